@@ -1,0 +1,36 @@
+# The commands a newcomer types. Each one installs what is missing, configures, builds.
+#   make demo   render the built-in scene and write out/demo.exr + out/demo.png
+#   make test   build and run every test (ctest)
+#   make bench  run the speed/accuracy benchmarks
+BUILD ?= build
+JOBS  ?= 2
+BOKEHTOOL = $(BUILD)/bin/bokehtool
+
+.PHONY: all deps configure build demo test bench install clean
+
+all: build
+
+deps:
+	@tools/install-deps.sh
+
+$(BUILD)/CMakeCache.txt: | deps
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release
+
+configure: $(BUILD)/CMakeCache.txt
+
+build: deps configure
+	cmake --build $(BUILD) -j $(JOBS)
+
+demo: build
+	@mkdir -p out
+	$(BOKEHTOOL) -v --scene lights -o out/demo.exr --ch R,G,B -o out/demo.png
+	@echo "demo: wrote out/demo.exr (RGBA+Z, float) and out/demo.png (sRGB preview)"
+
+test: build
+	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+
+install: build
+	cmake --install $(BUILD) --prefix $(or $(PREFIX),/usr/local)
+
+clean:
+	rm -rf $(BUILD) out

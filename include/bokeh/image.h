@@ -1,0 +1,79 @@
+// image.h — working-image helpers shared by every operation.
+//
+// Channel lookup by name (R, G, B, A, Z), premultiplication state, contiguous float
+// RGBA + Z working images, and the policy for non-finite pixel values.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <OpenImageIO/imagebuf.h>
+
+namespace bokeh {
+
+/// Indices of the channels the algorithms care about; -1 where absent.
+struct ChannelMap {
+    int r = -1, g = -1, b = -1, a = -1, z = -1;
+    bool has_rgb() const { return r >= 0 && g >= 0 && b >= 0; }
+};
+
+/// Find R, G, B, A, Z by name, as OpenEXR names them. A single-layer prefix
+/// ("beauty.R") is accepted when there is no unprefixed channel; the spec's alpha_channel
+/// and z_channel are used first when set.
+ChannelMap find_channels(const OIIO::ImageSpec& spec);
+
+/// True when the colour channels are stored multiplied by alpha, the OpenEXR convention
+/// and what OIIO gives on read unless "oiio:UnassociatedAlpha" says otherwise.
+bool is_premultiplied(const OIIO::ImageSpec& spec);
+
+/// A contiguous float image in the layout the algorithms use: premultiplied RGBA
+/// interleaved (4 floats a pixel) plus an optional depth plane, covering `roi`.
+struct WorkImage {
+    OIIO::ROI roi;                ///< the pixels held (x, y only)
+    std::vector<float> rgba;      ///< roi.width() * roi.height() * 4
+    std::vector<float> z;         ///< empty, or one value a pixel
+    bool has_alpha = false;       ///< false: alpha was absent and set to 1
+
+    int width() const { return roi.width(); }
+    int height() const { return roi.height(); }
+    size_t index(int x, int y) const
+    {
+        return size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin);
+    }
+    float* rgba_at(int x, int y) { return &rgba[index(x, y) * 4]; }
+    const float* rgba_at(int x, int y) const { return &rgba[index(x, y) * 4]; }
+};
+
+/// Fill `dst` from the data window of `src` (flat images only). Missing G/B copy R (a
+/// grey image), missing alpha is 1, colour is premultiplied if `src` is not. Returns
+/// false, with `err` set, when `src` is deep or has no colour channel.
+bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, int nthreads,
+                   std::string& err);
+
+/// Write a WorkImage back into `dst`'s R, G, B, A (and Z when both have one), converting
+/// to unpremultiplied colour if `dst`'s spec says it stores that. `dst` must already
+/// cover `src.roi`; other channels are left as they are.
+bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads,
+                     std::string& err);
+
+/// What to do with NaN and Inf pixel values (DESIGN.md, "bad values").
+enum class NonFinitePolicy {
+    Zero,   ///< colour -> 0, depth -> +inf ("no depth": infinitely far); counted
+    Error,  ///< fail, naming the count
+};
+
+/// Count of values replaced (or found, under NonFinitePolicy::Error).
+struct NonFiniteCount {
+    int64_t colour = 0;  ///< non-finite values in any channel but depth
+    int64_t depth  = 0;  ///< NaN or -inf depth values (+inf already means "far")
+    int64_t total() const { return colour + depth; }
+};
+
+/// Apply `policy` to every channel of a flat float image in place (deep images: every
+/// sample). Returns false when the policy is Error and a non-finite value was found,
+/// with the counts in `count` either way. Depth channels are those named Z or ZBack.
+bool scrub_nonfinite(OIIO::ImageBuf& img, NonFinitePolicy policy, NonFiniteCount& count,
+                     int nthreads = 0);
+
+}  // namespace bokeh

@@ -1,0 +1,77 @@
+// parallel.h — the one way OpenBokeh runs work on several threads.
+//
+// `nthreads` follows ImageBufAlgo: 0 = all cores, N = at most N threads (mapped onto a
+// tbb::task_arena). Work is split into fixed chunks whose boundaries do not depend on the
+// thread count, and reductions combine chunk results in chunk order, so every result is
+// bit-identical for any thread count (DESIGN.md, "Numbers, determinism").
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <OpenImageIO/imageio.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+namespace bokeh {
+
+/// Run `fn()` inside an arena of `nthreads` threads (0 = all cores).
+template<class Fn> void run_in_arena(int nthreads, Fn&& fn)
+{
+    if (nthreads <= 0) {
+        tbb::task_arena arena;
+        arena.execute(fn);
+    } else {
+        tbb::task_arena arena(nthreads);
+        arena.execute(fn);
+    }
+}
+
+/// Call `fn(begin, end)` on consecutive chunks of [begin, end), each at most `chunk` long.
+template<class Fn>
+void parallel_for_chunks(int64_t begin, int64_t end, int64_t chunk, int nthreads, Fn&& fn)
+{
+    if (end <= begin)
+        return;
+    if (chunk < 1)
+        chunk = 1;
+    const int64_t nchunks = (end - begin + chunk - 1) / chunk;
+    run_in_arena(nthreads, [&] {
+        tbb::parallel_for(int64_t(0), nchunks, [&](int64_t c) {
+            const int64_t b = begin + c * chunk;
+            fn(b, std::min(end, b + chunk));
+        });
+    });
+}
+
+/// Call `fn(ybegin, yend)` over the rows of `roi` (a few rows per task).
+template<class Fn> void parallel_rows(const OIIO::ROI& roi, int nthreads, Fn&& fn)
+{
+    parallel_for_chunks(roi.ybegin, roi.yend, 8, nthreads,
+                        [&](int64_t b, int64_t e) { fn(int(b), int(e)); });
+}
+
+/// Deterministic reduction: `partial(begin, end)` returns a T for one chunk; chunk
+/// results are combined with `combine(acc, part)` in chunk order.
+template<class T, class Partial, class Combine>
+T parallel_reduce_chunks(int64_t begin, int64_t end, int64_t chunk, int nthreads, T init,
+                         Partial&& partial, Combine&& combine)
+{
+    if (end <= begin)
+        return init;
+    if (chunk < 1)
+        chunk = 1;
+    const int64_t nchunks = (end - begin + chunk - 1) / chunk;
+    std::vector<T> parts(size_t(nchunks), init);
+    parallel_for_chunks(0, nchunks, 1, nthreads, [&](int64_t c, int64_t) {
+        const int64_t b = begin + c * chunk;
+        parts[size_t(c)]  = partial(b, std::min(end, b + chunk));
+    });
+    T acc = init;
+    for (const T& p : parts)
+        combine(acc, p);
+    return acc;
+}
+
+}  // namespace bokeh

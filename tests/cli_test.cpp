@@ -1,0 +1,378 @@
+// bokehtool as a user runs it: grammar, I/O fidelity, sequences, plugins, bad input.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+
+#include <OpenImageIO/deepdata.h>
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/strutil.h>
+
+#include "test_util.h"
+
+using namespace bokeh_test;
+using OIIO::Strutil::fmt::format;
+
+namespace {
+
+// A half RGBA + float Z EXR with an offset data window and custom metadata.
+std::string make_input(const std::string& dir, const std::string& name = "in.exr",
+                       float value = 0.5f)
+{
+    OIIO::ImageSpec spec(32, 24, 5, OIIO::TypeHalf);
+    spec.channelnames   = { "R", "G", "B", "A", "Z" };
+    spec.channelformats = { OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf,
+                            OIIO::TypeFloat };
+    spec.x = 4, spec.y = 2, spec.full_width = 48, spec.full_height = 32;
+    spec.attribute("studio:shot", "ab_0010");
+    const char* views[] = { "left", "right" };
+    spec.attribute("multiView", OIIO::TypeDesc(OIIO::TypeDesc::STRING, 2), views);
+    OIIO::ImageBuf buf(spec);
+    for (int y = spec.y; y < spec.y + spec.height; ++y)
+        for (int x = spec.x; x < spec.x + spec.width; ++x) {
+            const float px[5] = { value, x / 40.0f, y / 30.0f, 1.0f, 2.0f + x };
+            buf.setpixel(x, y, px);
+        }
+    const std::string path = dir + "/" + name;
+    EXPECT_TRUE(buf.write(path));
+    return path;
+}
+
+// One error line "bokehtool ERROR: <what>", exit 1, nothing at `output`.
+void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output)
+{
+    EXPECT_EQ(r.status, 1) << r.err;
+    EXPECT_TRUE(OIIO::Strutil::starts_with(r.err, "bokehtool ERROR: ")) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
+    EXPECT_NE(r.err.find(what), std::string::npos) << "expected '" << what << "' in: " << r.err;
+    if (!output.empty()) {
+        EXPECT_FALSE(exists(output)) << output << " was written";
+    }
+}
+
+}  // namespace
+
+TEST(Cli, VersionHelpPlugins)
+{
+    RunResult r = bokehtool("--version");
+    EXPECT_EQ(r.status, 0);
+    EXPECT_TRUE(OIIO::Strutil::starts_with(r.out, "bokehtool 0.")) << r.out;
+    r = bokehtool("--help");
+    EXPECT_EQ(r.status, 0);
+    for (const char* s : { "--scene", "--ch", "--attrib", "--colorconvert", "--threads", "-o FILE",
+                           ":policy=zero", "--frames" })
+        EXPECT_NE(r.out.find(s), std::string::npos) << s;
+    r = bokehtool("--help --scene");
+    EXPECT_EQ(r.status, 0);
+    EXPECT_NE(r.out.find(":width=1920"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("bokeh_io.so"), std::string::npos) << "names its plugin: " << r.out;
+    r = bokehtool("--help nosuchcommand");
+    expect_clean_failure(r, "--help: unknown command 'nosuchcommand'", "");
+    r = bokehtool("--plugins");
+    EXPECT_EQ(r.status, 0);
+    EXPECT_NE(r.out.find("loaded "), std::string::npos);
+    EXPECT_NE(r.out.find("bokeh_io.so: --ch"), std::string::npos) << r.out;
+}
+
+TEST(Cli, SceneToExrAndPng)
+{
+    const std::string dir = fresh_dir("cli_scene");
+    RunResult r = bokehtool(format("--scene lights:width=64:height=36 -o {0}/s.exr --ch R,G,B -o {0}/s.png", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf exr(dir + "/s.exr"), png(dir + "/s.png");
+    ASSERT_TRUE(exr.read(0, 0, true, OIIO::TypeFloat));
+    ASSERT_TRUE(png.read(0, 0, true, OIIO::TypeFloat));
+    EXPECT_EQ(exr.spec().width, 64);
+    EXPECT_EQ(exr.spec().nchannels, 5);
+    EXPECT_EQ(exr.nativespec().format, OIIO::TypeFloat);
+    EXPECT_EQ(png.nativespec().format, OIIO::TypeUInt8);
+    EXPECT_EQ(png.spec().nchannels, 3);
+    // The PNG is sRGB-encoded: a mid-grey linear value reads back brighter.
+    float e[5], p[3];
+    exr.getpixel(10, 30, e);
+    png.getpixel(10, 30, p);
+    const float lin = std::min(e[0], 1.0f);
+    const float srgb = lin <= 0.0031308f ? 12.92f * lin : 1.055f * std::pow(lin, 1.0f / 2.4f) - 0.055f;
+    EXPECT_NEAR(p[0], srgb, 1.0f / 255.0f + 1e-4f);
+    // Modifiers on the command work as well as on the name.
+    r = bokehtool(format("--scene:width=20:height=10 lights -o {}/t.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf t(dir + "/t.exr");
+    EXPECT_EQ(t.spec().width, 20);
+}
+
+TEST(Cli, KeepsTypesWindowsMetadataAndInput)
+{
+    const std::string dir = fresh_dir("cli_keep");
+    const std::string in  = make_input(dir);
+    const std::string before = file_bytes(in);
+    RunResult r = bokehtool(format("{0} -o {1}/out.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf out(dir + "/out.exr"), orig(in);
+    ASSERT_TRUE(out.read(0, 0, true));
+    const OIIO::ImageSpec& s = out.nativespec();
+    EXPECT_EQ(s.channelformat(0), OIIO::TypeHalf) << "half stays half";
+    EXPECT_EQ(s.channelformat(4), OIIO::TypeFloat);
+    EXPECT_EQ(s.x, 4);
+    EXPECT_EQ(s.full_width, 48);
+    EXPECT_EQ(s.get_string_attribute("studio:shot"), "ab_0010");
+    EXPECT_NE(s.find_attribute("multiView"), nullptr);
+    EXPECT_EQ(max_difference(out, orig), 0.0);
+    EXPECT_EQ(file_bytes(in), before) << "input untouched";
+
+    // -d changes the type; --ch keeps the types of the channels it keeps.
+    r = bokehtool(format("{0} -d float -o {1}/f.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("{0} --ch Z,R -o {1}/zr.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf f(dir + "/f.exr"), zr(dir + "/zr.exr");
+    EXPECT_EQ(f.nativespec().format, OIIO::TypeFloat);
+    EXPECT_EQ(f.nativespec().channelformats.size(), 0u);
+    // OpenEXR stores channels sorted by name, so only the set is kept.
+    EXPECT_EQ(zr.spec().nchannels, 2);
+    EXPECT_GE(zr.spec().channelindex("Z"), 0);
+    EXPECT_EQ(zr.nativespec().channelformat(zr.spec().channelindex("Z")), OIIO::TypeFloat);
+    EXPECT_EQ(zr.nativespec().channelformat(zr.spec().channelindex("R")), OIIO::TypeHalf);
+    r = bokehtool(format("{0} -d Z=half -o {1}/zh.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf zh(dir + "/zh.exr");
+    EXPECT_EQ(zh.nativespec().format, OIIO::TypeHalf);
+}
+
+TEST(Cli, ChannelsAttribColour)
+{
+    const std::string dir = fresh_dir("cli_cmds");
+    const std::string in  = make_input(dir);
+    RunResult r = bokehtool(format("{0} --ch R,G,B,A=0.25,Y=Z --attrib studio:note hello "
+                             "--attrib:type=float studio:gain 2 -o {1}/o.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf o(dir + "/o.exr");
+    ASSERT_TRUE(o.read(0, 0, true, OIIO::TypeFloat));
+    EXPECT_EQ(o.spec().nchannels, 5);
+    const int a = o.spec().channelindex("A"), y = o.spec().channelindex("Y");
+    ASSERT_GE(a, 0);
+    ASSERT_GE(y, 0);
+    float px[5];
+    o.getpixel(10, 10, px);
+    EXPECT_FLOAT_EQ(px[a], 0.25f);
+    EXPECT_FLOAT_EQ(px[y], 12.0f) << "Y renamed from Z";
+    EXPECT_EQ(o.spec().get_string_attribute("studio:note"), "hello");
+    EXPECT_EQ(o.spec().getattributetype("studio:gain"), OIIO::TypeFloat);
+
+    // --colorconvert / --tocolorspace / --iscolorspace.
+    r = bokehtool(format("{0} --colorconvert sRGB lin_rec709 -o {1}/lin.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf lin(dir + "/lin.exr");
+    lin.getpixel(10, 10, px);
+    EXPECT_NEAR(px[lin.spec().channelindex("R")], 0.214041f, 1e-3f) << "half precision";
+    r = bokehtool(format("{0} --iscolorspace sRGB --tocolorspace lin_rec709 -o {1}/lin2.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf lin2(dir + "/lin2.exr");
+    EXPECT_EQ(max_difference(lin, lin2), 0.0);
+    r = bokehtool(format("{0} --tocolorspace nosuchspace -o {1}/x.exr", in, dir));
+    expect_clean_failure(r, "--tocolorspace: unknown colour space 'nosuchspace'", dir + "/x.exr");
+}
+
+TEST(Cli, PngIsConvertedFromSrgbAndBack)
+{
+    const std::string dir = fresh_dir("cli_png");
+    OIIO::ImageSpec spec(8, 8, 3, OIIO::TypeUInt8);
+    OIIO::ImageBuf buf(spec);
+    for (int y = 0; y < 8; ++y)
+        for (int x = 0; x < 8; ++x) {
+            const float px[3] = { (x * 32) / 255.0f, 128 / 255.0f, (y * 30) / 255.0f };
+            buf.setpixel(x, y, px);
+        }
+    ASSERT_TRUE(buf.write(dir + "/in.png"));
+    RunResult r = bokehtool(format("{0}/in.png -o {0}/out.png -o {0}/out.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf back(dir + "/out.png"), orig(dir + "/in.png");
+    EXPECT_EQ(max_difference(back, orig), 0.0) << "PNG -> PNG is exact";
+    OIIO::ImageBuf exr(dir + "/out.exr");
+    ASSERT_TRUE(exr.read(0, 0, true, OIIO::TypeFloat));
+    EXPECT_EQ(exr.nativespec().format, OIIO::TypeHalf) << "8-bit becomes half in EXR";
+    float px[3];
+    exr.getpixel(0, 0, px);
+    EXPECT_NEAR(px[1], std::pow((128 / 255.0 + 0.055) / 1.055, 2.4), 2e-4) << "linearised";
+}
+
+TEST(Cli, InfoShowsDeepStatistics)
+{
+    const std::string deep = shared_data("openexr-images/LowResLeftView_Balls.exr");
+    REQUIRE_SHARED(deep);
+    RunResult r = bokehtool(format("--info -v {}", deep));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("deep half/float openexr"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("deep samples:"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("samples/pixel"), std::string::npos) << r.out;
+    const std::string dir = fresh_dir("cli_deep");
+    r = bokehtool(format("{} -o {}/deep.exr", deep, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf a(deep), b(dir + "/deep.exr");
+    ASSERT_TRUE(a.read(0, 0, true) && b.read(0, 0, true));
+    ASSERT_TRUE(b.deep());
+    const auto sa = a.deepdata()->all_samples(), sb = b.deepdata()->all_samples();
+    EXPECT_EQ(std::vector<unsigned int>(sa.begin(), sa.end()),
+              std::vector<unsigned int>(sb.begin(), sb.end()));
+}
+
+TEST(Cli, Sequences)
+{
+    const std::string dir = fresh_dir("cli_seq");
+    for (int f = 1; f <= 4; ++f)
+        make_input(dir, format("in.{:04d}.exr", f), 0.1f * f);
+    RunResult r = bokehtool(format("--progress {0}/in.#.exr --attrib seq:frame 1 -o {0}/out.#.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 4) << "a progress line per frame: " << r.out;
+    for (int f = 1; f <= 4; ++f) {
+        OIIO::ImageBuf o(format("{}/out.{:04d}.exr", dir, f));
+        ASSERT_TRUE(o.read(0, 0, true, OIIO::TypeFloat)) << f;
+        float px[5];
+        o.getpixel(10, 10, px);
+        EXPECT_NEAR(px[0], 0.1f * f, 1e-3f) << "frame " << f << " from its own input";
+    }
+    r = bokehtool(format("--frames 1-4x2 {0}/in.%04d.exr -o {0}/odd.@@@@.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(exists(dir + "/odd.0001.exr"));
+    EXPECT_FALSE(exists(dir + "/odd.0002.exr"));
+    EXPECT_TRUE(exists(dir + "/odd.0003.exr"));
+    r = bokehtool(format("{0}/in.2-3#.exr -o {0}/r.#.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(exists(dir + "/r.0002.exr") && exists(dir + "/r.0003.exr"));
+    EXPECT_FALSE(exists(dir + "/r.0001.exr"));
+
+    // A missing frame stops the run, naming it; earlier frames are done, later are not.
+    OIIO::Filesystem::remove(dir + "/in.0003.exr");
+    r = bokehtool(format("--frames 1-4 {0}/in.#.exr -o {0}/stop.#.exr", dir));
+    expect_clean_failure(r, "in.0003.exr: no such file (frame 3, 3 of 4", dir + "/stop.0003.exr");
+    EXPECT_TRUE(exists(dir + "/stop.0002.exr"));
+    EXPECT_FALSE(exists(dir + "/stop.0004.exr"));
+    r = bokehtool(format("{0}/none.#.exr -o {0}/x.#.exr", dir));
+    expect_clean_failure(r, "no files match", "");
+    r = bokehtool(format("--frames 1-x {0}/in.#.exr -o {0}/x.#.exr", dir));
+    expect_clean_failure(r, "--frames: '1-x' is not a frame list", "");
+}
+
+TEST(Cli, ThreadCountDoesNotChangeResults)
+{
+    const std::string dir = fresh_dir("cli_threads");
+    for (int t : { 1, 2, 8 }) {
+        RunResult r = bokehtool(format("--threads {0} --scene lights:width=200:height=100 -o {1}/t{0}.exr", t, dir));
+        ASSERT_EQ(r.status, 0) << r.err;
+    }
+    OIIO::ImageBuf a(dir + "/t1.exr"), b(dir + "/t2.exr"), c(dir + "/t8.exr");
+    EXPECT_EQ(max_difference(a, b), 0.0);
+    EXPECT_EQ(max_difference(a, c), 0.0);
+}
+
+TEST(Cli, NanPolicy)
+{
+    const std::string dir = fresh_dir("cli_nan");
+    OIIO::ImageSpec spec(4, 4, 5, OIIO::TypeFloat);
+    spec.channelnames = { "R", "G", "B", "A", "Z" };
+    OIIO::ImageBuf buf(spec);
+    const float bad[5] = { NAN, INFINITY, 0.5f, 1.0f, NAN };
+    buf.setpixel(1, 1, bad);
+    ASSERT_TRUE(buf.write(dir + "/nan.exr"));
+    RunResult r = bokehtool(format("{0}/nan.exr -o {0}/clean.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.err.find("WARNING: " + dir + "/nan.exr: replaced 2 non-finite colour value(s) by 0 "
+                         "and 1 NaN/-inf depth"), std::string::npos) << r.err;
+    OIIO::ImageBuf clean(dir + "/clean.exr");
+    float px[5];
+    clean.getpixel(1, 1, px);
+    EXPECT_EQ(px[0], 0.0f);
+    EXPECT_EQ(px[1], 0.0f);
+    EXPECT_EQ(px[4], INFINITY);
+    r = bokehtool(format("{0}/nan.exr --nan:policy=error -o {0}/strict.exr", dir));
+    expect_clean_failure(r, "3 non-finite (NaN/Inf) value(s) and --nan:policy=error", dir + "/strict.exr");
+    r = bokehtool(format("-q {0}/nan.exr -o {0}/quiet.exr", dir));
+    EXPECT_EQ(r.status, 0);
+    EXPECT_EQ(r.err, "") << "-q silences warnings";
+}
+
+TEST(Cli, NoClobber)
+{
+    const std::string dir = fresh_dir("cli_noclobber");
+    const std::string in  = make_input(dir);
+    std::ofstream(dir + "/out.exr") << "keep";
+    RunResult r = bokehtool(format("--no-clobber {0} -o {1}/out.exr", in, dir));
+    expect_clean_failure(r, "already exists (--no-clobber)", "");
+    EXPECT_EQ(file_bytes(dir + "/out.exr"), "keep");
+}
+
+// The bad-input list of the foundation issue: one line, exit 1, nothing written,
+// inputs untouched.
+TEST(Cli, BadInput)
+{
+    const std::string dir = fresh_dir("cli_bad");
+    const std::string in  = make_input(dir);
+    const std::string before = file_bytes(in);
+    const std::string out = dir + "/out.exr";
+    const std::string bytes = file_bytes(in);
+    std::ofstream(dir + "/truncated.exr", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    std::ofstream(dir + "/garbage.exr") << "not an image";
+
+    struct Case {
+        std::string args, expected;
+    };
+    const Case cases[] = {
+        { dir + "/missing.exr -o " + out, "-i: " + dir + "/missing.exr: no such file" },
+        { "-i " + dir + "/missing.exr -o " + out, "no such file" },
+        { dir + "/truncated.exr -o " + out, "truncated.exr: cannot read" },
+        { dir + "/garbage.exr -o " + out, "garbage.exr: cannot read" },
+        { dir + " -o " + out, "is a directory, not an image" },
+        { in + " --nosuchcommand -o " + out, "--nosuchcommand" },
+        { in + " --attrib:nosuchopt=1 a b -o " + out, "--attrib: unknown option 'nosuchopt'" },
+        { "--scene:width=0 lights -o " + out, "--scene: option 'width' = 0 is out of range" },
+        { "--scene:width=wide lights -o " + out, "option 'width' wants an integer but got 'wide'" },
+        { "--scene:aa=99 lights -o " + out, "out of range [1, 16]" },
+        { "--scene nosuchscene -o " + out, "--scene: unknown scene 'nosuchscene'" },
+        { "--threads many " + in + " -o " + out, "--threads: 'many' is not a thread count" },
+        { in + " -d uint99 -o " + out, "-d: 'uint99' is not a pixel type" },
+        { "--ch R,G,B -o " + out, "--ch: needs 1 image(s) on the stack but 0 are there" },
+        { "-o " + out, "-o: needs 1 image(s) on the stack but 0 are there" },
+        { in + " --ch R,G,Nope -o " + out, "--ch: no channel 'Nope'" },
+        { in + " --ch R,G,7 -o " + out, "--ch: channel number 7 is out of range (0..4)" },
+        { in + " --ch R,A=0.5x -o " + out, "--ch: no channel '0.5x'" },
+        { in + " -o", "-o" },
+        { in + " -o " + dir + "/nodir/out.exr", "directory '" + dir + "/nodir' does not exist" },
+        { in + " -o /proc/bokehtool_test.exr", "/proc/bokehtool_test.exr: cannot write" },
+        { in + " -o " + dir + "/out.nosuchformat", "no image format writes this file type" },
+        { "--colorconfig " + dir + "/none.ocio " + in + " -o " + out, "--colorconfig: colour config" },
+    };
+    for (const Case& k : cases) {
+        SCOPED_TRACE(k.args);
+        const RunResult r = bokehtool(k.args);
+        expect_clean_failure(r, k.expected, out);
+    }
+    EXPECT_FALSE(exists(dir + "/out.nosuchformat"));
+    EXPECT_EQ(file_bytes(in), before) << "input untouched";
+
+    // An error after an -o still writes nothing: outputs wait for the whole line.
+    RunResult r = bokehtool(in + " -o " + out + " " + dir + "/missing.exr");
+    expect_clean_failure(r, "missing.exr: no such file", out);
+    // Nothing but the inputs made above is left in the directory (no temporary files).
+    std::vector<std::string> files;
+    OIIO::Filesystem::get_directory_entries(dir, files);
+    EXPECT_EQ(files.size(), 3u);
+}
+
+TEST(Cli, BrokenPluginsAreNamedAndNeverCrash)
+{
+    const std::string dir = fresh_dir("cli_badplugin");
+    const std::string out = dir + "/out.exr";
+    for (const char* name : { "bad_abi", "throws", "duplicate", "no_entry" }) {
+        SCOPED_TRACE(name);
+        const std::string pdir = std::string(BOKEH_BAD_PLUGIN_DIR) + "/" + name;
+        RunResult r = bokehtool("--scene lights:width=8:height=8 -o " + out, "BOKEH_PLUGIN_PATH=" + pdir);
+        expect_clean_failure(r, pdir + "/" + name + ".so", out);
+        r = bokehtool("--plugins", "BOKEH_PLUGIN_PATH=" + pdir);
+        EXPECT_EQ(r.status, 1);
+        EXPECT_NE(r.out.find("FAILED plugin " + pdir), std::string::npos) << r.out;
+        EXPECT_NE(r.out.find("loaded "), std::string::npos) << "the good ones still listed";
+    }
+    RunResult r = bokehtool("--scene lights -o " + out, "BOKEH_PLUGIN_PATH=" + dir + "/nonexistent");
+    expect_clean_failure(r, "plugin directory " + dir + "/nonexistent: does not exist", out);
+}

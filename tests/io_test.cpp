@@ -1,0 +1,208 @@
+// Reading and writing: clear failures, atomic writes, types/windows/metadata kept, deep.
+#include <bokeh/io.h>
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include <OpenImageIO/deepdata.h>
+#include <OpenImageIO/filesystem.h>
+
+#include "test_util.h"
+
+using namespace bokeh;
+using namespace bokeh_test;
+
+// A small half RGBA + float Z EXR with an offset data window and custom metadata.
+static std::string make_exr(const std::string& dir, const std::string& name = "in.exr")
+{
+    OIIO::ImageSpec spec(40, 30, 5, OIIO::TypeHalf);
+    spec.channelnames   = { "R", "G", "B", "A", "Z" };
+    spec.channelformats = { OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf,
+                            OIIO::TypeFloat };
+    spec.alpha_channel  = 3;
+    spec.z_channel      = 4;
+    spec.x              = 7;
+    spec.y              = 3;
+    spec.full_x         = 0;
+    spec.full_y         = 0;
+    spec.full_width     = 64;
+    spec.full_height    = 48;
+    spec.attribute("studio:shot", "ab_0010");
+    spec.attribute("studio:take", 3);
+    const char* views[] = { "left", "right" };
+    spec.attribute("multiView", OIIO::TypeDesc(OIIO::TypeDesc::STRING, 2), views);
+    OIIO::ImageBuf buf(spec);
+    for (int y = spec.y; y < spec.y + spec.height; ++y)
+        for (int x = spec.x; x < spec.x + spec.width; ++x) {
+            const float px[5] = { x / 64.0f, y / 48.0f, 0.25f, 1.0f, 1.0f + x * 0.01f + y };
+            buf.setpixel(x, y, px);
+        }
+    const std::string path = dir + "/" + name;
+    EXPECT_TRUE(buf.write(path));
+    return path;
+}
+
+static size_t files_in(const std::string& dir)
+{
+    std::vector<std::string> files;
+    OIIO::Filesystem::get_directory_entries(dir, files);
+    return files.size();
+}
+
+TEST(Read, MissingDirectoryGarbageTruncated)
+{
+    const std::string dir = fresh_dir("io_read");
+    OIIO::ImageBuf buf;
+    std::string err;
+    EXPECT_FALSE(read_image(buf, dir + "/nope.exr", err));
+    EXPECT_NE(err.find("nope.exr: no such file"), std::string::npos) << err;
+    EXPECT_FALSE(read_image(buf, dir, err));
+    EXPECT_NE(err.find("is a directory"), std::string::npos) << err;
+
+    std::ofstream(dir + "/garbage.exr") << "this is not an image at all";
+    EXPECT_FALSE(read_image(buf, dir + "/garbage.exr", err));
+    EXPECT_NE(err.find("garbage.exr"), std::string::npos) << err;
+
+    const std::string good = make_exr(dir);
+    const std::string bytes = file_bytes(good);
+    std::ofstream(dir + "/truncated.exr", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    EXPECT_FALSE(read_image(buf, dir + "/truncated.exr", err));
+    EXPECT_NE(err.find("truncated.exr"), std::string::npos) << err;
+    std::string corrupt = bytes;
+    for (size_t i = corrupt.size() / 2; i < corrupt.size(); i += 7)
+        corrupt[i] = char(0xA5);
+    std::ofstream(dir + "/corrupt.exr", std::ios::binary) << corrupt;
+    EXPECT_FALSE(read_image(buf, dir + "/corrupt.exr", err));
+    EXPECT_NE(err.find("corrupt.exr"), std::string::npos) << err;
+}
+
+TEST(Read, TruncatedRealFile)
+{
+    const std::string beach = shared_data("openexr-images/Beachball_singlepart.0001.exr");
+    REQUIRE_SHARED(beach);
+    const std::string dir   = fresh_dir("io_read_real");
+    const std::string bytes = file_bytes(beach);
+    std::ofstream(dir + "/cut.exr", std::ios::binary) << bytes.substr(0, bytes.size() * 3 / 4);
+    OIIO::ImageBuf buf;
+    std::string err;
+    EXPECT_FALSE(read_image(buf, dir + "/cut.exr", err));
+    EXPECT_TRUE(read_image(buf, beach, err)) << err;
+    EXPECT_EQ(buf.spec().width, 911);
+}
+
+TEST(Write, KeepsTypesWindowsAndMetadata)
+{
+    const std::string dir = fresh_dir("io_write");
+    const std::string in  = make_exr(dir);
+    OIIO::ImageBuf buf;
+    std::string err;
+    ASSERT_TRUE(read_image(buf, in, err)) << err;
+    EXPECT_EQ(buf.spec().format, OIIO::TypeFloat) << "worked on as float";
+    WriteOptions opts;
+    opts.channel_formats = formats_for(buf.spec(), channel_types_of(buf.nativespec()));
+    ASSERT_TRUE(write_image(buf, dir + "/out.exr", opts, err)) << err;
+
+    OIIO::ImageBuf back(dir + "/out.exr");
+    ASSERT_TRUE(back.read(0, 0, true));
+    const OIIO::ImageSpec& s = back.nativespec();
+    EXPECT_EQ(s.channelformat(0), OIIO::TypeHalf);
+    EXPECT_EQ(s.channelformat(4), OIIO::TypeFloat);
+    EXPECT_EQ(s.channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "Z" }));
+    EXPECT_EQ(s.x, 7);
+    EXPECT_EQ(s.y, 3);
+    EXPECT_EQ(s.full_width, 64);
+    EXPECT_EQ(s.full_height, 48);
+    EXPECT_EQ(s.get_string_attribute("studio:shot"), "ab_0010");
+    EXPECT_EQ(s.get_int_attribute("studio:take"), 3);
+    const OIIO::ParamValue* views = s.find_attribute("multiView");
+    ASSERT_NE(views, nullptr);
+    EXPECT_EQ(views->type().arraylen, 2);
+    OIIO::ImageBuf orig(in);
+    EXPECT_EQ(max_difference(orig, back), 0.0) << "pixels identical";
+    EXPECT_EQ(files_in(dir), 2u) << "no temporary file left behind";
+}
+
+TEST(Write, FailureLeavesNothingAndKeepsExistingFile)
+{
+    const std::string dir = fresh_dir("io_write_fail");
+    const std::string in  = make_exr(dir);
+    OIIO::ImageBuf buf;
+    std::string err;
+    ASSERT_TRUE(read_image(buf, in, err));
+    EXPECT_FALSE(write_image(buf, dir + "/missing/out.exr", {}, err));
+    EXPECT_NE(err.find("does not exist"), std::string::npos) << err;
+    EXPECT_FALSE(write_image(buf, dir + "/out.unknownformat", {}, err));
+    EXPECT_FALSE(exists(dir + "/out.unknownformat"));
+    EXPECT_FALSE(write_image(buf, "/proc/bokeh_test_out.exr", {}, err)) << "read-only place";
+
+    // An existing output survives a failed write and --no-clobber.
+    std::ofstream(dir + "/keep.exr") << "precious";
+    WriteOptions bad;
+    bad.channel_formats = { OIIO::TypeHalf };  // wrong count: fails before writing
+    EXPECT_FALSE(write_image(buf, dir + "/keep.exr", bad, err));
+    WriteOptions nc;
+    nc.no_clobber = true;
+    EXPECT_FALSE(write_image(buf, dir + "/keep.exr", nc, err));
+    EXPECT_NE(err.find("already exists"), std::string::npos) << err;
+    EXPECT_EQ(file_bytes(dir + "/keep.exr"), "precious");
+    EXPECT_EQ(files_in(dir), 2u) << "only in.exr and keep.exr";
+}
+
+TEST(Deep, RoundTripOfTheRealDeepPasses)
+{
+    for (const char* name : { "Balls", "Leaves", "Trunks" }) {
+        const std::string path = shared_data(std::string("openexr-images/LowResLeftView_") + name + ".exr");
+        REQUIRE_SHARED(path);
+        const std::string dir = fresh_dir(std::string("io_deep_") + name);
+        OIIO::ImageBuf a;
+        std::string err;
+        ASSERT_TRUE(read_image(a, path, err)) << err;
+        ASSERT_TRUE(a.deep());
+        ASSERT_TRUE(write_image(a, dir + "/rt.exr", {}, err)) << err;
+        OIIO::ImageBuf b;
+        ASSERT_TRUE(read_image(b, dir + "/rt.exr", err)) << err;
+        ASSERT_TRUE(b.deep());
+        EXPECT_EQ(a.spec().channelnames, b.spec().channelnames);
+        EXPECT_EQ(a.roi(), b.roi());
+        EXPECT_EQ(a.spec().full_width, b.spec().full_width);
+        const OIIO::DeepData &da = *a.deepdata(), &db = *b.deepdata();
+        ASSERT_EQ(da.pixels(), db.pixels());
+        ASSERT_EQ(da.channels(), db.channels());
+        for (int c = 0; c < da.channels(); ++c)
+            EXPECT_EQ(da.channeltype(c), db.channeltype(c)) << "types kept";
+        int64_t mismatches = 0, samples = 0;
+        for (int64_t p = 0; p < da.pixels(); ++p) {
+            ASSERT_EQ(da.samples(p), db.samples(p)) << "pixel " << p;
+            for (int s = 0; s < da.samples(p); ++s, ++samples)
+                for (int c = 0; c < da.channels(); ++c)
+                    mismatches += da.deep_value(p, c, s) != db.deep_value(p, c, s);
+        }
+        EXPECT_EQ(mismatches, 0);
+        EXPECT_GT(samples, 10000) << name;
+        const DeepStats st = deep_stats(da);
+        EXPECT_EQ(st.total_samples, samples);
+        EXPECT_GE(st.max_samples, 1);
+    }
+}
+
+TEST(Deep, StatsAndDescription)
+{
+    OIIO::ImageSpec spec(3, 1, 5, OIIO::TypeFloat);
+    spec.channelnames = { "R", "G", "B", "A", "Z" };
+    spec.deep         = true;
+    OIIO::ImageBuf buf(spec);
+    buf.deepdata()->set_samples(0, 2);
+    buf.deepdata()->set_samples(2, 4);
+    const DeepStats st = deep_stats(*buf.deepdata());
+    EXPECT_EQ(st.pixels, 3);
+    EXPECT_EQ(st.empty_pixels, 1);
+    EXPECT_EQ(st.total_samples, 6);
+    EXPECT_EQ(st.min_samples, 0);
+    EXPECT_EQ(st.max_samples, 4);
+    EXPECT_DOUBLE_EQ(st.mean_samples(), 2.0);
+    const std::string d = describe_image(buf, "x.exr", true);
+    EXPECT_NE(d.find("deep samples: 6 total; per pixel min 0, max 4, mean 2.000; 1 of 3 pixels empty"),
+              std::string::npos)
+        << d;
+}

@@ -1,0 +1,67 @@
+#include "test_util.h"
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagebufalgo.h>
+
+namespace bokeh_test {
+
+std::string fresh_dir(const std::string& name)
+{
+    const std::string dir = std::string(BOKEH_TEST_TMP) + "/" + name;
+    std::string err;
+    OIIO::Filesystem::remove_all(dir, err);
+    OIIO::Filesystem::create_directory(BOKEH_TEST_TMP, err);
+    OIIO::Filesystem::create_directory(dir, err);
+    return dir;
+}
+
+std::string shared_data(const std::string& relative)
+{
+    const std::string path = std::string(BOKEH_SHARED_DATA) + "/" + relative;
+    return OIIO::Filesystem::exists(path) ? path : std::string();
+}
+
+std::string file_bytes(const std::string& path)
+{
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+bool exists(const std::string& path) { return OIIO::Filesystem::exists(path); }
+
+RunResult bokehtool(const std::string& args, const std::string& env)
+{
+    static int counter = 0;
+    const std::string base = std::string(BOKEH_TEST_TMP) + "/run" + std::to_string(getpid()) + "_"
+                             + std::to_string(++counter);
+    OIIO::Filesystem::create_directory(BOKEH_TEST_TMP);
+    const std::string cmd = env + " " + BOKEHTOOL + " " + args + " </dev/null >" + base
+                            + ".out 2>" + base + ".err";
+    RunResult r;
+    const int raw = std::system(cmd.c_str());
+    r.status      = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+    r.out         = file_bytes(base + ".out");
+    r.err         = file_bytes(base + ".err");
+    return r;
+}
+
+double max_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b)
+{
+    if (a.roi() != b.roi() || a.nchannels() != b.nchannels())
+        return std::numeric_limits<double>::infinity();
+    auto cmp = OIIO::ImageBufAlgo::compare(a, b, 0.0f, 0.0f);
+    return cmp.error ? std::numeric_limits<double>::infinity() : cmp.maxerror;
+}
+
+}  // namespace bokeh_test

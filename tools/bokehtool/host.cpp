@@ -1,0 +1,608 @@
+// host.cpp — bokehtool's host. See host.h for the two-pass design.
+
+#include "host.h"
+#include "sequence.h"
+
+#include <algorithm>
+#include <cstdlib>
+#include <exception>
+#include <iostream>
+
+#include <OpenImageIO/argparse.h>
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+#include <OpenImageIO/strutil.h>
+#include <OpenImageIO/sysutil.h>
+#include <OpenImageIO/timer.h>
+
+#include <bokeh/io.h>
+
+#ifndef BOKEH_VERSION
+#    error "BOKEH_VERSION must be defined by the build"
+#endif
+
+namespace bokehtool {
+
+using bokeh::Command;
+using bokeh::CommandContext;
+using bokeh::OptionSpec;
+using bokeh::StackImage;
+using OIIO::Strutil::fmt::format;
+
+static const char* kProgram = "bokehtool";
+
+Host::Host()
+{
+    m_registry.set_current_plugin(kProgram);
+    register_host_commands();
+    m_registry.set_current_plugin("");
+}
+
+void Host::add_host_command(Command cmd, bool global)
+{
+    m_global[cmd.name] = global;
+    m_registry.add(std::move(cmd));
+}
+
+static Command host_command(std::string name, std::string arguments, int inputs, int outputs,
+                            std::string help, bokeh::CommandFunction run)
+{
+    Command c;
+    c.name      = std::move(name);
+    c.arguments = std::move(arguments);
+    c.inputs    = inputs;
+    c.outputs   = outputs;
+    c.help      = std::move(help);
+    c.run       = std::move(run);
+    return c;
+}
+
+void Host::register_host_commands()
+{
+    auto nothing = [](CommandContext&) { return true; };
+    // Global options: applied in pass 1, wherever they stand on the line.
+    add_host_command(host_command("--help", "", 0, 0,
+                                  "Print this help; --help COMMAND for one command", nothing),
+                     true);
+    add_host_command(host_command("--version", "", 0, 0, "Print the version", nothing), true);
+    add_host_command(host_command("--plugins", "", 0, 0,
+                                  "List the plugin modules loaded, from where, and failures",
+                                  nothing),
+                     true);
+    add_host_command(host_command("--frames", "SPEC", 0, 0,
+                                  "Frames to run a sequence command line for (1-10, 1-10x2, 3,5)",
+                                  nothing),
+                     true);
+    add_host_command(host_command("--threads", "N", 0, 0, "Threads to use (0 = all cores)",
+                                  [this](CommandContext& c) {
+                                      OIIO::string_view s(c.args[0]);
+                                      int n = 0;
+                                      if (!OIIO::Strutil::parse_int(s, n) || !s.empty()
+                                          || n < 0 || n > 1024)
+                                          return c.fail(format("'{}' is not a thread count "
+                                                               "(0..1024, 0 = all cores)",
+                                                               c.args[0]));
+                                      m_threads = n;
+                                      return true;
+                                  }),
+                     true);
+    add_host_command(host_command("-v", "", 0, 0, "Verbose: timings and details",
+                                  [this](CommandContext&) { return m_verbosity = 2, true; }),
+                     true);
+    add_host_command(host_command("-q", "", 0, 0, "Quiet: errors only",
+                                  [this](CommandContext&) { return m_verbosity = 0, true; }),
+                     true);
+    add_host_command(host_command("--info", "", 0, 0,
+                                  "Describe every input as it is read (with -v: channels, "
+                                  "windows, metadata, deep sample statistics)",
+                                  [this](CommandContext&) { return m_info = true, true; }),
+                     true);
+    add_host_command(host_command("--no-clobber", "", 0, 0,
+                                  "Refuse to replace existing output files",
+                                  [this](CommandContext&) { return m_no_clobber = true, true; }),
+                     true);
+    add_host_command(host_command("--progress", "", 0, 0, "Print a line per frame",
+                                  [this](CommandContext&) { return m_progress = true, true; }),
+                     true);
+    add_host_command(host_command("--colorconfig", "FILE", 0, 0,
+                                  "OCIO config to use (default: $OCIO, else the shipped one)",
+                                  [this](CommandContext& c) {
+                                      m_colorconfig = c.args[0];
+                                      return true;
+                                  }),
+                     true);
+    Command nan = host_command(
+        "--nan", "", 0, 0,
+        "Policy for NaN/Inf pixels read: zero (colour -> 0, depth -> no depth; counted, "
+        "warned) or error",
+        [this](CommandContext& c) {
+            m_nan_policy = c.options.get_string("policy") == "error"
+                               ? bokeh::NonFinitePolicy::Error
+                               : bokeh::NonFinitePolicy::Zero;
+            return true;
+        });
+    nan.options = { OptionSpec::Choice("policy", { "zero", "error" },
+                                       "zero: replace and warn; error: fail") };
+    add_host_command(std::move(nan), true);
+
+    // Stack commands of the host itself.
+    add_host_command(host_command("-i", "FILE", 0, 1,
+                                  "Read an image (a bare file name does the same)",
+                                  [this](CommandContext& c) { return read_input(c.args[0]); }),
+                     false);
+    add_host_command(
+        host_command("-o", "FILE", 1, 1,
+                     "Write the top image (after the whole command line has succeeded)",
+                     [this](CommandContext& c) {
+                         m_writes.push_back({ c.inputs[0], c.args[0], m_datatypes });
+                         c.outputs.push_back(c.inputs[0]);
+                         return true;
+                     }),
+        false);
+    add_host_command(
+        host_command("-d", "TYPE", 0, 0,
+                     "Pixel type of later outputs: uint8, uint16, half, float; or CHANNEL=TYPE",
+                     [this](CommandContext& c) {
+                         const std::string& a = c.args[0];
+                         const size_t eq      = a.find('=');
+                         const std::string channel = eq == std::string::npos ? "" : a.substr(0, eq);
+                         const OIIO::TypeDesc t(eq == std::string::npos ? a : a.substr(eq + 1));
+                         if (t == OIIO::TypeUnknown || t.aggregate != OIIO::TypeDesc::SCALAR)
+                             return c.fail(format("'{}' is not a pixel type (uint8, uint16, "
+                                                  "half, float, ...)",
+                                                  a));
+                         if (channel.empty())
+                             m_datatypes.clear();
+                         m_datatypes[channel] = t;
+                         return true;
+                     }),
+        false);
+}
+
+// ---------------------------------------------------------------------------------------
+// Plugins and the shipped files, found relative to the executable (bin/..).
+
+static std::string prefix_dir()
+{
+    const std::string exe = OIIO::Sysutil::this_program_path();
+    return OIIO::Filesystem::parent_path(OIIO::Filesystem::parent_path(exe));
+}
+
+std::string Host::plugin_dir() const { return prefix_dir() + "/" + BOKEH_PLUGIN_RELDIR; }
+
+std::string Host::shipped_color_config() const
+{
+    return prefix_dir() + "/" + BOKEH_DATA_RELDIR + "/ocio/config.ocio";
+}
+
+bool Host::load_plugins()
+{
+    std::vector<std::string> dirs = { plugin_dir() };
+    if (const char* path = std::getenv("BOKEH_PLUGIN_PATH"))
+        for (const std::string& d : OIIO::Strutil::splits(path, ":"))
+            if (!d.empty())
+                dirs.push_back(d);
+    for (const std::string& dir : dirs) {
+        if (!OIIO::Filesystem::is_directory(dir)) {
+            m_plugin_failures.push_back(format("plugin directory {}: does not exist", dir));
+            continue;
+        }
+        std::vector<std::string> files;
+        OIIO::Filesystem::get_directory_entries(dir, files, false);
+        std::sort(files.begin(), files.end());
+        for (const std::string& f : files) {
+            if (OIIO::Filesystem::extension(f) != ".so")
+                continue;
+            std::string err;
+            if (bokeh::load_plugin(m_registry, f, err))
+                m_plugin_files.push_back(f);
+            else
+                m_plugin_failures.push_back(err);
+        }
+    }
+    return m_plugin_failures.empty();
+}
+
+// ---------------------------------------------------------------------------------------
+// Help.
+
+static std::string option_line(const OptionSpec& o)
+{
+    using Type = OptionSpec::Type;
+    std::string range;
+    switch (o.type) {
+    case Type::Int:
+    case Type::Float: range = format("number in [{}, {}]", o.min, o.max); break;
+    case Type::Bool: range = "0 or 1"; break;
+    case Type::Choice: range = "one of " + OIIO::Strutil::join(o.choices, "|"); break;
+    case Type::String: range = "text"; break;
+    }
+    return format("      :{}={}  ({}) {}\n", o.name, o.default_value, range, o.help);
+}
+
+void Host::print_help() const
+{
+    std::cout << format(
+        "{} {} — lens defocus for VFX compositing (OpenBokeh)\n\n"
+        "Usage: {} [INPUT | COMMAND ARGS...]... -o OUTPUT\n"
+        "Images form a stack: an input file pushes one, a command pops its inputs and\n"
+        "pushes its result, -o FILE writes the top. Options ride on a command:\n"
+        "--cmd:opt=val:opt2=val. A file name with #, @ or %04d runs the command line once\n"
+        "per frame (shot.#.exr, --frames 1-10x2). Errors: one line, exit status 1, nothing\n"
+        "written.\n",
+        kProgram, BOKEH_VERSION, kProgram);
+    std::string current = "-";
+    for (const Command& c : m_registry.commands()) {
+        if (c.plugin != current) {
+            current = c.plugin;
+            std::cout << (current == kProgram ? std::string("\nBuilt in:\n")
+                                              : format("\nFrom {}:\n", current));
+        }
+        const std::string head = c.name + (c.arguments.empty() ? "" : " " + c.arguments);
+        std::cout << format("  {:<24} {}\n", head, c.help);
+        for (const OptionSpec& o : c.options)
+            std::cout << option_line(o);
+    }
+    std::cout << format("\nMore on one command: {} --help COMMAND\n", kProgram);
+}
+
+bool Host::print_command_help(const std::string& name) const
+{
+    const Command* c = m_registry.find(name);
+    if (!c)
+        c = m_registry.find("--" + name);
+    if (!c)
+        return false;
+    std::cout << format("{}{}\n    {}\n    takes {} image(s) from the stack, pushes {}; from {}\n",
+                        c->name, c->arguments.empty() ? "" : " " + c->arguments, c->help,
+                        c->inputs, c->outputs, c->plugin);
+    if (!c->options.empty())
+        std::cout << "    options:\n";
+    for (const OptionSpec& o : c->options)
+        std::cout << option_line(o);
+    return true;
+}
+
+void Host::print_plugins() const
+{
+    std::cout << format("built-in plugin directory: {}\n", plugin_dir());
+    const char* env = std::getenv("BOKEH_PLUGIN_PATH");
+    std::cout << format("BOKEH_PLUGIN_PATH: {}\n", env ? env : "(not set)");
+    for (const std::string& f : m_plugin_files) {
+        std::vector<std::string> names;
+        for (const Command& c : m_registry.commands())
+            if (c.plugin == f)
+                names.push_back(c.name);
+        std::cout << format("loaded {}: {}\n", f, OIIO::Strutil::join(names, " "));
+    }
+    for (const std::string& f : m_plugin_failures)
+        std::cout << format("FAILED {}\n", f);
+}
+
+// ---------------------------------------------------------------------------------------
+// Messages.
+
+bool Host::fail(const std::string& command, const std::string& why)
+{
+    if (!m_failed)
+        std::cerr << format("{} ERROR: {}{}{}{}\n", kProgram, command,
+                            command.empty() ? "" : ": ", why, m_where);
+    m_failed = true;
+    return false;
+}
+
+void Host::warn(const std::string& what) const
+{
+    if (m_verbosity > 0)
+        std::cerr << format("{} WARNING: {}\n", kProgram, what);
+}
+
+void Host::message(const std::string& what) const
+{
+    if (m_verbosity > 0)
+        std::cout << what << (OIIO::Strutil::ends_with(what, "\n") ? "" : "\n");
+}
+
+// ---------------------------------------------------------------------------------------
+// Parsing and running.
+
+bool Host::parse(const std::vector<std::string>& args, bool checking)
+{
+    OIIO::ArgParse ap;
+    ap.prog(kProgram).add_help(false).exit_on_error(false);
+    std::vector<const char*> argv = { kProgram };
+    for (const std::string& a : args)
+        argv.push_back(a.c_str());
+
+    auto action = [this, &ap, checking](OIIO::cspan<const char*> a) {
+        if (m_failed)
+            return;
+        std::vector<std::string> words(a.begin(), a.end());
+        dispatch(ap, words, checking);
+        if (m_failed)
+            ap.abort();
+    };
+    for (const Command& c : m_registry.commands()) {
+        const std::string decl = c.name + (c.arguments.empty() ? "" : " " + c.arguments);
+        ap.add_argument(decl.c_str()).help(c.help).always_run().action(action);
+    }
+    ap.add_argument("filename").hidden().always_run().action(action);
+
+    if (ap.parse_args(int(argv.size()), argv.data()) < 0 && !m_failed) {
+        std::string why = OIIO::Strutil::strip(ap.geterror());
+        return fail("", why.empty() ? "malformed command line" : why + " (see --help)");
+    }
+    return !m_failed;
+}
+
+void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool checking)
+{
+    const std::string& head = words[0];
+    const bool is_file      = head.empty() || head[0] != '-' || head == "-";
+    if (is_file) {
+        if (checking)
+            ++m_depth;
+        else
+            read_input(head);
+        return;
+    }
+    const size_t colon          = head.find(':');
+    const std::string name      = head.substr(0, colon);
+    const std::string modifiers = colon == std::string::npos ? "" : head.substr(colon + 1);
+    const Command* cmd          = m_registry.find(name);
+    if (!cmd) {
+        fail(name, "unknown command (see --help)");
+        return;
+    }
+    const std::vector<std::string> args(words.begin() + 1, words.end());
+    bokeh::OptionValues opts;
+    if (checking) {
+        if (!check_command(*cmd, modifiers, args, opts))
+            return;
+        if (m_global[name]) {
+            CommandContext ctx;
+            ctx.args    = args;
+            ctx.options = opts;
+            if (!cmd->run(ctx))
+                fail(name, ctx.error);
+        }
+        return;
+    }
+    if (m_global[name])
+        return;
+    std::string err;
+    bokeh::parse_options(cmd->options, modifiers, opts, err);  // checked in pass 1
+    run_command(*cmd, opts, args);
+}
+
+bool Host::check_command(const Command& cmd, const std::string& modifiers,
+                         const std::vector<std::string>& args, bokeh::OptionValues& opts)
+{
+    std::string err;
+    if (!bokeh::parse_options(cmd.options, modifiers, opts, err))
+        return fail(cmd.name, err);
+    if (int(args.size()) != cmd.argument_count())
+        return fail(cmd.name, format("needs {} argument(s): {}", cmd.argument_count(),
+                                     cmd.arguments));
+    if (m_depth < cmd.inputs)
+        return fail(cmd.name, format("needs {} image(s) on the stack but {} {} there",
+                                     cmd.inputs, m_depth, m_depth == 1 ? "is" : "are"));
+    m_depth += cmd.outputs - cmd.inputs;
+    return true;
+}
+
+bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
+                       const std::vector<std::string>& args)
+{
+    if (int(m_stack.size()) < cmd.inputs)
+        return fail(cmd.name, format("needs {} image(s) on the stack but {} there", cmd.inputs,
+                                     m_stack.size()));
+    CommandContext ctx;
+    ctx.args      = args;
+    ctx.options   = std::move(opts);
+    ctx.nthreads  = m_threads;
+    ctx.verbosity = m_verbosity;
+    ctx.colors    = &m_colors;
+    ctx.message   = [this](const std::string& s) { message(s); };
+    ctx.inputs.assign(m_stack.end() - cmd.inputs, m_stack.end());
+    m_stack.resize(m_stack.size() - size_t(cmd.inputs));
+
+    if (cmd.needs_scene_linear) {
+        for (StackImage& in : ctx.inputs) {
+            if (in.buf->deep() || in.colorspace == m_colors.scene_linear())
+                continue;
+            auto linear = std::make_shared<OIIO::ImageBuf>(*in.buf);
+            std::string err;
+            if (!m_colors.convert(*linear, in.colorspace, m_colors.scene_linear(), m_threads, err))
+                return fail(cmd.name, err);
+            in.buf        = linear;
+            in.colorspace = m_colors.scene_linear();
+        }
+    }
+
+    OIIO::Timer timer;
+    bool ok = false;
+    try {
+        ok = cmd.run(ctx);
+    } catch (const std::exception& e) {
+        ctx.error = format("failed with an exception: {}", e.what());
+    } catch (...) {
+        ctx.error = "failed with an unknown exception";
+    }
+    if (!ok)
+        return fail(cmd.name, ctx.error.empty() ? "failed (no reason given)" : ctx.error);
+    if (int(ctx.outputs.size()) != cmd.outputs)
+        return fail(cmd.name, format("pushed {} image(s) but declares {} (a plugin bug; {})",
+                                     ctx.outputs.size(), cmd.outputs, cmd.plugin));
+    for (StackImage& out : ctx.outputs) {
+        if (!out.buf || !out.buf->initialized())
+            return fail(cmd.name, format("produced no image (a plugin bug; {})", cmd.plugin));
+        if (!ctx.inputs.empty()) {
+            if (out.file_types.empty())
+                out.file_types = ctx.inputs[0].file_types;
+            if (out.colorspace.empty())
+                out.colorspace = ctx.inputs[0].colorspace;
+            if (out.origin.empty())
+                out.origin = ctx.inputs[0].origin;
+        }
+        if (out.colorspace.empty())
+            out.colorspace = m_colors.scene_linear();
+        if (out.origin.empty())
+            out.origin = cmd.name;
+        m_stack.push_back(std::move(out));
+    }
+    if (m_verbosity > 1 && cmd.name != "-o")
+        message(format("  {} {}: {:.3f} s", cmd.name, OIIO::Strutil::join(args, " "),
+                       timer()));
+    return true;
+}
+
+bool Host::read_input(const std::string& path)
+{
+    auto buf = std::make_shared<OIIO::ImageBuf>();
+    std::string err;
+    if (!bokeh::read_image(*buf, path, err))
+        return fail("-i", err);
+    bokeh::NonFiniteCount count;
+    if (!bokeh::scrub_nonfinite(*buf, m_nan_policy, count, m_threads))
+        return fail("-i", format("{}: {} non-finite (NaN/Inf) value(s) and --nan:policy=error",
+                                 path, count.total()));
+    if (count.total() > 0)
+        warn(format("{}: replaced {} non-finite colour value(s) by 0 and {} NaN/-inf depth "
+                    "value(s) by +inf (no depth)",
+                    path, count.colour, count.depth));
+    if (m_info)
+        std::cout << bokeh::describe_image(*buf, path, m_verbosity > 1);
+    StackImage img;
+    img.colorspace = m_colors.space_of_file(buf->nativespec());
+    img.file_types = bokeh::channel_types_of(buf->nativespec());
+    img.origin     = path;
+    img.buf        = std::move(buf);
+    m_stack.push_back(std::move(img));
+    return true;
+}
+
+// Formats that hold only integer pixels: outputs there are display-referred (sRGB).
+static bool integer_only_format(const std::string& path)
+{
+    static const char* names[] = { ".png", ".jpg", ".jpeg", ".bmp", ".gif", ".tga",
+                                   ".webp", ".ppm", ".pgm", ".pnm", ".ico" };
+    const std::string ext = OIIO::Strutil::lower(OIIO::Filesystem::extension(path));
+    return std::any_of(std::begin(names), std::end(names), [&](const char* n) { return ext == n; });
+}
+
+bool Host::write_one(const PendingWrite& w)
+{
+    const StackImage& img = w.image;
+    std::vector<OIIO::TypeDesc> formats = bokeh::formats_for(img.buf->spec(), img.file_types);
+    for (int c = 0; c < img.buf->nchannels(); ++c) {
+        auto all = w.datatypes.find(""), mine = w.datatypes.find(img.buf->spec().channel_name(c));
+        if (mine != w.datatypes.end())
+            formats[size_t(c)] = mine->second;
+        else if (all != w.datatypes.end())
+            formats[size_t(c)] = all->second;
+    }
+    // Display-referred 8/16-bit data cannot go into OpenEXR (float, half, uint32 only):
+    // it becomes scene-linear half there, and float data becomes 8-bit sRGB in PNG/JPEG.
+    const std::string ext = OIIO::Strutil::lower(OIIO::Filesystem::extension(w.path));
+    bool integer          = true;
+    for (OIIO::TypeDesc& t : formats) {
+        if (integer_only_format(w.path) && t.is_floating_point())
+            t = OIIO::TypeUInt8;
+        if (ext == ".exr" && t.is_floating_point() == false && t.basetype != OIIO::TypeDesc::UINT32)
+            t = OIIO::TypeHalf;
+        integer = integer && !t.is_floating_point();
+    }
+    const std::string target = integer ? m_colors.display_default() : m_colors.scene_linear();
+
+    const OIIO::ImageBuf* pixels = img.buf.get();
+    OIIO::ImageBuf converted;
+    if (!img.buf->deep() && img.colorspace != target) {
+        converted = *img.buf;
+        std::string err;
+        if (!m_colors.convert(converted, img.colorspace, target, m_threads, err))
+            return fail("-o", format("{}: {}", w.path, err));
+        converted.specmod().attribute("oiio:ColorSpace", target);
+        pixels = &converted;
+    }
+    bokeh::WriteOptions opts;
+    opts.channel_formats = formats;
+    opts.no_clobber      = m_no_clobber;
+    std::string err;
+    if (!bokeh::write_image(*pixels, w.path, opts, err))
+        return fail("-o", err);
+    if (m_verbosity > 1)
+        message(format("  wrote {}", w.path));
+    return true;
+}
+
+bool Host::write_pending()
+{
+    for (const PendingWrite& w : m_writes)
+        if (!write_one(w))
+            return false;
+    return true;
+}
+
+int Host::main(const std::vector<std::string>& args)
+{
+    auto has = [&](const char* flag) { return std::find(args.begin(), args.end(), flag) != args.end(); };
+    if (has("--version")) {
+        std::cout << format("{} {}\n", kProgram, BOKEH_VERSION);
+        return 0;
+    }
+    const bool plugins_ok = load_plugins();
+    auto help = std::find(args.begin(), args.end(), "--help");
+    if (args.empty() || help != args.end()) {
+        if (help != args.end() && help + 1 != args.end()) {
+            if (!print_command_help(*(help + 1)))
+                return fail("--help", format("unknown command '{}'", *(help + 1))), 1;
+        } else {
+            print_help();
+        }
+        return plugins_ok ? 0 : 1;
+    }
+    if (has("--plugins")) {
+        print_plugins();
+        return plugins_ok ? 0 : 1;
+    }
+    if (!plugins_ok) {
+        // A broken plugin is a broken installation: say which, and stop.
+        for (const std::string& f : m_plugin_failures)
+            std::cerr << format("{} ERROR: {}\n", kProgram, f);
+        return 1;
+    }
+
+    FramePlan plan;
+    std::string err;
+    if (!plan_frames(args, plan, err))
+        return fail("", err), 1;
+    const bool sequence = !plan.frames.empty();
+    const std::vector<int> frames = sequence ? plan.frames : std::vector<int>{ 0 };
+
+    // Pass 1: check the whole line and take the global options.
+    if (!parse(sequence ? args_for_frame(plan, frames.front()) : plan.args, true))
+        return 1;
+    if (!m_colors.load(bokeh::resolve_color_config(m_colorconfig, shipped_color_config()), err))
+        return fail("--colorconfig", err), 1;
+    OIIO::attribute("threads", m_threads);
+
+    for (size_t i = 0; i < frames.size(); ++i) {
+        OIIO::Timer timer;
+        m_stack.clear();
+        m_writes.clear();
+        m_datatypes.clear();
+        const std::vector<std::string> line = sequence ? args_for_frame(plan, frames[i]) : plan.args;
+        if (sequence)
+            m_where = format(" (frame {}, {} of {}; the run stopped here)", frames[i], i + 1,
+                             frames.size());
+        if (!parse(line, false) || !write_pending())
+            return 1;
+        if (m_progress && m_verbosity > 0)
+            std::cout << format("frame {} ({} of {}) done in {:.2f} s\n", frames[i], i + 1,
+                                frames.size(), timer());
+    }
+    return 0;
+}
+
+}  // namespace bokehtool
