@@ -1,0 +1,504 @@
+// blur.cpp — uniform blurs: box by running sums, Gaussian by separable convolution or
+// three boxes, disk and polygon by row spans, and the brute-force reference.
+//
+// Every method is a "valid" convolution of a padded plane: the source region the output
+// needs, grown by the kernel radius and filled past the data window by the border rule,
+// is copied once into a contiguous float plane; the methods read only inside it.
+//
+// Row spans (disk, polygon): each kernel row's weight profile is cut into horizontal
+// bars ("skyline" decomposition: one bar per rise of the profile), so a kernel becomes a
+// list of (dy, x0, x1, weight) spans; a span's sum is a difference of two row prefix sums.
+// Cost per pixel is linear in the number of spans, about 3 per kernel row for convex
+// anti-aliased shapes, so linear in the diameter (SEEDS.md section 5 asks for cost that
+// does not grow with the area). Prefix sums are double so a 1e6 pixel leaves no drift;
+// output rows are computed in column strips so the rows of prefix sums in use stay in L2.
+//
+// Running sums (box): one add and one subtract per pixel per pass whatever the width,
+// in double; a fractional width adds its two partial end pixels explicitly.
+//
+// Fast Gaussian: three equal boxes whose variance adds up to sigma^2 (central limit;
+// Wells 1986, "Efficient synthesis of Gaussian filters by cascaded uniform filters"). The
+// box width is fractional, so the variance matches exactly, not to the nearest odd width.
+
+#include <bokeh/blur.h>
+#include <bokeh/parallel.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+namespace {
+
+// A contiguous interleaved float image.
+struct Plane {
+    int w = 0, h = 0, nc = 0;
+    std::vector<float> px;
+    Plane() = default;
+    Plane(int w_, int h_, int nc_)
+        : w(w_), h(h_), nc(nc_), px(size_t(w_) * size_t(h_) * size_t(nc_), 0.0f)
+    {
+    }
+    size_t stride() const { return size_t(w) * size_t(nc); }
+    float* row(int y) { return &px[size_t(y) * stride()]; }
+    const float* row(int y) const { return &px[size_t(y) * stride()]; }
+};
+
+constexpr int kOutside = std::numeric_limits<int>::min();
+
+// Index of coordinate i in [begin, end) under the border rule; kOutside = black.
+int border_index(int i, int begin, int end, Border b)
+{
+    if (i >= begin && i < end)
+        return i;
+    const int n = end - begin;
+    switch (b) {
+    case Border::Black: return kOutside;
+    case Border::Clamp: return std::clamp(i, begin, end - 1);
+    case Border::Mirror: {
+        // ... 2 1 0 | 0 1 2 ... : period 2n with the edge pixel repeated.
+        int t = (i - begin) % (2 * n);
+        if (t < 0)
+            t += 2 * n;
+        return begin + (t < n ? t : 2 * n - 1 - t);
+    }
+    }
+    return kOutside;
+}
+
+// The source over `region`, border-filled. `src` is float with local pixels.
+Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads)
+{
+    const int nc = src.nchannels();
+    Plane p(region.width(), region.height(), nc);
+    const OIIO::ROI data = src.roi();
+    parallel_for_chunks(0, p.h, 8, nthreads, [&](int64_t j0, int64_t j1) {
+        for (int j = int(j0); j < int(j1); ++j) {
+            const int sy = border_index(region.ybegin + j, data.ybegin, data.yend, border);
+            float* out   = p.row(j);
+            if (sy == kOutside)
+                continue;
+            for (int i = 0; i < p.w; ++i) {
+                const int sx = border_index(region.xbegin + i, data.xbegin, data.xend, border);
+                if (sx != kOutside)
+                    std::copy_n(static_cast<const float*>(src.pixeladdr(sx, sy, data.zbegin)), nc,
+                                out + size_t(i) * size_t(nc));
+            }
+        }
+    });
+    return p;
+}
+
+// --- brute force -------------------------------------------------------------------
+
+// The weights point-reflected: out(x) = sum_d w(d) in(x - d) = sum_d w(-d) in(x + d), so a
+// point spreads into the kernel's own shape (this matters for shapes without point
+// symmetry, such as a pentagon).
+KernelWeights reflected(const KernelWeights& k)
+{
+    KernelWeights r = k;
+    std::reverse(r.w.begin(), r.w.end());
+    return r;
+}
+
+Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads)
+{
+    const KernelWeights k = reflected(kernel);
+    Plane out(in.w - 2 * k.rx, in.h - 2 * k.ry, in.nc);
+    const size_t n = out.stride();
+    parallel_for_chunks(0, out.h, 4, nthreads, [&](int64_t y0, int64_t y1) {
+        std::vector<double> acc(n);
+        for (int y = int(y0); y < int(y1); ++y) {
+            std::fill(acc.begin(), acc.end(), 0.0);
+            for (int dy = -k.ry; dy <= k.ry; ++dy)
+                for (int dx = -k.rx; dx <= k.rx; ++dx) {
+                    const double w = k.at(dx, dy);
+                    if (w == 0.0)
+                        continue;
+                    const float* src = in.row(y + k.ry + dy) + size_t(k.rx + dx) * size_t(in.nc);
+                    for (size_t i = 0; i < n; ++i)
+                        acc[i] += w * src[i];
+                }
+            float* o = out.row(y);
+            for (size_t i = 0; i < n; ++i)
+                o[i] = float(acc[i]);
+        }
+    });
+    return out;
+}
+
+// --- row spans ---------------------------------------------------------------------
+
+struct Span {
+    int dy, x0, x1;  // covers dx in [x0, x1]
+    double weight;
+};
+
+// Skyline decomposition of each kernel row into stacked horizontal bars.
+std::vector<Span> kernel_spans(const KernelWeights& k)
+{
+    std::vector<Span> spans;
+    struct Open {
+        int start;
+        double level;
+    };
+    for (int dy = -k.ry; dy <= k.ry; ++dy) {
+        std::vector<Open> stack;
+        for (int dx = -k.rx; dx <= k.rx + 1; ++dx) {
+            const double h = dx <= k.rx ? k.at(dx, dy) : 0.0;
+            while (!stack.empty() && h < stack.back().level) {
+                const Open top = stack.back();
+                stack.pop_back();
+                const double below = std::max(h, stack.empty() ? 0.0 : stack.back().level);
+                spans.push_back({ dy, top.start, dx - 1, top.level - below });
+                if (h > (stack.empty() ? 0.0 : stack.back().level)) {
+                    stack.push_back({ top.start, h });  // the lower part continues
+                    break;
+                }
+            }
+            if (h > (stack.empty() ? 0.0 : stack.back().level))
+                stack.push_back({ dx, h });
+        }
+    }
+    return spans;
+}
+
+Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
+{
+    const int nc = in.nc;
+    Plane out(in.w - 2 * kernel.rx, in.h - 2 * kernel.ry, nc);
+    const KernelWeights k         = reflected(kernel);
+    const std::vector<Span> spans = kernel_spans(k);
+
+    // Row prefix sums: P[y][(x + 1) nc + c] = sum of in[y][0..x] in channel c.
+    const size_t pstride = size_t(in.w + 1) * size_t(nc);
+    std::vector<double> prefix(size_t(in.h) * pstride);
+    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int64_t y = y0; y < y1; ++y) {
+            double* p       = &prefix[size_t(y) * pstride];
+            const float* v  = in.row(int(y));
+            for (int c = 0; c < nc; ++c)
+                p[c] = 0.0;
+            for (size_t i = 0, n = size_t(in.w) * size_t(nc); i < n; ++i)
+                p[i + size_t(nc)] = p[i] + v[i];
+        }
+    });
+
+    // Output in column strips x row chunks; each task owns its outputs.
+    constexpr int kStrip = 256, kRows = 16;
+    const int nstrips = (out.w + kStrip - 1) / kStrip;
+    const int nrows   = (out.h + kRows - 1) / kRows;
+    parallel_for_chunks(0, int64_t(nstrips) * nrows, 1, nthreads, [&](int64_t t, int64_t) {
+        const int xs = int(t % nstrips) * kStrip, xe = std::min(out.w, xs + kStrip);
+        const int ys = int(t / nstrips) * kRows, ye = std::min(out.h, ys + kRows);
+        const size_t i0 = size_t(xs) * size_t(nc), n = size_t(xe - xs) * size_t(nc);
+        std::vector<double> acc(n);
+        for (int y = ys; y < ye; ++y) {
+            std::fill(acc.begin(), acc.end(), 0.0);
+            for (const Span& s : spans) {
+                const double* p  = &prefix[size_t(y + k.ry + s.dy) * pstride] + i0;
+                const double* hi = p + size_t(k.rx + s.x1 + 1) * size_t(nc);
+                const double* lo = p + size_t(k.rx + s.x0) * size_t(nc);
+                const double w   = s.weight;
+                for (size_t i = 0; i < n; ++i)
+                    acc[i] += w * (hi[i] - lo[i]);
+            }
+            float* o = out.row(y) + i0;
+            for (size_t i = 0; i < n; ++i)
+                o[i] = float(acc[i]);
+        }
+    });
+    return out;
+}
+
+// --- separable passes --------------------------------------------------------------
+
+// Horizontal then vertical direct convolution with 1-D weights (Gaussian).
+Plane convolve_separable(const Plane& in, const std::vector<double>& wx,
+                         const std::vector<double>& wy, int nthreads)
+{
+    const int rx = int(wx.size() / 2), ry = int(wy.size() / 2), nc = in.nc;
+    Plane mid(in.w - 2 * rx, in.h, nc);
+    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        const size_t n = mid.stride();
+        std::vector<double> acc(n);
+        for (int y = int(y0); y < int(y1); ++y) {
+            std::fill(acc.begin(), acc.end(), 0.0);
+            for (size_t j = 0; j < wx.size(); ++j) {
+                const float* src = in.row(y) + j * size_t(nc);
+                for (size_t i = 0; i < n; ++i)
+                    acc[i] += wx[j] * src[i];
+            }
+            float* o = mid.row(y);
+            for (size_t i = 0; i < n; ++i)
+                o[i] = float(acc[i]);
+        }
+    });
+    Plane out(mid.w, in.h - 2 * ry, nc);
+    parallel_for_chunks(0, out.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        const size_t n = out.stride();
+        std::vector<double> acc(n);
+        for (int y = int(y0); y < int(y1); ++y) {
+            std::fill(acc.begin(), acc.end(), 0.0);
+            for (size_t j = 0; j < wy.size(); ++j) {
+                const float* src = mid.row(y + int(j));
+                for (size_t i = 0; i < n; ++i)
+                    acc[i] += wy[j] * src[i];
+            }
+            float* o = out.row(y);
+            for (size_t i = 0; i < n; ++i)
+                o[i] = float(acc[i]);
+        }
+    });
+    return out;
+}
+
+// A box of fractional width, read off its 1-D weights: `full` pixels each side at
+// weight `inner`, then one end pixel each side at weight `end` (0 when none).
+struct BoxPass {
+    int full = 0, radius = 0;
+    double inner = 1.0, end = 0.0;
+    explicit BoxPass(const std::vector<double>& w)
+    {
+        radius = int(w.size() / 2);
+        inner  = w[size_t(radius)];
+        const bool partial = radius > 0 && w.front() != inner;
+        full   = partial ? radius - 1 : radius;
+        end    = partial ? w.front() : 0.0;
+    }
+};
+
+// One box pass along x (running sums along each row).
+Plane box_horizontal(const Plane& in, const BoxPass& b, int nthreads)
+{
+    const int nc = in.nc;
+    Plane out(in.w - 2 * b.radius, in.h, nc);
+    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        std::vector<double> sum(static_cast<size_t>(nc));
+        for (int y = int(y0); y < int(y1); ++y) {
+            const float* v = in.row(y);
+            float* o       = out.row(y);
+            auto at = [&](int x, int c) { return double(v[size_t(x) * size_t(nc) + size_t(c)]); };
+            for (int c = 0; c < nc; ++c) {
+                sum[size_t(c)] = 0.0;
+                for (int i = -b.full; i <= b.full; ++i)
+                    sum[size_t(c)] += at(b.radius + i, c);
+            }
+            for (int x = 0; x < out.w; ++x) {
+                const int centre = x + b.radius;
+                for (int c = 0; c < nc; ++c) {
+                    double s = sum[size_t(c)] * b.inner;
+                    if (b.end != 0.0)
+                        s += b.end * (at(centre - b.full - 1, c) + at(centre + b.full + 1, c));
+                    o[size_t(x) * size_t(nc) + size_t(c)] = float(s);
+                    if (x + 1 < out.w)
+                        sum[size_t(c)] += at(centre + b.full + 1, c) - at(centre - b.full, c);
+                }
+            }
+        }
+    });
+    return out;
+}
+
+// One box pass along y: running sums down the columns, a row of sums at a time.
+Plane box_vertical(const Plane& in, const BoxPass& b, int nthreads)
+{
+    Plane out(in.w, in.h - 2 * b.radius, in.nc);
+    const size_t n = in.stride();
+    constexpr size_t kStrip = 1024;
+    parallel_for_chunks(0, int64_t((n + kStrip - 1) / kStrip), 1, nthreads, [&](int64_t s, int64_t) {
+        const size_t i0 = size_t(s) * kStrip, i1 = std::min(n, i0 + kStrip);
+        std::vector<double> sum(i1 - i0, 0.0);
+        for (int j = -b.full; j <= b.full; ++j) {
+            const float* r = in.row(b.radius + j);
+            for (size_t i = i0; i < i1; ++i)
+                sum[i - i0] += r[i];
+        }
+        for (int y = 0; y < out.h; ++y) {
+            const int centre = y + b.radius;
+            float* o         = out.row(y);
+            const float* lo  = b.end != 0.0 ? in.row(centre - b.full - 1) : nullptr;
+            const float* hi  = b.end != 0.0 ? in.row(centre + b.full + 1) : nullptr;
+            for (size_t i = i0; i < i1; ++i) {
+                double v = sum[i - i0] * b.inner;
+                if (lo)
+                    v += b.end * (double(lo[i]) + double(hi[i]));
+                o[i] = float(v);
+            }
+            if (y + 1 < out.h) {
+                const float* add = in.row(centre + b.full + 1);
+                const float* sub = in.row(centre - b.full);
+                for (size_t i = i0; i < i1; ++i)
+                    sum[i - i0] += double(add[i]) - double(sub[i]);
+            }
+        }
+    });
+    return out;
+}
+
+Plane box_blur(const Plane& in, const std::vector<double>& wx, const std::vector<double>& wy,
+               int nthreads)
+{
+    return box_vertical(box_horizontal(in, BoxPass(wx), nthreads), BoxPass(wy), nthreads);
+}
+
+// Box width whose variance is `variance` (bisection: variance grows with width).
+double box_width_for_variance(double variance)
+{
+    auto var = [](double w) {
+        const std::vector<double> b = box_weights_1d(w);
+        const int r = int(b.size() / 2);
+        double v    = 0.0;
+        for (int i = -r; i <= r; ++i)
+            v += b[size_t(i + r)] * i * i;
+        return v;
+    };
+    double lo = 1.0, hi = 2.0 * std::sqrt(3.0 * variance) + 3.0;
+    for (int it = 0; it < 60; ++it) {
+        const double mid = 0.5 * (lo + hi);
+        (var(mid) < variance ? lo : hi) = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+// --- dispatch ----------------------------------------------------------------------
+
+// A float, local copy of `src` when it is not already one.
+const OIIO::ImageBuf& float_source(const OIIO::ImageBuf& src, OIIO::ImageBuf& holder)
+{
+    if (src.spec().format == OIIO::TypeFloat && src.localpixels())
+        return src;
+    holder.copy(src, OIIO::TypeFloat);
+    return holder;
+}
+
+bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi, const Plane& p)
+{
+    OIIO::ImageSpec spec = src.spec();
+    spec.set_format(OIIO::TypeFloat);
+    spec.channelformats.clear();
+    spec.x      = roi.xbegin;
+    spec.y      = roi.ybegin;
+    spec.width  = roi.width();
+    spec.height = roi.height();
+    dst.reset(spec);
+    for (int y = 0; y < p.h; ++y)
+        std::copy_n(p.row(y), p.stride(),
+                    static_cast<float*>(dst.pixeladdr(roi.xbegin, roi.ybegin + y)));
+    return true;
+}
+
+OIIO::ROI grown(OIIO::ROI r, int rx, int ry)
+{
+    r.xbegin -= rx;
+    r.xend += rx;
+    r.ybegin -= ry;
+    r.yend += ry;
+    return r;
+}
+
+bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src)
+{
+    if (!src.initialized()) {
+        dst.errorfmt("blur: the source image is empty");
+        return false;
+    }
+    if (src.deep()) {
+        dst.errorfmt("blur: deep images cannot be blurred; flatten them first");
+        return false;
+    }
+    if (src.spec().depth > 1) {
+        dst.errorfmt("blur: volume images are not supported");
+        return false;
+    }
+    return true;
+}
+
+}  // namespace
+
+bool convolve_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
+                        const KernelWeights& weights, const BlurOptions& opts, OIIO::ROI roi,
+                        int nthreads)
+{
+    if (!check_source(dst, src))
+        return false;
+    OIIO::ImageBuf holder;
+    const OIIO::ImageBuf& in = float_source(src, holder);
+    if (!roi.defined())
+        roi = opts.grow ? grown(in.roi(), weights.rx, weights.ry) : in.roi();
+    const Plane p = pad(in, grown(roi, weights.rx, weights.ry), opts.border, nthreads);
+    return finish(dst, in, roi, convolve_brute(p, weights, nthreads));
+}
+
+bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
+          const BlurOptions& opts, OIIO::ROI roi, int nthreads)
+{
+    std::string err;
+    if (!validate(k, err)) {
+        dst.errorfmt("blur: {}", err);
+        return false;
+    }
+    if (!check_source(dst, src))
+        return false;
+    OIIO::ImageBuf holder;
+    const OIIO::ImageBuf& in = float_source(src, holder);
+    const KernelWeights weights = kernel_weights(k);
+    if (opts.method == BlurMethod::Reference)
+        return convolve_reference(dst, in, weights, opts, roi, nthreads);
+
+    const bool gaussian = k.shape == KernelShape::Gaussian;
+    if (opts.method == BlurMethod::Fast && !gaussian) {
+        dst.errorfmt("blur: no fast approximation of this kernel shape yet (use method=exact)");
+        return false;
+    }
+    if (opts.method == BlurMethod::Fast && !weights.is_identity()) {
+        // Three boxes per axis with the Gaussian's variance.
+        const double sx = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.width_px;
+        const double sy = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.height_px;
+        const std::vector<double> bx = box_weights_1d(sx > 0 ? box_width_for_variance(sx * sx / 3.0) : 0.0);
+        const std::vector<double> by = box_weights_1d(sy > 0 ? box_width_for_variance(sy * sy / 3.0) : 0.0);
+        const int rx = 3 * int(bx.size() / 2), ry = 3 * int(by.size() / 2);
+        if (!roi.defined())
+            roi = opts.grow ? grown(in.roi(), rx, ry) : in.roi();
+        Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads);
+        for (int pass = 0; pass < 3; ++pass)
+            p = box_blur(p, bx, by, nthreads);
+        return finish(dst, in, roi, p);
+    }
+
+    if (!roi.defined())
+        roi = opts.grow ? grown(in.roi(), weights.rx, weights.ry) : in.roi();
+    const Plane p = pad(in, grown(roi, weights.rx, weights.ry), opts.border, nthreads);
+    if (weights.is_identity())
+        return finish(dst, in, roi, p);  // bit-exact copy
+    switch (k.shape) {
+    case KernelShape::Box: {
+        const std::vector<double> wx = box_weights_1d(k.width_px), wy = box_weights_1d(k.height_px);
+        return finish(dst, in, roi, box_blur(p, wx, wy, nthreads));
+    }
+    case KernelShape::Gaussian: {
+        const double sx = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.width_px;
+        const double sy = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.height_px;
+        return finish(dst, in, roi,
+                      convolve_separable(p, gaussian_weights_1d(sx), gaussian_weights_1d(sy), nthreads));
+    }
+    case KernelShape::Disk:
+    case KernelShape::Polygon: return finish(dst, in, roi, convolve_spans(p, weights, nthreads));
+    }
+    dst.errorfmt("blur: unknown kernel shape");
+    return false;
+}
+
+OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts,
+                    OIIO::ROI roi, int nthreads)
+{
+    OIIO::ImageBuf dst;
+    blur(dst, src, k, opts, roi, nthreads);
+    return dst;
+}
+
+}  // namespace bokeh

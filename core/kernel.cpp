@@ -1,0 +1,212 @@
+// kernel.cpp — exact weights of the uniform kernels.
+//
+// Box: a rectangle of real width w over pixel squares; pixel i (offset from the centre)
+// gets the length of [i - 1/2, i + 1/2] inside [-w/2, w/2], over w. Gaussian: the normal
+// density integrated over each pixel (erf differences), out to 4 sigma, renormalised.
+// Disk and polygon: the area of each pixel square inside the shape (anti-aliased) or the
+// pixel-centre test (hard; OIIO's make_kernel("disk") is `(x/(w/2))^2 + (y/(h/2))^2 < 1`).
+// Polygon with N blades: the edge distance at polar angle phi from an edge's normal is
+// cos(pi/N) / cos(phi) (circumradius 1); curved blades blend it toward the circle,
+// d = d_poly + curvature (1 - d_poly), an approximation of real curved blades, which are
+// circle arcs. A catadioptric lens's central obstruction is a hole of `hole * d`.
+
+#include <bokeh/blur.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using OIIO::Strutil::fmt::format;
+
+constexpr double kPi = 3.14159265358979323846;
+
+bool validate(const Kernel& k, std::string& err)
+{
+    auto bad_size = [](float v) { return !std::isfinite(v) || v < 0.0f || v > 4096.0f; };
+    if (bad_size(k.width_px) || bad_size(k.height_px)) {
+        err = format("kernel size {}x{} is outside 0..4096 pixels", k.width_px, k.height_px);
+        return false;
+    }
+    if (!std::isfinite(k.sigma_px) || k.sigma_px < 0.0f || k.sigma_px > 1024.0f) {
+        err = format("sigma {} is outside 0..1024 pixels", k.sigma_px);
+        return false;
+    }
+    if (k.blades < 3 || k.blades > 64) {
+        err = format("blades {} is outside 3..64", k.blades);
+        return false;
+    }
+    if (!std::isfinite(k.rotation_deg) || !std::isfinite(k.curvature) || k.curvature < 0.0f
+        || k.curvature > 1.0f) {
+        err = format("curvature {} is outside 0..1", k.curvature);
+        return false;
+    }
+    if (!std::isfinite(k.hole) || k.hole < 0.0f || k.hole >= 1.0f) {
+        err = format("hole {} is outside 0..<1", k.hole);
+        return false;
+    }
+    return true;
+}
+
+std::vector<double> box_weights_1d(double width)
+{
+    if (!(width > 1.0))
+        return { 1.0 };
+    const double h = 0.5 * width;
+    const int full = int(std::floor(h - 0.5));           // pixels wholly inside, each side
+    const double f = h - (full + 0.5);                    // overlap of the next pixel out
+    const int r    = f > 1e-12 ? full + 1 : full;
+    std::vector<double> w(size_t(2 * r + 1), 1.0 / width);
+    if (r > full)
+        w.front() = w.back() = f / width;
+    return w;
+}
+
+std::vector<double> gaussian_weights_1d(double sigma)
+{
+    if (!(sigma > 0.0))
+        return { 1.0 };
+    const int r = std::max(1, int(std::ceil(4.0 * sigma)));
+    std::vector<double> w(size_t(2 * r + 1));
+    const double k = 1.0 / (sigma * std::sqrt(2.0));
+    double sum     = 0.0;
+    for (int i = -r; i <= r; ++i) {
+        w[size_t(i + r)] = 0.5 * (std::erf((i + 0.5) * k) - std::erf((i - 0.5) * k));
+        sum += w[size_t(i + r)];
+    }
+    for (double& v : w)
+        v /= sum;
+    return w;
+}
+
+namespace {
+
+KernelWeights outer(const std::vector<double>& wx, const std::vector<double>& wy)
+{
+    KernelWeights kw;
+    kw.rx = int(wx.size() / 2);
+    kw.ry = int(wy.size() / 2);
+    for (double y : wy)
+        for (double x : wx)
+            kw.w.push_back(x * y);
+    return kw;
+}
+
+// Drop all-zero outer rows and columns (symmetrically), so a kernel that covers one
+// pixel becomes the identity and the brute-force reference does no wasted work.
+KernelWeights trimmed(const KernelWeights& kw)
+{
+    int rx = 0, ry = 0;
+    for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+        for (int dx = -kw.rx; dx <= kw.rx; ++dx)
+            if (kw.at(dx, dy) != 0.0) {
+                rx = std::max(rx, std::abs(dx));
+                ry = std::max(ry, std::abs(dy));
+            }
+    KernelWeights t;
+    t.rx = rx;
+    t.ry = ry;
+    for (int dy = -ry; dy <= ry; ++dy)
+        for (int dx = -rx; dx <= rx; ++dx)
+            t.w.push_back(kw.at(dx, dy));
+    return t;
+}
+
+// Inside test of a disk or polygon in kernel pixel coordinates (y down).
+struct Shape {
+    const Kernel& k;
+    double ax, ay;           // half sizes
+    double alpha, vertex;    // polygon: sector angle, angle of a vertex
+    bool polygon;
+
+    explicit Shape(const Kernel& kernel)
+        : k(kernel)
+        , ax(0.5 * kernel.width_px)
+        , ay(0.5 * kernel.height_px)
+        , alpha(2.0 * kPi / kernel.blades)
+        , vertex(0.5 * kPi + kernel.rotation_deg * kPi / 180.0)
+        , polygon(kernel.shape == KernelShape::Polygon && kernel.curvature < 1.0f)
+    {
+    }
+
+    bool inside(double x, double y) const
+    {
+        const double u = x / ax, v = -y / ay;  // v up
+        const double r = std::sqrt(u * u + v * v);
+        double d       = 1.0;
+        if (polygon) {
+            const double phi = std::fmod(std::fmod(std::atan2(v, u) - vertex, alpha) + alpha, alpha)
+                               - 0.5 * alpha;
+            const double d_poly = std::cos(0.5 * alpha) / std::cos(phi);
+            d = d_poly + k.curvature * (1.0 - d_poly);
+        }
+        return r < d && r >= k.hole * d;
+    }
+};
+
+KernelWeights shape_weights(const Kernel& k)
+{
+    const Shape shape(k);
+    KernelWeights kw;
+    kw.rx = int(std::floor(shape.ax + 0.5));
+    kw.ry = int(std::floor(shape.ay + 0.5));
+    const int nx = 2 * kw.rx + 1, ny = 2 * kw.ry + 1;
+    kw.w.assign(size_t(nx) * size_t(ny), 0.0);
+    constexpr int coarse = 5, fine = 64;
+    double sum = 0.0;
+    for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+        for (int dx = -kw.rx; dx <= kw.rx; ++dx) {
+            double w;
+            if (k.edge == KernelEdge::Hard) {
+                w = shape.inside(dx, dy) ? 1.0 : 0.0;
+            } else {
+                // A coarse look first; only pixels the boundary crosses get the fine grid.
+                int in = 0;
+                for (int j = 0; j < coarse; ++j)
+                    for (int i = 0; i < coarse; ++i)
+                        in += shape.inside(dx - 0.5 + (i + 0.5) / coarse, dy - 0.5 + (j + 0.5) / coarse);
+                if (in == 0 || in == coarse * coarse) {
+                    w = in ? 1.0 : 0.0;
+                } else {
+                    int n = 0;
+                    for (int j = 0; j < fine; ++j)
+                        for (int i = 0; i < fine; ++i)
+                            n += shape.inside(dx - 0.5 + (i + 0.5) / fine, dy - 0.5 + (j + 0.5) / fine);
+                    w = double(n) / (fine * fine);
+                }
+            }
+            kw.w[size_t((dy + kw.ry) * nx + (dx + kw.rx))] = w;
+            sum += w;
+        }
+    if (sum <= 0.0)  // smaller than any pixel centre (hard edge): the identity
+        return KernelWeights{ 0, 0, { 1.0 } };
+    for (double& v : kw.w)
+        v /= sum;
+    return trimmed(kw);
+}
+
+}  // namespace
+
+KernelWeights kernel_weights(const Kernel& k)
+{
+    if (k.width_px <= 0.0f && k.height_px <= 0.0f && k.sigma_px <= 0.0f)
+        return KernelWeights{ 0, 0, { 1.0 } };
+    switch (k.shape) {
+    case KernelShape::Box: return outer(box_weights_1d(k.width_px), box_weights_1d(k.height_px));
+    case KernelShape::Gaussian: {
+        const double sx = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.width_px;
+        const double sy = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.height_px;
+        return outer(gaussian_weights_1d(sx), gaussian_weights_1d(sy));
+    }
+    case KernelShape::Disk:
+    case KernelShape::Polygon:
+        if (k.width_px <= 0.0f || k.height_px <= 0.0f)
+            return KernelWeights{ 0, 0, { 1.0 } };
+        return shape_weights(k);
+    }
+    return KernelWeights{ 0, 0, { 1.0 } };
+}
+
+}  // namespace bokeh
