@@ -221,6 +221,25 @@ bool parse_size(std::string_view text, int& width, int& height)
     return true;
 }
 
+bool parse_extent(std::string_view text, float& width, float& height)
+{
+    OIIO::string_view sv(text.data(), text.size());
+    float w = 0.0f, h = 0.0f;
+    if (!OIIO::Strutil::parse_float(sv, w))
+        return false;
+    if (sv.empty()) {
+        h = w;
+    } else if (!OIIO::Strutil::parse_char(sv, 'x') || !OIIO::Strutil::parse_float(sv, h)
+               || !sv.empty()) {
+        return false;
+    }
+    if (!std::isfinite(w) || !std::isfinite(h) || w < 0.0f || h < 0.0f)
+        return false;
+    width  = w;
+    height = h;
+    return true;
+}
+
 int Command::argument_count() const
 {
     return int(OIIO::Strutil::splits(arguments, " ").size());

@@ -376,3 +376,41 @@ TEST(Cli, BrokenPluginsAreNamedAndNeverCrash)
     RunResult r = bokehtool("--scene lights -o " + out, "BOKEH_PLUGIN_PATH=" + dir + "/nonexistent");
     expect_clean_failure(r, "plugin directory " + dir + "/nonexistent: does not exist", out);
 }
+
+TEST(Cli, Blur)
+{
+    const std::string dir = fresh_dir("cli_blur");
+    const std::string in  = make_input(dir);
+    RunResult r = bokehtool(format("{0} --blur:kernel=disk:edge=hard 7x7 -o {1}/disk.exr "
+                                   "--blur:kernel=hex:grow=1 5 -o {1}/hex.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf disk(dir + "/disk.exr"), hex(dir + "/hex.exr"), orig(in);
+    ASSERT_TRUE(disk.read(0, 0, true));
+    EXPECT_EQ(disk.nativespec().channelformat(0), OIIO::TypeHalf) << "half stays half";
+    EXPECT_EQ(disk.roi(), orig.roi());
+    EXPECT_EQ(hex.roi().xbegin, orig.roi().xbegin - 2) << "grown by the radius";
+    // A constant region stays constant; the G ramp (x/40) is linear, so a symmetric
+    // kernel leaves it unchanged away from the border.
+    float a[5], b[5];
+    disk.getpixel(20, 12, a);
+    orig.getpixel(20, 12, b);
+    EXPECT_NEAR(a[0], b[0], 1e-3f);
+    EXPECT_NEAR(a[1], b[1], 2e-3f);
+
+    const std::string out = dir + "/x.exr";
+    for (auto [args, what] : { std::pair<std::string, std::string>{ "--blur 3x", "'3x' is not a kernel size" },
+                               { "--blur -3", "not a kernel size" },
+                               { "--blur:kernel=star 3", "option 'kernel' = 'star' is not one of" },
+                               { "--blur:blades=2:kernel=polygon 9", "out of range [3, 64]" },
+                               { "--blur:kernel=disk:method=fast 9", "no fast approximation" },
+                               { "--blur 5000", "outside 0..4096" } }) {
+        SCOPED_TRACE(args);
+        r = bokehtool(in + " " + args + " -o " + out);
+        expect_clean_failure(r, what, out);
+    }
+    const std::string deep = shared_data("openexr-images/LowResLeftView_Balls.exr");
+    if (!deep.empty()) {
+        r = bokehtool(deep + " --blur 3 -o " + out);
+        expect_clean_failure(r, "deep images cannot be blurred", out);
+    }
+}

@@ -82,6 +82,9 @@ bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifi
 /// Parse an image size "WxH" or "N" (= NxN); both positive. False if malformed.
 bool parse_size(std::string_view text, int& width, int& height);
 
+/// Parse a kernel extent "WxH" or "N" in pixels; finite, >= 0, fractions allowed.
+bool parse_extent(std::string_view text, float& width, float& height);
+
 /// What a command is given and gives back.
 struct CommandContext {
     std::vector<std::string> args;    ///< the command's own arguments, after the command
