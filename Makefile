@@ -29,6 +29,10 @@ demo: build
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 
+bench: build
+	@mkdir -p docs/bench
+	$(BUILD)/bin/bokeh-bench --threads 2 --reps 5 --csv docs/bench/blur.csv
+
 install: build
 	cmake --install $(BUILD) --prefix $(or $(PREFIX),/usr/local)
 
