@@ -11,6 +11,7 @@
 #include <dlfcn.h>
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <exception>
 
@@ -104,6 +105,15 @@ bool OptionValues::given(const std::string& name) const
     return it != explicitly_given.end() && it->second;
 }
 
+// A plain decimal number, the whole of `s` (strtod would also take "0x3" as hex 3).
+static bool parse_decimal(std::string_view s, float& v)
+{
+    if (s.empty())
+        return false;
+    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), v, std::chars_format::general);
+    return ec == std::errc() && end == s.data() + s.size();
+}
+
 // Check one value against its spec and store it in canonical form.
 static bool set_option(const OptionSpec& spec, std::string_view text, OptionValues& out,
                        std::string& err)
@@ -122,7 +132,7 @@ static bool set_option(const OptionSpec& spec, std::string_view text, OptionValu
             v     = i;
         } else {
             float f = 0.0f;
-            ok      = OIIO::Strutil::parse_float(sv, f) && sv.empty() && std::isfinite(f);
+            ok      = parse_decimal(value, f) && std::isfinite(f);
             v       = f;
         }
         if (!ok) {
@@ -202,42 +212,45 @@ bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifi
     return true;
 }
 
-bool parse_size(std::string_view text, int& width, int& height)
+bool parse_extent(std::string_view text, float& width, float& height)
 {
-    OIIO::string_view sv(text.data(), text.size());
-    int w = 0, h = 0;
-    if (!OIIO::Strutil::parse_int(sv, w))
+    const size_t x = text.find('x');
+    float w = 0.0f, h = 0.0f;
+    if (!parse_decimal(text.substr(0, x), w))
         return false;
-    if (sv.empty()) {
+    if (x == std::string_view::npos)
         h = w;
-    } else if (!OIIO::Strutil::parse_char(sv, 'x') || !OIIO::Strutil::parse_int(sv, h)
-               || !sv.empty()) {
+    else if (!parse_decimal(text.substr(x + 1), h))
         return false;
-    }
-    if (w <= 0 || h <= 0)
+    if (!std::isfinite(w) || !std::isfinite(h) || w < 0.0f || h < 0.0f)
         return false;
     width  = w;
     height = h;
     return true;
 }
 
-bool parse_extent(std::string_view text, float& width, float& height)
+bool parse_size(std::string_view text, int& width, int& height)
 {
-    OIIO::string_view sv(text.data(), text.size());
     float w = 0.0f, h = 0.0f;
-    if (!OIIO::Strutil::parse_float(sv, w))
+    if (!parse_extent(text, w, h) || w < 1.0f || h < 1.0f || w != std::floor(w)
+        || h != std::floor(h) || w > 1e9f || h > 1e9f)
         return false;
-    if (sv.empty()) {
-        h = w;
-    } else if (!OIIO::Strutil::parse_char(sv, 'x') || !OIIO::Strutil::parse_float(sv, h)
-               || !sv.empty()) {
-        return false;
-    }
-    if (!std::isfinite(w) || !std::isfinite(h) || w < 0.0f || h < 0.0f)
-        return false;
-    width  = w;
-    height = h;
+    width  = int(w);
+    height = int(h);
     return true;
+}
+
+Command make_command(std::string name, std::string arguments, int inputs, std::string help,
+                     CommandFunction run, std::vector<OptionSpec> options)
+{
+    Command c;
+    c.name      = std::move(name);
+    c.arguments = std::move(arguments);
+    c.inputs    = inputs;
+    c.help      = std::move(help);
+    c.run       = std::move(run);
+    c.options   = std::move(options);
+    return c;
 }
 
 int Command::argument_count() const

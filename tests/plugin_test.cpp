@@ -56,6 +56,7 @@ TEST(Options, RejectsWithTheOptionNamed)
     EXPECT_FALSE(parse_options(specs(), "gain=abc", v, err));
     EXPECT_FALSE(parse_options(specs(), "gain=nan", v, err));
     EXPECT_FALSE(parse_options(specs(), "gain=inf", v, err));
+    EXPECT_FALSE(parse_options(specs(), "gain=0x3", v, err)) << "no hexadecimal";
     EXPECT_FALSE(parse_options(specs(), "edge=wrap", v, err));
     EXPECT_NE(err.find("black, clamp, mirror"), std::string::npos) << err;
     EXPECT_FALSE(parse_options(specs(), "grow=maybe", v, err));
@@ -72,8 +73,17 @@ TEST(Options, ParseSize)
     EXPECT_TRUE(parse_size("9", w, h));
     EXPECT_EQ(w, 9);
     EXPECT_EQ(h, 9);
-    for (const char* bad : { "", "x", "3x", "0x3", "-3x3", "3x3x3", "3y3", "abc" })
+    for (const char* bad : { "", "x", "3x", "0x3", "-3x3", "3x3x3", "3y3", "abc", "2.5x3" })
         EXPECT_FALSE(parse_size(bad, w, h)) << bad;
+    float fw = 0, fh = 0;
+    EXPECT_TRUE(parse_extent("6.5x4.25", fw, fh));
+    EXPECT_FLOAT_EQ(fw, 6.5f);
+    EXPECT_FLOAT_EQ(fh, 4.25f);
+    EXPECT_TRUE(parse_extent("0x5", fw, fh)) << "zero width, not hexadecimal 5";
+    EXPECT_EQ(fw, 0.0f);
+    EXPECT_EQ(fh, 5.0f);
+    for (const char* bad : { "", "0x", "x2", "-1", "inf", "nan", "1e40", "3 x 3", "0x1p3" })
+        EXPECT_FALSE(parse_extent(bad, fw, fh)) << bad;
 }
 
 TEST(Registry, RefusesBadAndDuplicateNames)

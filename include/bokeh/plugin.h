@@ -123,6 +123,10 @@ struct Command {
     int argument_count() const;
 };
 
+/// A command taking `inputs` images and pushing one, with the fields most commands set.
+Command make_command(std::string name, std::string arguments, int inputs, std::string help,
+                     CommandFunction run, std::vector<OptionSpec> options = {});
+
 /// The set of commands, filled by plugins.
 class Registry {
 public:

@@ -55,12 +55,11 @@ BOKEH_PLUGIN_EXPORT int bokeh_plugin_abi_version() { return BOKEH_PLUGIN_ABI_VER
 
 BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
 {
-    bokeh::Command c;
-    c.name      = "--blur";
-    c.arguments = "WxH";
-    c.help      = "Blur with a uniform kernel of WxH pixels (fractions allowed; WxH unequal: "
-                  "anamorphic). Exact methods match the brute-force reference";
-    c.inputs    = 1;
+    bokeh::Command c = bokeh::make_command(
+        "--blur", "WxH", 1,
+        "Blur with a uniform kernel of WxH pixels (fractions allowed; WxH unequal: "
+        "anamorphic). Exact methods match the brute-force reference",
+        blur_command);
     c.needs_scene_linear = true;
     c.options = {
         OptionSpec::Choice("kernel", { "gaussian", "box", "disk", "hex", "polygon" },
@@ -77,6 +76,5 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon: 0 straight blades .. 1 circle"),
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk/polygon: catadioptric hole (radius fraction)"),
     };
-    c.run = blur_command;
     r.add(c);
 }

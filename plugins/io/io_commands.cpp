@@ -11,24 +11,10 @@
 
 namespace {
 
-using bokeh::Command;
 using bokeh::CommandContext;
 using bokeh::OptionSpec;
 using bokeh::StackImage;
 using OIIO::Strutil::fmt::format;
-
-Command command(std::string name, std::string arguments, int inputs, std::string help,
-                bokeh::CommandFunction run, std::vector<OptionSpec> options = {})
-{
-    Command c;
-    c.name      = std::move(name);
-    c.arguments = std::move(arguments);
-    c.inputs    = inputs;
-    c.help      = std::move(help);
-    c.run       = std::move(run);
-    c.options   = std::move(options);
-    return c;
-}
 
 // The image a command passes on: same pixels and labels, its own buffer.
 StackImage copy_of(const StackImage& in)
@@ -188,22 +174,22 @@ BOKEH_PLUGIN_EXPORT int bokeh_plugin_abi_version() { return BOKEH_PLUGIN_ABI_VER
 
 BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
 {
-    r.add(command("--ch", "CHANNELS", 1,
+    r.add(bokeh::make_command("--ch", "CHANNELS", 1,
                   "Select, reorder, rename (NEW=OLD) or fill (NAME=VALUE) channels", channels));
-    r.add(command("--attrib", "NAME VALUE", 1, "Set a metadata attribute", attrib,
+    r.add(bokeh::make_command("--attrib", "NAME VALUE", 1, "Set a metadata attribute", attrib,
                   { OptionSpec::Choice("type", { "auto", "int", "float", "string" },
                                        "value type (auto: as the value reads)") }));
-    r.add(command("--iscolorspace", "SPACE", 1,
+    r.add(bokeh::make_command("--iscolorspace", "SPACE", 1,
                   "Say which colour space the top image is in (pixels unchanged)", iscolorspace));
-    r.add(command("--tocolorspace", "SPACE", 1, "Convert the top image to a colour space",
+    r.add(bokeh::make_command("--tocolorspace", "SPACE", 1, "Convert the top image to a colour space",
                   [](CommandContext& c) { return convert_to(c, c.inputs[0].colorspace, c.args[0]); }));
-    r.add(command("--colorconvert", "FROM TO", 1, "Convert the top image between colour spaces",
+    r.add(bokeh::make_command("--colorconvert", "FROM TO", 1, "Convert the top image between colour spaces",
                   [](CommandContext& c) { return convert_to(c, c.args[0], c.args[1]); }));
 
     std::string names;
     for (const std::string& n : bokeh::scene_names())
         names += format(" {}: {}.", n, bokeh::scene_description(n));
-    r.add(command("--scene", "NAME", 0,
+    r.add(bokeh::make_command("--scene", "NAME", 0,
                   "Push a built-in synthetic RGBA+Z scene with known depth (Z in metres); "
                   "options may also follow the name (lights:width=640)." + names,
                   scene, scene_options()));

@@ -44,16 +44,13 @@ void Host::add_host_command(Command cmd, bool global)
     m_registry.add(std::move(cmd));
 }
 
+// A host command pushing `outputs` images (globals and -d push none).
 static Command host_command(std::string name, std::string arguments, int inputs, int outputs,
                             std::string help, bokeh::CommandFunction run)
 {
-    Command c;
-    c.name      = std::move(name);
-    c.arguments = std::move(arguments);
-    c.inputs    = inputs;
-    c.outputs   = outputs;
-    c.help      = std::move(help);
-    c.run       = std::move(run);
+    Command c = bokeh::make_command(std::move(name), std::move(arguments), inputs,
+                                    std::move(help), std::move(run));
+    c.outputs = outputs;
     return c;
 }
 
