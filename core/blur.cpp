@@ -170,6 +170,24 @@ Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int
     return p;
 }
 
+// --- weighted sums of rows (separable passes, brute force) ------------------------
+
+// Each row y of `out` = sum_j w[j] * source(y, j), accumulated in double.
+template<class Source>
+void weighted_rows(Plane& out, const std::vector<double>& w, Source source, int nthreads)
+{
+    parallel_for_chunks(0, out.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        const size_t n = out.stride();
+        std::vector<double> acc(n);
+        for (int y = int(y0); y < int(y1); ++y) {
+            std::fill(acc.begin(), acc.end(), 0.0);
+            for (size_t j = 0; j < w.size(); ++j)
+                add_scaled(acc.data(), source(y, j), w[j], n);
+            to_float(out.row(y), acc.data(), n);
+        }
+    });
+}
+
 // --- brute force -------------------------------------------------------------------
 
 // The weights point-reflected: out(x) = sum_d w(d) in(x - d) = sum_d w(-d) in(x + d), so a
@@ -185,23 +203,20 @@ KernelWeights reflected(const KernelWeights& k)
 Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads)
 {
     const KernelWeights k = reflected(kernel);
+    // The non-zero taps as (row offset, column offset) with their weights.
+    std::vector<std::pair<int, int>> taps;
+    std::vector<double> weights;
+    for (int dy = -k.ry; dy <= k.ry; ++dy)
+        for (int dx = -k.rx; dx <= k.rx; ++dx)
+            if (k.at(dx, dy) != 0.0) {
+                taps.emplace_back(k.ry + dy, k.rx + dx);
+                weights.push_back(k.at(dx, dy));
+            }
     Plane out(in.w - 2 * k.rx, in.h - 2 * k.ry, in.nc);
-    const size_t n = out.stride();
-    parallel_for_chunks(0, out.h, 4, nthreads, [&](int64_t y0, int64_t y1) {
-        std::vector<double> acc(n);
-        for (int y = int(y0); y < int(y1); ++y) {
-            std::fill(acc.begin(), acc.end(), 0.0);
-            for (int dy = -k.ry; dy <= k.ry; ++dy)
-                for (int dx = -k.rx; dx <= k.rx; ++dx) {
-                    const double w = k.at(dx, dy);
-                    if (w == 0.0)
-                        continue;
-                    add_scaled(acc.data(), in.row(y + k.ry + dy) + size_t(k.rx + dx) * size_t(in.nc),
-                               w, n);
-                }
-            to_float(out.row(y), acc.data(), n);
-        }
-    });
+    const size_t nc = size_t(in.nc);
+    weighted_rows(out, weights,
+                  [&](int y, size_t j) { return in.row(y + taps[j].first) + size_t(taps[j].second) * nc; },
+                  nthreads);
     return out;
 }
 
@@ -292,29 +307,12 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 Plane convolve_separable(const Plane& in, const std::vector<double>& wx,
                          const std::vector<double>& wy, int nthreads)
 {
-    const int rx = int(wx.size() / 2), ry = int(wy.size() / 2), nc = in.nc;
-    Plane mid(in.w - 2 * rx, in.h, nc);
-    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        const size_t n = mid.stride();
-        std::vector<double> acc(n);
-        for (int y = int(y0); y < int(y1); ++y) {
-            std::fill(acc.begin(), acc.end(), 0.0);
-            for (size_t j = 0; j < wx.size(); ++j)
-                add_scaled(acc.data(), in.row(y) + j * size_t(nc), wx[j], n);
-            to_float(mid.row(y), acc.data(), n);
-        }
-    });
-    Plane out(mid.w, in.h - 2 * ry, nc);
-    parallel_for_chunks(0, out.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        const size_t n = out.stride();
-        std::vector<double> acc(n);
-        for (int y = int(y0); y < int(y1); ++y) {
-            std::fill(acc.begin(), acc.end(), 0.0);
-            for (size_t j = 0; j < wy.size(); ++j)
-                add_scaled(acc.data(), mid.row(y + int(j)), wy[j], n);
-            to_float(out.row(y), acc.data(), n);
-        }
-    });
+    const int rx = int(wx.size() / 2), ry = int(wy.size() / 2);
+    const size_t nc = size_t(in.nc);
+    Plane mid(in.w - 2 * rx, in.h, in.nc);
+    weighted_rows(mid, wx, [&](int y, size_t j) { return in.row(y) + j * nc; }, nthreads);
+    Plane out(mid.w, in.h - 2 * ry, in.nc);
+    weighted_rows(out, wy, [&](int y, size_t j) { return mid.row(y + int(j)); }, nthreads);
     return out;
 }
 
@@ -501,8 +499,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     }
     if (opts.method == BlurMethod::Fast && !weights.is_identity()) {
         // Three boxes per axis with the Gaussian's variance.
-        const double sx = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.width_px;
-        const double sy = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.height_px;
+        const auto [sx, sy] = gaussian_sigma(k);
         const std::vector<double> bx = box_weights_1d(sx > 0 ? box_width_for_variance(sx * sx / 3.0) : 0.0);
         const std::vector<double> by = box_weights_1d(sy > 0 ? box_width_for_variance(sy * sy / 3.0) : 0.0);
         const int rx = 3 * int(bx.size() / 2), ry = 3 * int(by.size() / 2);
@@ -525,8 +522,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         return finish(dst, in, roi, box_blur(p, wx, wy, nthreads));
     }
     case KernelShape::Gaussian: {
-        const double sx = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.width_px;
-        const double sy = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.height_px;
+        const auto [sx, sy] = gaussian_sigma(k);
         return finish(dst, in, roi,
                       convolve_separable(p, gaussian_weights_1d(sx), gaussian_weights_1d(sy), nthreads));
     }

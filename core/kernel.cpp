@@ -50,6 +50,13 @@ bool validate(const Kernel& k, std::string& err)
     return true;
 }
 
+std::pair<double, double> gaussian_sigma(const Kernel& k)
+{
+    if (k.sigma_px > 0.0f)
+        return { k.sigma_px, k.sigma_px };
+    return { 0.25 * k.width_px, 0.25 * k.height_px };
+}
+
 std::vector<double> box_weights_1d(double width)
 {
     if (!(width > 1.0))
@@ -196,8 +203,7 @@ KernelWeights kernel_weights(const Kernel& k)
     switch (k.shape) {
     case KernelShape::Box: return outer(box_weights_1d(k.width_px), box_weights_1d(k.height_px));
     case KernelShape::Gaussian: {
-        const double sx = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.width_px;
-        const double sy = k.sigma_px > 0.0f ? k.sigma_px : 0.25 * k.height_px;
+        const auto [sx, sy] = gaussian_sigma(k);
         return outer(gaussian_weights_1d(sx), gaussian_weights_1d(sy));
     }
     case KernelShape::Disk:

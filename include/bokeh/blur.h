@@ -8,6 +8,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <OpenImageIO/imagebuf.h>
@@ -63,6 +64,10 @@ struct KernelWeights {
     double at(int dx, int dy) const { return w[size_t((dy + ry) * (2 * rx + 1) + (dx + rx))]; }
     bool is_identity() const { return rx == 0 && ry == 0; }
 };
+
+/// The Gaussian's sigma along x and y in pixels: `sigma_px` if set, else width / 4 and
+/// height / 4 (oiiotool's width-to-sigma rule for `--blur:kernel=gaussian WxH`).
+std::pair<double, double> gaussian_sigma(const Kernel& k);
 
 /// Check a kernel's parameters; false + `err` naming the bad one.
 bool validate(const Kernel& k, std::string& err);
