@@ -23,6 +23,8 @@
 #include <bokeh/blur.h>
 #include <bokeh/parallel.h>
 
+#include "plane.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -33,29 +35,9 @@
 
 namespace bokeh {
 
+using namespace detail;
+
 namespace {
-
-// The innermost loops, compiled for AVX-512, AVX2 and baseline x86-64 and chosen at load
-// time (GCC function multiversioning), so one portable binary runs at the machine's width.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#    define BOKEH_HOT __attribute__((target_clones("avx512f", "avx2", "default")))
-#else
-#    define BOKEH_HOT
-#endif
-
-// acc[i] += w * (hi[i] - lo[i]): one span of prefix sums.
-BOKEH_HOT void add_span(double* acc, const double* hi, const double* lo, double w, size_t n)
-{
-    for (size_t i = 0; i < n; ++i)
-        acc[i] += w * (hi[i] - lo[i]);
-}
-
-// acc[i] += w * src[i].
-BOKEH_HOT void add_scaled(double* acc, const float* src, double w, size_t n)
-{
-    for (size_t i = 0; i < n; ++i)
-        acc[i] += w * double(src[i]);
-}
 
 // sum[i] += add[i] - sub[i] (a running sum moving one row down).
 BOKEH_HOT void slide(double* sum, const float* add, const float* sub, size_t n)
@@ -88,86 +70,6 @@ BOKEH_HOT void box_row(float* out, const double* hi, const double* lo, double in
         for (size_t i = 0; i < n; ++i)
             out[i] = float(inner * (hi[i] - lo[i]));
     }
-}
-
-BOKEH_HOT void to_float(float* out, const double* acc, size_t n)
-{
-    for (size_t i = 0; i < n; ++i)
-        out[i] = float(acc[i]);
-}
-
-// A contiguous interleaved float image. Its pixels start uninitialised: every method
-// writes each output value, and pad() writes the black ones itself.
-struct Plane {
-    int w = 0, h = 0, nc = 0;
-    std::unique_ptr<float[]> px;
-    Plane() = default;
-    Plane(int w_, int h_, int nc_)
-        : w(w_), h(h_), nc(nc_), px(new float[size_t(w_) * size_t(h_) * size_t(nc_)])
-    {
-    }
-    size_t stride() const { return size_t(w) * size_t(nc); }
-    float* row(int y) { return px.get() + size_t(y) * stride(); }
-    const float* row(int y) const { return px.get() + size_t(y) * stride(); }
-};
-
-constexpr int kOutside = std::numeric_limits<int>::min();
-
-// Index of coordinate i in [begin, end) under the border rule; kOutside = black.
-int border_index(int i, int begin, int end, Border b)
-{
-    if (i >= begin && i < end)
-        return i;
-    const int n = end - begin;
-    switch (b) {
-    case Border::Black: return kOutside;
-    case Border::Clamp: return std::clamp(i, begin, end - 1);
-    case Border::Mirror: {
-        // ... 2 1 0 | 0 1 2 ... : period 2n with the edge pixel repeated.
-        int t = (i - begin) % (2 * n);
-        if (t < 0)
-            t += 2 * n;
-        return begin + (t < n ? t : 2 * n - 1 - t);
-    }
-    }
-    return kOutside;
-}
-
-// The source over `region`, border-filled. `src` is float with local pixels.
-Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads)
-{
-    const int nc = src.nchannels();
-    Plane p(region.width(), region.height(), nc);
-    const OIIO::ROI data = src.roi();
-    parallel_for_chunks(0, p.h, 8, nthreads, [&](int64_t j0, int64_t j1) {
-        for (int j = int(j0); j < int(j1); ++j) {
-            const int sy = border_index(region.ybegin + j, data.ybegin, data.yend, border);
-            float* out   = p.row(j);
-            if (sy == kOutside) {
-                std::fill_n(out, p.stride(), 0.0f);
-                continue;
-            }
-            // The part of the row inside the data window in one copy, the rest by the rule.
-            const int in0 = std::max(region.xbegin, data.xbegin);
-            const int in1 = std::min(region.xend, data.xend);
-            if (in1 > in0)
-                std::copy_n(static_cast<const float*>(src.pixeladdr(in0, sy, data.zbegin)),
-                            size_t(in1 - in0) * size_t(nc),
-                            out + size_t(in0 - region.xbegin) * size_t(nc));
-            for (int i = 0; i < p.w; ++i) {
-                const int x = region.xbegin + i;
-                if (x >= in0 && x < in1)
-                    continue;
-                const int sx = border_index(x, data.xbegin, data.xend, border);
-                if (sx != kOutside)
-                    std::copy_n(static_cast<const float*>(src.pixeladdr(sx, sy, data.zbegin)), nc,
-                                out + size_t(i) * size_t(nc));
-                else
-                    std::fill_n(out + size_t(i) * size_t(nc), nc, 0.0f);
-            }
-        }
-    });
-    return p;
 }
 
 // --- weighted sums of rows (separable passes, brute force) ------------------------
@@ -221,40 +123,6 @@ Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads)
 }
 
 // --- row spans ---------------------------------------------------------------------
-
-struct Span {
-    int dy, x0, x1;  // covers dx in [x0, x1]
-    double weight;
-};
-
-// Skyline decomposition of each kernel row into stacked horizontal bars.
-std::vector<Span> kernel_spans(const KernelWeights& k)
-{
-    std::vector<Span> spans;
-    struct Open {
-        int start;
-        double level;
-    };
-    for (int dy = -k.ry; dy <= k.ry; ++dy) {
-        std::vector<Open> stack;
-        for (int dx = -k.rx; dx <= k.rx + 1; ++dx) {
-            const double h = dx <= k.rx ? k.at(dx, dy) : 0.0;
-            while (!stack.empty() && h < stack.back().level) {
-                const Open top = stack.back();
-                stack.pop_back();
-                const double below = std::max(h, stack.empty() ? 0.0 : stack.back().level);
-                spans.push_back({ dy, top.start, dx - 1, top.level - below });
-                if (h > (stack.empty() ? 0.0 : stack.back().level)) {
-                    stack.push_back({ top.start, h });  // the lower part continues
-                    break;
-                }
-            }
-            if (h > (stack.empty() ? 0.0 : stack.back().level))
-                stack.push_back({ dx, h });
-        }
-    }
-    return spans;
-}
 
 Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 {
@@ -409,58 +277,40 @@ double box_width_for_variance(double variance)
 
 // --- dispatch ----------------------------------------------------------------------
 
-// A float, local copy of `src` when it is not already one.
-const OIIO::ImageBuf& float_source(const OIIO::ImageBuf& src, OIIO::ImageBuf& holder)
-{
-    if (src.spec().format == OIIO::TypeFloat && src.localpixels())
-        return src;
-    holder.copy(src, OIIO::TypeFloat);
-    return holder;
-}
-
-bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi, const Plane& p)
-{
-    OIIO::ImageSpec spec = src.spec();
-    spec.set_format(OIIO::TypeFloat);
-    spec.channelformats.clear();
-    spec.x      = roi.xbegin;
-    spec.y      = roi.ybegin;
-    spec.width  = roi.width();
-    spec.height = roi.height();
-    dst.reset(spec, OIIO::InitializePixels::No);
-    for (int y = 0; y < p.h; ++y)
-        std::copy_n(p.row(y), p.stride(),
-                    static_cast<float*>(dst.pixeladdr(roi.xbegin, roi.ybegin + y)));
-    return true;
-}
-
-OIIO::ROI grown(OIIO::ROI r, int rx, int ry)
-{
-    r.xbegin -= rx;
-    r.xend += rx;
-    r.ybegin -= ry;
-    r.yend += ry;
-    return r;
-}
-
-bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src)
-{
-    if (!src.initialized()) {
-        dst.errorfmt("blur: the source image is empty");
-        return false;
-    }
-    if (src.deep()) {
-        dst.errorfmt("blur: deep images cannot be blurred; flatten them first");
-        return false;
-    }
-    if (src.spec().depth > 1) {
-        dst.errorfmt("blur: volume images are not supported");
-        return false;
-    }
-    return true;
-}
-
 }  // namespace
+
+namespace detail {
+
+// Skyline decomposition of each kernel row into stacked horizontal bars.
+std::vector<Span> kernel_spans(const KernelWeights& k)
+{
+    std::vector<Span> spans;
+    struct Open {
+        int start;
+        double level;
+    };
+    for (int dy = -k.ry; dy <= k.ry; ++dy) {
+        std::vector<Open> stack;
+        for (int dx = -k.rx; dx <= k.rx + 1; ++dx) {
+            const double h = dx <= k.rx ? k.at(dx, dy) : 0.0;
+            while (!stack.empty() && h < stack.back().level) {
+                const Open top = stack.back();
+                stack.pop_back();
+                const double below = std::max(h, stack.empty() ? 0.0 : stack.back().level);
+                spans.push_back({ dy, top.start, dx - 1, top.level - below });
+                if (h > (stack.empty() ? 0.0 : stack.back().level)) {
+                    stack.push_back({ top.start, h });  // the lower part continues
+                    break;
+                }
+            }
+            if (h > (stack.empty() ? 0.0 : stack.back().level))
+                stack.push_back({ dx, h });
+        }
+    }
+    return spans;
+}
+
+}  // namespace detail
 
 bool convolve_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
                         const KernelWeights& weights, const BlurOptions& opts, OIIO::ROI roi,
@@ -476,61 +326,201 @@ bool convolve_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
     return finish(dst, in, roi, convolve_brute(p, weights, nthreads));
 }
 
+namespace {
+
+bool is_hexagon(const Kernel& k)
+{
+    return k.shape == KernelShape::Polygon && k.blades == 6 && k.curvature == 0.0f && k.hole == 0.0f;
+}
+
+// The concrete method for `k`, or false + `err` when the asked one does not apply.
+bool resolve_method(const Kernel& k, BlurMethod asked, BlurMethod& m, std::string& err)
+{
+    const bool gaussian = k.shape == KernelShape::Gaussian;
+    const bool shape    = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
+    switch (asked) {
+    case BlurMethod::Auto:
+    case BlurMethod::Exact: m = BlurMethod::Exact; return true;
+    case BlurMethod::Reference: m = asked; return true;
+    case BlurMethod::Fast:
+        m = gaussian       ? BlurMethod::ThreeBoxes
+            : is_hexagon(k) ? BlurMethod::Parallelograms
+            : shape && k.hole == 0.0f ? BlurMethod::Bands
+                                      : BlurMethod::Exact;  // box: running sums are the fast method
+        return true;
+    case BlurMethod::ThreeBoxes:
+        m = asked;
+        if (!gaussian)
+            err = "method=boxes3 is for the gaussian kernel";
+        return gaussian;
+    case BlurMethod::Parallelograms:
+        m = asked;
+        if (!is_hexagon(k))
+            err = "method=parallelograms needs a hexagon (6 straight blades, no hole)";
+        return is_hexagon(k);
+    case BlurMethod::Bands:
+        m = asked;
+        if (!shape || k.hole != 0.0f)
+            err = "method=bands is for disk and polygon kernels without a hole";
+        return shape && k.hole == 0.0f;
+    case BlurMethod::BilinearTaps: {
+        m = asked;
+        const bool ok = k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased
+                        && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f)
+                        && k.hole == 0.0f;
+        if (!ok)
+            err = "method=taps is the seed's 9x9 or 17x17 anti-aliased disk only";
+        return ok;
+    }
+    }
+    err = "unknown method";
+    return false;
+}
+
+// Iris mode (SEEDS.md section 3): values go to exp(k (x - shift)) before the blur and come
+// back by shift + log(v) / k. The shift (the channel's minimum for k > 0, maximum for
+// k < 0) keeps every exponent in [0, 80], inside float's range, so nothing overflows and
+// no dark value underflows to an unrecoverable zero; a wider range is refused.
+struct Iris {
+    double k = 0.0;
+    int alpha = -1;
+    std::vector<double> shift;
+
+    bool forward(Plane& p, std::string& err, int nthreads)
+    {
+        const int nc = p.nc;
+        shift.assign(size_t(nc), 0.0);
+        for (int c = 0; c < nc; ++c) {
+            if (c == alpha)
+                continue;
+            double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+            for (size_t i = size_t(c); i < p.size(); i += size_t(nc))
+                if (std::isfinite(p.px[i])) {
+                    lo = std::min(lo, double(p.px[i]));
+                    hi = std::max(hi, double(p.px[i]));
+                }
+            if (!(hi >= lo))
+                continue;
+            if (std::abs(k) * (hi - lo) > 80.0) {
+                err = OIIO::Strutil::fmt::format(
+                    "iris {} times channel {}'s range {} .. {} exceeds 80: exp() would overflow; "
+                    "lower iris",
+                    k, c, lo, hi);
+                return false;
+            }
+            shift[size_t(c)] = k > 0 ? lo : hi;
+        }
+        map(p, nthreads, [&](float v, int c) { return float(std::exp(k * (v - shift[size_t(c)]))); });
+        return true;
+    }
+    void inverse(Plane& p, int nthreads) const
+    {
+        map(p, nthreads, [&](float v, int c) { return float(shift[size_t(c)] + std::log(double(v)) / k); });
+    }
+    template<class F> void map(Plane& p, int nthreads, F f) const
+    {
+        parallel_for_chunks(0, p.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int y = int(y0); y < int(y1); ++y) {
+                float* r = p.row(y);
+                for (int x = 0; x < p.w; ++x)
+                    for (int c = 0; c < p.nc; ++c)
+                        if (c != alpha)
+                            r[size_t(x) * size_t(p.nc) + size_t(c)] = f(r[size_t(x) * size_t(p.nc) + size_t(c)], c);
+            }
+        });
+    }
+};
+
+}  // namespace
+
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
           const BlurOptions& opts, OIIO::ROI roi, int nthreads)
 {
     std::string err;
-    if (!validate(k, err)) {
+    BlurMethod method = BlurMethod::Exact;
+    if (!validate(k, err) || !resolve_method(k, opts.method, method, err)) {
         dst.errorfmt("blur: {}", err);
+        return false;
+    }
+    if (opts.bands < 1 || opts.bands > 64) {
+        dst.errorfmt("blur: bands {} is outside 1..64", opts.bands);
+        return false;
+    }
+    if (!std::isfinite(opts.iris) || std::abs(opts.iris) > 1000.0f) {
+        dst.errorfmt("blur: iris {} is outside -1000..1000", opts.iris);
         return false;
     }
     if (!check_source(dst, src))
         return false;
     OIIO::ImageBuf holder;
     const OIIO::ImageBuf& in = float_source(src, holder);
-    const KernelWeights weights = kernel_weights(k);
-    if (opts.method == BlurMethod::Reference)
-        return convolve_reference(dst, in, weights, opts, roi, nthreads);
 
-    const bool gaussian = k.shape == KernelShape::Gaussian;
-    if (opts.method == BlurMethod::Fast && !gaussian) {
-        dst.errorfmt("blur: no fast approximation of this kernel shape yet (use method=exact)");
-        return false;
-    }
-    if (opts.method == BlurMethod::Fast && !weights.is_identity()) {
+    // The weights the method computes with (the effective ones for the approximations
+    // that have them) and how far the method reads around an output pixel.
+    const KernelWeights weights = method == BlurMethod::Bands        ? banded_weights(k, opts.bands)
+                                  : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
+                                                                       : kernel_weights(k);
+    int rx = weights.rx, ry = weights.ry;
+    std::vector<double> box3x, box3y;
+    if (method == BlurMethod::ThreeBoxes) {
         // Three boxes per axis with the Gaussian's variance.
         const auto [sx, sy] = gaussian_sigma(k);
-        const std::vector<double> bx = box_weights_1d(sx > 0 ? box_width_for_variance(sx * sx / 3.0) : 0.0);
-        const std::vector<double> by = box_weights_1d(sy > 0 ? box_width_for_variance(sy * sy / 3.0) : 0.0);
-        const int rx = 3 * int(bx.size() / 2), ry = 3 * int(by.size() / 2);
-        if (!roi.defined())
-            roi = opts.grow ? grown(in.roi(), rx, ry) : in.roi();
-        Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads);
-        for (int pass = 0; pass < 3; ++pass)
-            p = box_blur(p, bx, by, nthreads);
-        return finish(dst, in, roi, p);
+        box3x = box_weights_1d(sx > 0 ? box_width_for_variance(sx * sx / 3.0) : 0.0);
+        box3y = box_weights_1d(sy > 0 ? box_width_for_variance(sy * sy / 3.0) : 0.0);
+        rx    = 3 * int(box3x.size() / 2);
+        ry    = 3 * int(box3y.size() / 2);
+    } else if (method == BlurMethod::Parallelograms && !weights.is_identity()) {
+        rx = hexagon_reach(k, true);
+        ry = hexagon_reach(k, false);
     }
-
     if (!roi.defined())
-        roi = opts.grow ? grown(in.roi(), weights.rx, weights.ry) : in.roi();
-    const Plane p = pad(in, grown(roi, weights.rx, weights.ry), opts.border, nthreads);
+        roi = opts.grow ? grown(in.roi(), rx, ry) : in.roi();
+    Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads);
     if (weights.is_identity())
         return finish(dst, in, roi, p);  // bit-exact copy
-    switch (k.shape) {
-    case KernelShape::Box: {
-        const std::vector<double> wx = box_weights_1d(k.width_px), wy = box_weights_1d(k.height_px);
-        return finish(dst, in, roi, box_blur(p, wx, wy, nthreads));
+
+    Iris iris;
+    if (opts.iris != 0.0f) {
+        iris.k     = opts.iris;
+        iris.alpha = in.spec().alpha_channel;
+        if (!iris.forward(p, err, nthreads)) {
+            dst.errorfmt("blur: {}", err);
+            return false;
+        }
     }
-    case KernelShape::Gaussian: {
-        const auto [sx, sy] = gaussian_sigma(k);
-        return finish(dst, in, roi,
-                      convolve_separable(p, gaussian_weights_1d(sx), gaussian_weights_1d(sy), nthreads));
+    Plane out;
+    int ox = 0, oy = 0;  // where the output starts in `out` (planes the size of p)
+    switch (method) {
+    case BlurMethod::Reference: out = convolve_brute(p, weights, nthreads); break;
+    case BlurMethod::ThreeBoxes:
+        out = std::move(p);
+        for (int pass = 0; pass < 3; ++pass)
+            out = box_blur(out, box3x, box3y, nthreads);
+        break;
+    case BlurMethod::Parallelograms:
+        out = hexagon_parallelograms(p, k, nthreads);
+        ox  = rx;
+        oy  = ry;
+        break;
+    case BlurMethod::Bands: out = convolve_banded(p, weights, nthreads); break;
+    case BlurMethod::BilinearTaps: out = convolve_spans(p, weights, nthreads); break;
+    default:
+        switch (k.shape) {
+        case KernelShape::Box:
+            out = box_blur(p, box_weights_1d(k.width_px), box_weights_1d(k.height_px), nthreads);
+            break;
+        case KernelShape::Gaussian: {
+            const auto [sx, sy] = gaussian_sigma(k);
+            out = convolve_separable(p, gaussian_weights_1d(sx), gaussian_weights_1d(sy), nthreads);
+            break;
+        }
+        case KernelShape::Disk:
+        case KernelShape::Polygon: out = convolve_spans(p, weights, nthreads); break;
+        }
     }
-    case KernelShape::Disk:
-    case KernelShape::Polygon: return finish(dst, in, roi, convolve_spans(p, weights, nthreads));
-    }
-    dst.errorfmt("blur: unknown kernel shape");
-    return false;
+    if (opts.iris != 0.0f)
+        iris.inverse(out, nthreads);
+    return finish(dst, in, roi, out, ox, oy);
 }
 
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts,

@@ -28,12 +28,19 @@ enum class KernelEdge {
     Hard,         ///< 0/1 by the pixel centre: OIIO's make_kernel("disk") rule
 };
 
-/// Which algorithm computes the blur (all give the same kernel's result unless "Fast").
+/// Which algorithm computes the blur. Auto, Exact and Reference give the kernel's exact
+/// result; the others approximate it, each at a cost that does not grow with the size
+/// (BilinearTaps: fixed sizes); bokeh-bench charts what each one costs and loses.
 enum class BlurMethod {
-    Auto,       ///< the fastest exact method for the shape
-    Exact,      ///< box: running sums; Gaussian: separable convolution; shapes: row spans
-    Fast,       ///< Gaussian: three fractional-width boxes with the same variance
-    Reference,  ///< brute-force 2-D convolution (slow; tests and charts)
+    Auto,            ///< the fastest exact method for the shape
+    Exact,           ///< box: running sums; Gaussian: separable convolution; shapes: row spans
+    Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
+                     ///< hexagon -> parallelograms, disk and polygon -> bands
+    Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
+    ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
+    Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
+    Bands,           ///< disk, polygon: BlurOptions::bands rectangles of a summed-area table
+    BilinearTaps,    ///< disk: the seed's 9x9 (25 fetches) or 17x17 (81 fetches) kernel
 };
 
 /// Pixels outside the source's data window.
@@ -55,6 +62,11 @@ struct BlurOptions {
     Border border     = Border::Black;
     bool grow         = false;  ///< enlarge the data window by the kernel radius
     BlurMethod method = BlurMethod::Auto;
+    int bands         = 8;      ///< Bands: horizontal bands per half kernel (1..64)
+    /// Iris mode (SEEDS.md section 3): average exp(iris * x) and return log(mean) / iris,
+    /// so bright values dominate the average as in a real lens; 0 = a plain average.
+    /// Applies to every channel but alpha; iris * (max - min) must stay within 80.
+    float iris = 0.0f;
 };
 
 /// A kernel's normalised weights on a (2 rx + 1) x (2 ry + 1) grid centred on (0, 0).
@@ -79,6 +91,17 @@ KernelWeights kernel_weights(const Kernel& k);
 /// One-dimensional weights of the separable shapes, centred, sum 1.
 std::vector<double> box_weights_1d(double width_px);
 std::vector<double> gaussian_weights_1d(double sigma_px);
+
+/// The effective kernel of BlurMethod::Bands: the exact kernel's rows grouped into at
+/// most `bands` bands per half, each band one anti-aliased interval of the band's mean
+/// area and centre. Same energy as the exact kernel.
+KernelWeights banded_weights(const Kernel& k, int bands);
+
+/// The effective kernel of BlurMethod::BilinearTaps: what the seed's bilinear fetches
+/// (one per 2 x 2 group of pixels, at the group's centroid, weighted by its area) add up
+/// to. `fetches` receives the number that carry weight (25 for 9 x 9; 77 of the
+/// 81 for 17 x 17, whose corner groups miss the disk).
+KernelWeights bilinear_tap_weights(const Kernel& k, int* fetches = nullptr);
 
 /// Blur `src` into `dst` (ImageBufAlgo style: false + dst.geterror() on failure).
 /// `roi` (default: the source data window, grown if asked) is the region computed.

@@ -36,10 +36,16 @@ bool blur_command(CommandContext& c)
                                     : bokeh::Border::Black;
     o.grow = c.options.get_bool("grow");
     const std::string& method = c.options.get_string("method");
-    o.method = method == "exact"       ? bokeh::BlurMethod::Exact
-               : method == "fast"      ? bokeh::BlurMethod::Fast
-               : method == "reference" ? bokeh::BlurMethod::Reference
-                                       : bokeh::BlurMethod::Auto;
+    o.method = method == "exact"            ? bokeh::BlurMethod::Exact
+               : method == "fast"           ? bokeh::BlurMethod::Fast
+               : method == "reference"      ? bokeh::BlurMethod::Reference
+               : method == "boxes3"         ? bokeh::BlurMethod::ThreeBoxes
+               : method == "parallelograms" ? bokeh::BlurMethod::Parallelograms
+               : method == "bands"          ? bokeh::BlurMethod::Bands
+               : method == "taps"           ? bokeh::BlurMethod::BilinearTaps
+                                            : bokeh::BlurMethod::Auto;
+    o.bands = c.options.get_int("bands");
+    o.iris  = float(c.options.get_float("iris"));
 
     bokeh::StackImage out = c.inputs[0];
     out.buf               = std::make_shared<OIIO::ImageBuf>();
@@ -68,8 +74,15 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk)"),
         OptionSpec::Choice("border", { "black", "clamp", "mirror" }, "pixels outside the image"),
         OptionSpec::Bool("grow", false, "grow the data window by the kernel radius"),
-        OptionSpec::Choice("method", { "auto", "exact", "fast", "reference" },
-                           "fast: 3-box Gaussian; reference: brute force"),
+        OptionSpec::Choice("method",
+                           { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
+                             "bands", "taps" },
+                           "fast: the shape's approximation (gaussian: boxes3, hex: "
+                           "parallelograms, disk/polygon: bands); taps: the seed's 9x9/17x17 "
+                           "bilinear-fetch disk; reference: brute force"),
+        OptionSpec::Int("bands", 8, 1, 64, "method=bands: bands per half kernel"),
+        OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
+                          "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
         OptionSpec::Float("sigma", 0.0, 0.0, 1024.0, "Gaussian sigma in pixels (0: W/4)"),
         OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
         OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon: degrees (0: a vertex up)"),

@@ -1,0 +1,85 @@
+// plane.h — internal to the library: the contiguous float planes every blur method works
+// on, and the steps around them (border fill, output into an ImageBuf, source checks).
+//
+// Every method is a "valid" convolution of a padded plane: the source region the output
+// needs, grown by the kernel's reach and filled past the data window by the border rule,
+// is copied once into a contiguous interleaved float plane; the methods read only inside
+// it, and finish() copies the wanted region into the destination.
+#pragma once
+
+#include <bokeh/blur.h>
+
+#include <cstddef>
+#include <memory>
+#include <vector>
+
+#include <OpenImageIO/imagebuf.h>
+
+// The innermost loops are compiled for AVX-512, AVX2 and baseline x86-64 and chosen at load
+// time (GCC function multiversioning), so one portable binary runs at the machine's width.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#    define BOKEH_HOT __attribute__((target_clones("avx512f", "avx2", "default")))
+#else
+#    define BOKEH_HOT
+#endif
+
+namespace bokeh::detail {
+
+/// A contiguous interleaved float image. Its pixels start uninitialised: every method
+/// writes each output value, and pad() writes the black ones itself.
+struct Plane {
+    int w = 0, h = 0, nc = 0;
+    std::unique_ptr<float[]> px;
+    Plane() = default;
+    Plane(int w_, int h_, int nc_)
+        : w(w_), h(h_), nc(nc_), px(new float[size_t(w_) * size_t(h_) * size_t(nc_)])
+    {
+    }
+    size_t stride() const { return size_t(w) * size_t(nc); }
+    size_t size() const { return stride() * size_t(h); }
+    float* row(int y) { return px.get() + size_t(y) * stride(); }
+    const float* row(int y) const { return px.get() + size_t(y) * stride(); }
+};
+
+/// The source over `region`, border-filled. `src` is float with local pixels.
+Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads);
+
+/// `dst` = plane `p` from (ox, oy) on, placed at `roi` (its size), with `src`'s metadata.
+bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi, const Plane& p,
+            int ox = 0, int oy = 0);
+
+/// `r` grown by rx, ry pixels on each side.
+OIIO::ROI grown(OIIO::ROI r, int rx, int ry);
+
+/// A float, local copy of `src` when it is not already one.
+const OIIO::ImageBuf& float_source(const OIIO::ImageBuf& src, OIIO::ImageBuf& holder);
+
+/// False + an error on `dst` when `src` cannot be blurred (empty, deep, volume).
+bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* what = "blur");
+
+/// acc[i] += w * (hi[i] - lo[i]): one span of prefix sums.
+void add_span(double* acc, const double* hi, const double* lo, double w, size_t n);
+/// acc[i] += w * src[i].
+void add_scaled(double* acc, const float* src, double w, size_t n);
+/// out[i] = float(acc[i]).
+void to_float(float* out, const double* acc, size_t n);
+
+/// One bar of a kernel row: weight `weight` on offsets dx in [x0, x1] of row dy.
+struct Span {
+    int dy, x0, x1;
+    double weight;
+};
+/// Skyline decomposition of each kernel row into stacked horizontal bars (blur.cpp).
+std::vector<Span> kernel_spans(const KernelWeights& k);
+
+/// Approximations (blur_approx.cpp). Planes are the padded input's size.
+Plane hexagon_parallelograms(const Plane& in, const Kernel& k, int nthreads);
+/// How far the parallelogram passes read along x (or y), interpolation included.
+int hexagon_reach(const Kernel& k, bool along_x);
+/// Convolution with a kernel of repeated rows (bands) via a summed-area table.
+Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads);
+
+/// The plane transposed (rows become columns), for passes written along x only.
+Plane transposed(const Plane& in, int nthreads);
+
+}  // namespace bokeh::detail
