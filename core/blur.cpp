@@ -377,60 +377,6 @@ bool resolve_method(const Kernel& k, BlurMethod asked, BlurMethod& m, std::strin
     return false;
 }
 
-// Iris mode (SEEDS.md section 3): values go to exp(k (x - shift)) before the blur and come
-// back by shift + log(v) / k. The shift (the channel's minimum for k > 0, maximum for
-// k < 0) keeps every exponent in [0, 80], inside float's range, so nothing overflows and
-// no dark value underflows to an unrecoverable zero; a wider range is refused.
-struct Iris {
-    double k = 0.0;
-    int alpha = -1;
-    std::vector<double> shift;
-
-    bool forward(Plane& p, std::string& err, int nthreads)
-    {
-        const int nc = p.nc;
-        shift.assign(size_t(nc), 0.0);
-        for (int c = 0; c < nc; ++c) {
-            if (c == alpha)
-                continue;
-            double lo = std::numeric_limits<double>::infinity(), hi = -lo;
-            for (size_t i = size_t(c); i < p.size(); i += size_t(nc))
-                if (std::isfinite(p.px[i])) {
-                    lo = std::min(lo, double(p.px[i]));
-                    hi = std::max(hi, double(p.px[i]));
-                }
-            if (!(hi >= lo))
-                continue;
-            if (std::abs(k) * (hi - lo) > 80.0) {
-                err = OIIO::Strutil::fmt::format(
-                    "iris {} times channel {}'s range {} .. {} exceeds 80: exp() would overflow; "
-                    "lower iris",
-                    k, c, lo, hi);
-                return false;
-            }
-            shift[size_t(c)] = k > 0 ? lo : hi;
-        }
-        map(p, nthreads, [&](float v, int c) { return float(std::exp(k * (v - shift[size_t(c)]))); });
-        return true;
-    }
-    void inverse(Plane& p, int nthreads) const
-    {
-        map(p, nthreads, [&](float v, int c) { return float(shift[size_t(c)] + std::log(double(v)) / k); });
-    }
-    template<class F> void map(Plane& p, int nthreads, F f) const
-    {
-        parallel_for_chunks(0, p.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
-            for (int y = int(y0); y < int(y1); ++y) {
-                float* r = p.row(y);
-                for (int x = 0; x < p.w; ++x)
-                    for (int c = 0; c < p.nc; ++c)
-                        if (c != alpha)
-                            r[size_t(x) * size_t(p.nc) + size_t(c)] = f(r[size_t(x) * size_t(p.nc) + size_t(c)], c);
-            }
-        });
-    }
-};
-
 }  // namespace
 
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,

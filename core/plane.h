@@ -11,6 +11,7 @@
 
 #include <cstddef>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <OpenImageIO/imagebuf.h>
@@ -78,6 +79,19 @@ Plane hexagon_parallelograms(const Plane& in, const Kernel& k, int nthreads);
 int hexagon_reach(const Kernel& k, bool along_x);
 /// Convolution with a kernel of repeated rows (bands) via a summed-area table.
 Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads);
+
+/// Iris mode (SEEDS.md section 3): values go to exp(k (x - shift)) before the blur and
+/// come back by shift + log(v) / k. The shift (the channel's minimum for k > 0, maximum
+/// for k < 0) keeps every exponent in [0, 80], inside float's range, so nothing
+/// overflows and no dark value underflows to an unrecoverable zero; a wider range is
+/// refused. Alpha (channel `alpha`) is left linear.
+struct Iris {
+    double k  = 0.0;
+    int alpha = -1;
+    std::vector<double> shift;
+    bool forward(Plane& p, std::string& err, int nthreads);
+    void inverse(Plane& p, int nthreads) const;
+};
 
 /// The plane transposed (rows become columns), for passes written along x only.
 Plane transposed(const Plane& in, int nthreads);

@@ -583,3 +583,94 @@ TEST(BlurIris, HighlightsDominateAndFlatAreasStay)
     EXPECT_FALSE(blur(b, src, disk, iris));
     EXPECT_NE(b.geterror().find("exceeds 80"), std::string::npos) << b.geterror();
 }
+
+// --- image kernels by FFT ---------------------------------------------------------------
+
+namespace {
+
+OIIO::ImageBuf kernel_image(const KernelWeights& kw, int nchannels = 1)
+{
+    OIIO::ImageSpec spec(2 * kw.rx + 1, 2 * kw.ry + 1, nchannels, OIIO::TypeFloat);
+    spec.x = -kw.rx;  // centred on (0, 0) as OIIO's make_kernel does
+    spec.y = -kw.ry;
+    OIIO::ImageBuf img(spec);
+    for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+        for (int dx = -kw.rx; dx <= kw.rx; ++dx)
+            for (int c = 0; c < nchannels; ++c) {
+                const float v = float(kw.at(dx, dy) * (c + 1));
+                img.setpixel(dx, dy, 0, &v, 1);
+            }
+    return img;
+}
+
+}  // namespace
+
+TEST(BlurImageKernel, FftEqualsBruteForce)
+{
+    const OIIO::ImageBuf src = test_image(70, 55, 3, -4);
+    for (const Named& n : kernels()) {
+        SCOPED_TRACE(n.name);
+        const KernelWeights kw = kernel_weights(n.k);
+        for (Border border : { Border::Black, Border::Mirror }) {
+            BlurOptions o;
+            o.border = border;
+            OIIO::ImageBuf got, ref;
+            ASSERT_TRUE(convolve_image(got, src, kernel_image(kw), o)) << got.geterror();
+            ASSERT_TRUE(convolve_reference(ref, src, kw, o));
+            ASSERT_EQ(got.roi(), ref.roi());
+            // Double FFT: round-off ~1e-15 of the sum; float output.
+            EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
+        }
+    }
+}
+
+TEST(BlurImageKernel, ColourKernelsAndTheCentreRule)
+{
+    // A 3-channel kernel: each channel its own (normalised) shape; alpha uses their mean.
+    Kernel disk;
+    disk.shape    = KernelShape::Disk;
+    disk.width_px = disk.height_px = 7;
+    Kernel box;
+    box.shape    = KernelShape::Box;
+    box.width_px = box.height_px = 7;
+    const KernelWeights kd = kernel_weights(disk), kb = kernel_weights(box);
+    OIIO::ImageBuf k(OIIO::ImageSpec(7, 7, 3, OIIO::TypeFloat));  // origin (0, 0): centre (3, 3)
+    for (int y = 0; y < 7; ++y)
+        for (int x = 0; x < 7; ++x) {
+            const float px[3] = { float(kd.at(x - 3, y - 3)), float(kb.at(x - 3, y - 3)),
+                                  float(3.0 * kd.at(x - 3, y - 3)) };
+            k.setpixel(x, y, px);
+        }
+    const OIIO::ImageBuf src = test_image(30, 30);
+    OIIO::ImageBuf got, rd, rb;
+    ASSERT_TRUE(convolve_image(got, src, k)) << got.geterror();
+    ASSERT_TRUE(blur(rd, src, disk));
+    ASSERT_TRUE(blur(rb, src, box));
+    const OIIO::ImageBuf r = OIIO::ImageBufAlgo::channels(got, 1, { 0 });
+    const OIIO::ImageBuf g = OIIO::ImageBufAlgo::channels(got, 1, { 1 });
+    const OIIO::ImageBuf b = OIIO::ImageBufAlgo::channels(got, 1, { 2 });
+    EXPECT_LE(bokeh_test::max_difference(r, OIIO::ImageBufAlgo::channels(rd, 1, { 0 })), 2e-6 * peak(rd));
+    EXPECT_LE(bokeh_test::max_difference(g, OIIO::ImageBufAlgo::channels(rb, 1, { 1 })), 2e-6 * peak(rb));
+    EXPECT_LE(bokeh_test::max_difference(b, OIIO::ImageBufAlgo::channels(rd, 1, { 2 })), 2e-6 * peak(rd))
+        << "a channel's scale does not matter: each is normalised";
+    // A one-pixel kernel anywhere is the identity (to round-off).
+    OIIO::ImageBuf one(OIIO::ImageSpec(1, 1, 1, OIIO::TypeFloat));
+    const float v = 5.0f;
+    one.setpixel(0, 0, &v);
+    ASSERT_TRUE(convolve_image(got, src, one));
+    EXPECT_LE(bokeh_test::max_difference(got, src), 1e-5 * peak(src));
+}
+
+TEST(BlurImageKernel, BadKernelsAreRefused)
+{
+    const OIIO::ImageBuf src = test_image(10, 10);
+    OIIO::ImageBuf k(OIIO::ImageSpec(3, 3, 1, OIIO::TypeFloat)), out;
+    EXPECT_FALSE(convolve_image(out, src, k));
+    EXPECT_NE(out.geterror().find("sums to 0"), std::string::npos) << out.geterror();
+    const float nan = NAN;
+    k.setpixel(1, 1, &nan);
+    EXPECT_FALSE(convolve_image(out, src, k));
+    EXPECT_NE(out.geterror().find("non-finite value at (1, 1)"), std::string::npos) << out.geterror();
+    EXPECT_FALSE(convolve_image(out, src, OIIO::ImageBuf()));
+    EXPECT_NE(out.geterror().find("kernel image"), std::string::npos) << out.geterror();
+}

@@ -1,12 +1,14 @@
 // bokehtool as a user runs it: grammar, I/O fidelity, sequences, plugins, bad input.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
 
 #include "test_util.h"
@@ -377,6 +379,47 @@ TEST(Cli, BrokenPluginsAreNamedAndNeverCrash)
     expect_clean_failure(r, "plugin directory " + dir + "/nonexistent: does not exist", out);
 }
 
+TEST(Cli, BlurMethodsAndConvolve)
+{
+    const std::string dir = fresh_dir("cli_blur_methods");
+    const std::string in  = make_input(dir);
+    // The approximations run from the command line and stay close to the exact kernel;
+    // --convolve with a kernel made by the exact disk gives the exact disk.
+    RunResult r = bokehtool(format(
+        "{0} --blur:kernel=disk 9 -o {1}/exact.exr "
+        "{0} --blur:kernel=disk:method=bands:bands=4 9 -o {1}/bands.exr "
+        "{0} --blur:kernel=disk:method=taps 9 -o {1}/taps.exr "
+        "{0} --blur:kernel=hex:method=fast 9 -o {1}/hex.exr "
+        "{0} --blur:kernel=disk:iris=2 9 -o {1}/iris.exr",
+        in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf exact(dir + "/exact.exr");
+    const auto stats = OIIO::ImageBufAlgo::computePixelStats(exact);
+    const double peak = *std::max_element(stats.max.begin(), stats.max.end());
+    for (const char* name : { "bands", "taps", "hex", "iris" }) {
+        OIIO::ImageBuf b(dir + "/" + name + ".exr");
+        ASSERT_TRUE(b.read(0, 0, true)) << name;
+        const double d = max_difference(exact, b);
+        EXPECT_GT(d, 0.0) << name << " differs from the exact disk";
+        if (std::string(name) != "iris") {  // iris changes the picture by design
+            EXPECT_LT(d, 0.1 * peak) << name;
+        }
+    }
+    // --convolve with OIIO's disk kernel (data window centred on 0, 0) is our hard disk.
+    const OIIO::ImageBuf k = OIIO::ImageBufAlgo::make_kernel("disk", 9, 9);
+    ASSERT_TRUE(k.write(dir + "/k.exr"));
+    r = bokehtool(format("{0} --blur:kernel=disk:edge=hard 9 -o {1}/hard.exr "
+                         "{0} {1}/k.exr --convolve -o {1}/conv.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf hard(dir + "/hard.exr"), conv(dir + "/conv.exr");
+    EXPECT_LE(max_difference(hard, conv), 1e-3) << "half output";
+    const std::string out = dir + "/x.exr";
+    OIIO::ImageBuf zero(OIIO::ImageSpec(3, 3, 1, OIIO::TypeFloat));
+    ASSERT_TRUE(zero.write(dir + "/zero.exr"));
+    expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --convolve -o {2}", in, dir, out)),
+                         "kernel image channel 0 sums to 0", out);
+}
+
 TEST(Cli, Blur)
 {
     const std::string dir = fresh_dir("cli_blur");
@@ -402,7 +445,10 @@ TEST(Cli, Blur)
                                { "--blur -3", "not a kernel size" },
                                { "--blur:kernel=star 3", "option 'kernel' = 'star' is not one of" },
                                { "--blur:blades=2:kernel=polygon 9", "out of range [3, 64]" },
-                               { "--blur:kernel=disk:method=fast 9", "no fast approximation" },
+                               { "--blur:kernel=disk:method=parallelograms 9", "needs a hexagon" },
+                               { "--blur:kernel=disk:method=taps 11", "9x9 or 17x17" },
+                               { "--blur:iris=200 9", "exceeds 80" },
+                               { "--convolve", "needs 2 image(s) on the stack" },
                                { "--blur 5000", "outside 0..4096" } }) {
         SCOPED_TRACE(args);
         r = bokehtool(in + " " + args + " -o " + out);

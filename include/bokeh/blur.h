@@ -110,6 +110,16 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts = {},
                     OIIO::ROI roi = {}, int nthreads = 0);
 
+/// Convolve with an image as the kernel (any size, colour allowed), by FFT. The kernel's
+/// centre is its data window's pixel (xbegin + width / 2, ybegin + height / 2), which is
+/// (0, 0) for OIIO's make_kernel results. Channels: a 1-channel kernel blurs every
+/// channel; otherwise source channel c uses kernel channel c, and source channels past
+/// the kernel's (alpha, say) use the mean of the kernel's channels. Each kernel channel
+/// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
+/// kernel value, is refused. opts.method and opts.bands are ignored; opts.iris applies.
+bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
+                    const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
+
 /// Convolve with explicit weights by brute force: the exact reference for every method.
 bool convolve_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
                         const KernelWeights& weights, const BlurOptions& opts = {},

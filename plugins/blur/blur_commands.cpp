@@ -1,5 +1,6 @@
 // blur_commands.cpp — `--blur`, spelled as oiiotool spells it (`--blur:kernel=disk 31x31`),
-// with our kernels and options. The work is bokeh::blur (core/blur.cpp).
+// with our kernels and options, and `--convolve` with an image kernel. The work is
+// bokeh::blur and bokeh::convolve_image (core/blur*.cpp).
 
 #include <bokeh/blur.h>
 #include <bokeh/plugin.h>
@@ -11,6 +12,18 @@ namespace {
 using bokeh::CommandContext;
 using bokeh::OptionSpec;
 using OIIO::Strutil::fmt::format;
+
+bokeh::BlurOptions blur_options(const CommandContext& c)
+{
+    bokeh::BlurOptions o;
+    const std::string& border = c.options.get_string("border");
+    o.border = border == "clamp"    ? bokeh::Border::Clamp
+               : border == "mirror" ? bokeh::Border::Mirror
+                                    : bokeh::Border::Black;
+    o.grow = c.options.get_bool("grow");
+    o.iris = float(c.options.get_float("iris"));
+    return o;
+}
 
 bool blur_command(CommandContext& c)
 {
@@ -29,12 +42,7 @@ bool blur_command(CommandContext& c)
     k.hole         = float(c.options.get_float("hole"));
     k.edge = c.options.get_string("edge") == "hard" ? bokeh::KernelEdge::Hard
                                                      : bokeh::KernelEdge::Antialiased;
-    bokeh::BlurOptions o;
-    const std::string& border = c.options.get_string("border");
-    o.border = border == "clamp"    ? bokeh::Border::Clamp
-               : border == "mirror" ? bokeh::Border::Mirror
-                                    : bokeh::Border::Black;
-    o.grow = c.options.get_bool("grow");
+    bokeh::BlurOptions o = blur_options(c);
     const std::string& method = c.options.get_string("method");
     o.method = method == "exact"            ? bokeh::BlurMethod::Exact
                : method == "fast"           ? bokeh::BlurMethod::Fast
@@ -45,11 +53,22 @@ bool blur_command(CommandContext& c)
                : method == "taps"           ? bokeh::BlurMethod::BilinearTaps
                                             : bokeh::BlurMethod::Auto;
     o.bands = c.options.get_int("bands");
-    o.iris  = float(c.options.get_float("iris"));
 
     bokeh::StackImage out = c.inputs[0];
     out.buf               = std::make_shared<OIIO::ImageBuf>();
     if (!bokeh::blur(*out.buf, *c.inputs[0].buf, k, o, {}, c.nthreads))
+        return c.fail(out.buf->geterror());
+    c.outputs.push_back(std::move(out));
+    return true;
+}
+
+// oiiotool's `--convolve`: the top image is the kernel, the one below it is blurred.
+bool convolve_command(CommandContext& c)
+{
+    bokeh::StackImage out = c.inputs[0];
+    out.buf               = std::make_shared<OIIO::ImageBuf>();
+    if (!bokeh::convolve_image(*out.buf, *c.inputs[0].buf, *c.inputs[1].buf, blur_options(c), {},
+                               c.nthreads))
         return c.fail(out.buf->geterror());
     c.outputs.push_back(std::move(out));
     return true;
@@ -90,4 +109,18 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk/polygon: catadioptric hole (radius fraction)"),
     };
     r.add(c);
+
+    bokeh::Command conv = bokeh::make_command(
+        "--convolve", "", 2,
+        "Convolve the second image with the top one as the kernel (any shape, colour "
+        "allowed; normalised per channel; by FFT)",
+        convolve_command);
+    conv.needs_scene_linear = true;
+    conv.options = {
+        OptionSpec::Choice("border", { "black", "clamp", "mirror" }, "pixels outside the image"),
+        OptionSpec::Bool("grow", false, "grow the data window by the kernel radius"),
+        OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
+                          "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
+    };
+    r.add(conv);
 }

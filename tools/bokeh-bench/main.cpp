@@ -8,6 +8,8 @@
 //
 //   bokeh-bench [--threads N] [--reps N] [--csv FILE] [--quick]
 
+#include "gegl_peer.h"
+
 #include <bokeh/blur.h>
 #include <bokeh/scene.h>
 
@@ -143,6 +145,20 @@ int main(int argc, char* argv[])
         cases.push_back(c);
     }
 
+    // GEGL's gegl:lens-blur at radius 30 is a hard disk 61 pixels across (see
+    // gegl_peer.h): it and our exact hard disk are measured against that kernel.
+    if (bokeh_bench::gegl_available()) {
+        bokeh::Kernel hard = kernel(S::Disk, 61);
+        hard.edge          = bokeh::KernelEdge::Hard;
+        ours("disk hard", "row spans (exact)", 61, hard);
+        ours("disk hard", "8 bands (summed-area table)", 61, hard, M::Bands);
+        Case c{ "disk hard", "GEGL gegl:lens-blur radius 30", "gegl", 61, hard, {} };
+        c.reps = std::min(reps, 3);
+        cases.push_back(c);
+    } else {
+        std::printf("(GEGL not built in: the gegl:lens-blur peer is left out)\n");
+    }
+
     std::vector<std::string> rows;
     rows.push_back("task,method,peer,size_px,threads,median_ms,reps,rmse_linear,psnr_db_tonemapped");
     std::printf("%-9s %-32s %6s %10s %12s %10s\n", "task", "method", "size", "median ms",
@@ -151,7 +167,23 @@ int main(int argc, char* argv[])
         const int n = c.reps > 0 ? c.reps : reps;
         double ms;
         OIIO::ImageBuf result_small;
-        if (c.peer == "oiio") {
+        if (c.peer == "gegl") {
+            auto run = [&](const OIIO::ImageBuf& in, OIIO::ImageBuf& out) {
+                out.reset(in.spec());
+                std::string err;
+                if (!bokeh_bench::gegl_lens_blur(static_cast<const float*>(in.localpixels()),
+                                                 in.spec().width, in.spec().height,
+                                                 0.5f * float(c.size - 1), threads,
+                                                 static_cast<float*>(out.localpixels()), &err)) {
+                    std::fprintf(stderr, "bokeh-bench: GEGL: %s\n", err.c_str());
+                    std::exit(1);
+                }
+            };
+            OIIO::ImageBuf out;
+            ms = 1e3 * median_seconds([&] { run(frame, out); }, n);
+            run(small, result_small);
+            result_small.set_origin(small.spec().x, small.spec().y);
+        } else if (c.peer == "oiio") {
             const OIIO::ImageBuf k = IBA::make_kernel("disk", float(c.size), float(c.size));
             OIIO::ImageBuf out;
             ms = 1e3 * median_seconds([&] { IBA::convolve(out, frame, k, true, {}, threads); }, n);

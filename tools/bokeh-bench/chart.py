@@ -1,0 +1,303 @@
+#!/usr/bin/env python3
+"""Speed/accuracy charts from the CSV that bokeh-bench writes.
+
+For each task in the CSV (box, disk, gaussian, ...) this writes OUTDIR/<task>.png and
+OUTDIR/<task>.svg with two panels:
+
+  left   error vs time: median ms (log x) against PSNR after tone mapping (higher is
+         better), one colour/marker per method, peers hollow, every point labelled with its
+         kernel size; the Pareto front (points no other point beats on both speed and
+         accuracy) is ringed and joined by a dashed line; a dotted line marks the 40 dB
+         budget. Bit-exact results (PSNR written as 999) sit on a band labelled "exact".
+  right  time vs kernel size per method (log-log), so a flat line means a cost that does
+         not grow with the kernel.
+
+It also prints, per task, a Markdown table of the Pareto-front points for the docs.
+
+    python3 tools/bokeh-bench/chart.py CSV OUTDIR [--title-suffix TEXT]
+
+Columns are read by header name; columns it does not know are ignored. Needs only the
+standard library and matplotlib (Debian: python3-matplotlib).
+"""
+
+import argparse
+import csv
+import math
+import os
+import re
+import sys
+
+REQUIRED = ("task", "method", "peer", "size_px", "median_ms", "psnr_db_tonemapped")
+EXACT_PSNR = 999.0   # what bokeh-bench writes when the result is identical to the reference
+BUDGET_DB = 40.0
+PROG = "chart.py"
+
+
+def fail(path, reason):
+    print(f"{PROG}: {path}: {reason}", file=sys.stderr)
+    sys.exit(1)
+
+
+def note(msg):
+    print(f"{PROG}: {msg}", file=sys.stderr)
+
+
+def read_rows(path):
+    """Rows as dicts with numbers parsed; exits with a one-line message on bad input."""
+    try:
+        f = open(path, newline="", encoding="utf-8")
+    except OSError as e:
+        fail(path, e.strerror.lower() if e.strerror else str(e))
+    rows = []
+    with f:
+        reader = csv.DictReader(f)
+        header = [h.strip() for h in (reader.fieldnames or [])]
+        if not header:
+            fail(path, "empty file (no header line)")
+        reader.fieldnames = header
+        missing = [c for c in REQUIRED if c not in header]
+        if missing:
+            fail(path, "missing column(s) " + ", ".join(missing))
+        for row in reader:
+            line = reader.line_num
+            if None in row:   # more fields than the header: a comma inside an unquoted name
+                fail(path, f"line {line}: more fields than the header has columns")
+            task = (row["task"] or "").strip()
+            if not task:
+                note(f"{path}: line {line}: no task name, row skipped")
+                continue
+            values = {}
+            for col in ("size_px", "median_ms", "psnr_db_tonemapped"):
+                text = (row[col] or "").strip()
+                if not text:
+                    values = None   # a case that did not run; not an error in the file
+                    break
+                try:
+                    values[col] = float(text)
+                except ValueError:
+                    fail(path, f"line {line}: {col} is not a number: {text!r}")
+            if values is None:
+                note(f"{path}: line {line}: empty value, row skipped")
+                continue
+            if not values["median_ms"] > 0:
+                note(f"{path}: line {line}: median_ms {values['median_ms']} cannot go "
+                     "on a log axis, row skipped")
+                continue
+            psnr = values["psnr_db_tonemapped"]
+            rows.append({
+                "task": task,
+                "method": (row["method"] or "").strip(),
+                "peer": (row["peer"] or "").strip(),
+                "threads": (row.get("threads") or "").strip(),
+                "size": values["size_px"],
+                "ms": values["median_ms"],
+                "psnr": psnr,
+                "exact": not math.isfinite(psnr) or psnr >= EXACT_PSNR,
+            })
+    return rows
+
+
+def pareto_front(points):
+    """Points not dominated by another: a point is dominated when another one is at least
+    as fast and at least as accurate, and strictly better in one of the two. (Requiring
+    strictly better in both would keep every slower bit-exact point on the front.)"""
+    def beats(q, p):
+        return (q["ms"] <= p["ms"] and q["acc"] >= p["acc"]
+                and (q["ms"] < p["ms"] or q["acc"] > p["acc"]))
+    front = [p for p in points if not any(beats(q, p) for q in points)]
+    return sorted(front, key=lambda p: p["ms"])
+
+
+def series_of(rows):
+    """Group a task's rows into series (one per method), ours first, then peers, each in
+    order of first appearance. If a method was run with several thread counts, each count
+    becomes its own series, since its timings are not comparable."""
+    many_threads = {}
+    for r in rows:
+        many_threads.setdefault((r["method"], r["peer"]), set()).add(r["threads"])
+    series = {}
+    for r in rows:
+        key = (r["method"], r["peer"])
+        if len(many_threads[key]) > 1:
+            key += (r["threads"],)
+        series.setdefault(key, []).append(r)
+    keys = sorted(series, key=lambda k: bool(k[1]))   # stable: keeps CSV order within
+    return [(k, series[k]) for k in keys]
+
+
+def label_of(key):
+    method, peer = key[0], key[1]
+    if peer:
+        # The peer's name is usually in the method name already ("OIIO IBA::convolve").
+        if peer.lower() not in method.lower():
+            method = f"{peer}: {method}"
+        method += " (peer)"
+    if len(key) > 2:
+        method += f", {key[2]} threads"
+    return method
+
+
+def ms_text(ms):
+    return f"{ms:.0f}" if ms >= 100 else f"{ms:.1f}" if ms >= 10 else f"{ms:.2f}"
+
+
+def markdown_front(task, front, labels):
+    lines = [f"### {task}", "", "| method | size px | median ms | PSNR dB |",
+             "|---|---:|---:|---:|"]
+    for p in front:
+        db = "exact" if p["exact"] else f"{p['psnr']:.1f}"
+        lines.append(f"| {labels[id(p)]} | {p['size']:g} | {ms_text(p['ms'])} | {db} |")
+    return "\n".join(lines)
+
+
+def plain_number(x, _pos=None):
+    """Tick labels like 30, 300, 3000 instead of 10^x: readers compare milliseconds."""
+    return f"{x:g}"
+
+
+def draw_task(plt, ticker, task, rows, outdir, suffix):
+    series = series_of(rows)
+    colours = plt.get_cmap("tab10").colors
+    markers = "osD^vP*Xph<>"
+
+    finite = [r["psnr"] for r in rows if not r["exact"]]
+    # Bit-exact points have no finite PSNR; draw them on a ceiling 10 dB above the best
+    # finite one (and above the budget line) so they stay visibly on top, never dropped.
+    top_finite = max(finite + [BUDGET_DB])
+    ceiling = top_finite + 10
+    for r in rows:
+        r["acc"] = ceiling if r["exact"] else r["psnr"]
+
+    fig, (ax, ax_size) = plt.subplots(1, 2, figsize=(12, 5.2),
+                                      gridspec_kw={"width_ratios": [1.35, 1]})
+    handles, labels = [], {}
+    for i, (key, pts) in enumerate(series):
+        colour, marker = colours[i % len(colours)], markers[i % len(markers)]
+        peer = bool(key[1])
+        style = dict(marker=marker, color=colour, markersize=7, markeredgewidth=1.6,
+                     markerfacecolor="none" if peer else colour)
+        label = label_of(key)
+        for p in pts:
+            labels[id(p)] = label
+
+        h, = ax.plot([p["ms"] for p in pts], [p["acc"] for p in pts], linestyle="none",
+                     label=label, zorder=3, **style)
+        handles.append(h)
+        for p in pts:
+            ax.annotate(f"{p['size']:g}", (p["ms"], p["acc"]), xytext=(5, 4),
+                        textcoords="offset points", fontsize=7.5, color=colour)
+
+        by_size = sorted(pts, key=lambda p: p["size"])
+        ax_size.plot([p["size"] for p in by_size], [p["ms"] for p in by_size],
+                     linestyle="--" if peer else "-", linewidth=1.3, zorder=3, **style)
+
+    front = pareto_front(rows)
+    h_front, = ax.plot([p["ms"] for p in front], [p["acc"] for p in front], "k--",
+                       linewidth=1, marker="o", markersize=15, markerfacecolor="none",
+                       markeredgewidth=1, zorder=2, label="Pareto front")
+    handles.append(h_front)
+
+    # Left panel: error vs time.
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
+    ax.xaxis.set_minor_formatter(ticker.NullFormatter())
+    ax.set_xlabel("median time, ms (log; left is faster)")
+    ax.set_ylabel("PSNR after tone map x/(1+x), dB (up is more accurate)")
+    ax.axhline(BUDGET_DB, color="0.35", linestyle=":", linewidth=1.2, zorder=1)
+    ax.annotate(f"{BUDGET_DB:g} dB budget", (0.01, BUDGET_DB), xycoords=("axes fraction", "data"),
+                xytext=(0, 3), textcoords="offset points", fontsize=8, color="0.3")
+
+    low = min(finite + [BUDGET_DB]) - 8
+    if any(r["exact"] for r in rows):
+        high = ceiling + 6
+        ax.axhspan(ceiling - 4, ceiling + 4, color="0.92", zorder=0)
+        ax.axhline(top_finite + 5, color="0.7", linewidth=0.8, zorder=1)  # finite | exact
+        ticks = [t for t in ticker.MaxNLocator(7).tick_values(low, top_finite)
+                 if low <= t <= top_finite + 2]
+        ax.set_yticks(ticks + [ceiling])
+        ax.set_yticklabels([f"{t:g}" for t in ticks] + ["exact"])
+    else:
+        high = top_finite + 8
+    ax.set_ylim(low, high)
+    ax.grid(True, which="major", color="0.9", linewidth=0.6)
+    ax.set_title("error vs time (labels: kernel size, px)", fontsize=10)
+
+    # Right panel: cost vs kernel size. Sizes usually double from case to case, so a log x
+    # axis spaces them evenly, and on log-log a slope of 1 or 2 reads as O(size), O(size^2).
+    sizes = sorted({r["size"] for r in rows})
+    ax_size.set_xscale("log")
+    ax_size.set_yscale("log")
+    if len(sizes) <= 12:
+        ax_size.set_xticks(sizes)
+    ax_size.xaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
+    ax_size.xaxis.set_minor_formatter(ticker.NullFormatter())
+    ax_size.yaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
+    ax_size.yaxis.set_minor_formatter(ticker.NullFormatter())
+    ax_size.set_xlabel("kernel size, px (log)")
+    ax_size.set_ylabel("median time, ms (log)")
+    ax_size.grid(True, which="major", color="0.9", linewidth=0.6)
+    ax_size.set_title("time vs kernel size (flat = cost independent of size)", fontsize=10)
+
+    fig.suptitle(f"{task}: speed vs accuracy" + (f" {suffix}" if suffix else ""),
+                 fontsize=13)
+    # Legend below both panels, outside the data; the figure grows with its rows.
+    ncol = min(len(handles), 3)
+    nrows = math.ceil(len(handles) / ncol)
+    fig.legend(handles=handles, loc="lower center", ncol=ncol, fontsize=9, frameon=False,
+               numpoints=1)
+    fig.set_size_inches(12, 4.6 + 0.25 * nrows)
+    fig.subplots_adjust(left=0.07, right=0.985, top=0.87, wspace=0.22,
+                        bottom=(0.55 + 0.25 * nrows) / (4.6 + 0.25 * nrows))
+
+    base = os.path.join(outdir, re.sub(r"[^A-Za-z0-9._-]+", "_", task))
+    # No dates or random ids in the files, so a re-run with the same data changes nothing.
+    fig.savefig(base + ".png", dpi=100, metadata={"Software": None})
+    fig.savefig(base + ".svg", metadata={"Date": None})
+    plt.close(fig)
+    return markdown_front(task, front, labels)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("csv", help="CSV written by bokeh-bench --csv")
+    ap.add_argument("outdir", help="directory for <task>.png and <task>.svg")
+    ap.add_argument("--title-suffix", default="", help="text appended to every chart title")
+    args = ap.parse_args()
+
+    rows = read_rows(args.csv)
+    if not rows:
+        fail(args.csv, "no data rows")
+
+    try:
+        import matplotlib
+    except ImportError:
+        fail(args.csv, f"matplotlib is not available to {sys.executable} "
+             "(Debian: apt install python3-matplotlib, run with /usr/bin/python3)")
+    matplotlib.use("Agg")
+    matplotlib.rcParams["svg.hashsalt"] = "openbokeh"   # stable ids in the SVG
+    import matplotlib.pyplot as plt
+    from matplotlib import ticker
+
+    try:
+        os.makedirs(args.outdir, exist_ok=True)
+    except OSError as e:
+        fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
+
+    tasks = {}
+    for r in rows:
+        tasks.setdefault(r["task"], []).append(r)
+    tables = []
+    for task, task_rows in tasks.items():
+        if not task_rows:
+            note(f"{args.csv}: task {task!r} has no usable rows, skipped")
+            continue
+        try:
+            tables.append(draw_task(plt, ticker, task, task_rows, args.outdir,
+                                    args.title_suffix))
+        except OSError as e:
+            fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
+    print("\n\n".join(tables))
+
+
+if __name__ == "__main__":
+    main()
