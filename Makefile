@@ -32,6 +32,7 @@ test: build
 bench: build
 	@mkdir -p docs/bench
 	$(BUILD)/bin/bokeh-bench --threads 2 --reps 5 --csv docs/bench/blur.csv
+	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/blur.csv docs/bench
 
 install: build
 	cmake --install $(BUILD) --prefix $(or $(PREFIX),/usr/local)

@@ -43,12 +43,13 @@ def note(msg):
 
 
 def read_rows(path):
-    """Rows as dicts with numbers parsed; exits with a one-line message on bad input."""
+    """(task names in order of appearance, rows as dicts with numbers parsed); exits with
+    a one-line message on bad input. A task whose rows were all skipped is still named."""
     try:
         f = open(path, newline="", encoding="utf-8")
     except OSError as e:
         fail(path, e.strerror.lower() if e.strerror else str(e))
-    rows = []
+    rows, tasks = [], {}
     with f:
         reader = csv.DictReader(f)
         header = [h.strip() for h in (reader.fieldnames or [])]
@@ -66,6 +67,7 @@ def read_rows(path):
             if not task:
                 note(f"{path}: line {line}: no task name, row skipped")
                 continue
+            tasks[task] = None
             values = {}
             for col in ("size_px", "median_ms", "psnr_db_tonemapped"):
                 text = (row[col] or "").strip()
@@ -94,7 +96,7 @@ def read_rows(path):
                 "psnr": psnr,
                 "exact": not math.isfinite(psnr) or psnr >= EXACT_PSNR,
             })
-    return rows
+    return list(tasks), rows
 
 
 def pareto_front(points):
@@ -155,6 +157,58 @@ def plain_number(x, _pos=None):
     return f"{x:g}"
 
 
+def log_ticks(axis, ticker, values):
+    """Plain-number ticks on a log axis. Timings often span less than a decade, where the
+    default locator leaves no labelled tick at all, so use 1-2-5 or 1..9 steps then."""
+    span = math.log10(max(values) / min(values)) if values else 2
+    subs = (1.0,) if span >= 2 else (1.0, 2.0, 5.0) if span >= 0.6 else tuple(range(1, 10))
+    axis.set_major_locator(ticker.LogLocator(base=10, subs=subs))
+    axis.set_major_formatter(ticker.FuncFormatter(plain_number))
+    axis.set_minor_formatter(ticker.NullFormatter())
+
+
+class Placer:
+    """Places text next to points so that it overlaps neither markers nor text placed
+    before (near-equal timings are common, so labels would pile up otherwise). Works in
+    points on the figure, so call it only once the axes limits and layout are final."""
+
+    def __init__(self, ax, points, marker_pt=10):
+        self.ax = ax
+        self.to_points = 72 / ax.figure.dpi
+        half = marker_pt / 2
+        self.taken = [(x - half, y - half, x + half, y + half)
+                      for x, y in (self.at(p) for p in points)]
+
+    def at(self, xy, transform=None):
+        t = transform or self.ax.transData
+        return tuple(v * self.to_points for v in t.transform(xy))
+
+    def free(self, box):
+        return not any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3]
+                       for b in self.taken)
+
+    def place(self, xy, text, candidates, fontsize, transform=None, **kw):
+        """Annotate text at the first candidate (dx, dy) offset, in points, whose box is
+        free; the first candidate if none is. A positive dx puts the text to the right of
+        xy, a negative one to the left; dy is where the text's bottom goes."""
+        px, py = self.at(xy, transform)
+        w, h = 0.6 * fontsize * len(text), fontsize   # a digit or letter is ~0.6 em
+        boxes = []
+        for dx, dy in candidates:
+            x0 = px + dx if dx >= 0 else px + dx - w
+            boxes.append((x0, py + dy, x0 + w, py + dy + h))
+        i = next((i for i, b in enumerate(boxes) if self.free(b)), 0)
+        self.taken.append(boxes[i])
+        dx, dy = candidates[i]
+        self.ax.annotate(text, xy, xycoords=transform or "data", xytext=(dx, dy),
+                         textcoords="offset points", fontsize=fontsize,
+                         ha="left" if dx >= 0 else "right", va="bottom", **kw)
+
+
+SIZE_LABEL_OFFSETS = [(5, 3), (5, -11), (-5, 3), (-5, -11), (5, 11), (5, -19), (-5, 11),
+                      (-5, -19), (9, -4), (-9, -4)]
+
+
 def draw_task(plt, ticker, task, rows, outdir, suffix):
     series = series_of(rows)
     colours = plt.get_cmap("tab10").colors
@@ -170,7 +224,7 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
 
     fig, (ax, ax_size) = plt.subplots(1, 2, figsize=(12, 5.2),
                                       gridspec_kw={"width_ratios": [1.35, 1]})
-    handles, labels = [], {}
+    handles, labels, size_labels = [], {}, []
     for i, (key, pts) in enumerate(series):
         colour, marker = colours[i % len(colours)], markers[i % len(markers)]
         peer = bool(key[1])
@@ -183,29 +237,35 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
         h, = ax.plot([p["ms"] for p in pts], [p["acc"] for p in pts], linestyle="none",
                      label=label, zorder=3, **style)
         handles.append(h)
-        for p in pts:
-            ax.annotate(f"{p['size']:g}", (p["ms"], p["acc"]), xytext=(5, 4),
-                        textcoords="offset points", fontsize=7.5, color=colour)
+        size_labels += [(p["ms"], p["acc"], f"{p['size']:g}", colour) for p in pts]
 
         by_size = sorted(pts, key=lambda p: p["size"])
         ax_size.plot([p["size"] for p in by_size], [p["ms"] for p in by_size],
                      linestyle="--" if peer else "-", linewidth=1.3, zorder=3, **style)
 
-    front = pareto_front(rows)
-    h_front, = ax.plot([p["ms"] for p in front], [p["acc"] for p in front], "k--",
-                       linewidth=1, marker="o", markersize=15, markerfacecolor="none",
-                       markeredgewidth=1, zorder=2, label="Pareto front")
+    # One front per kernel size: methods compete at the same size, not across sizes.
+    front = []
+    for size in sorted({r["size"] for r in rows}):
+        f = pareto_front([r for r in rows if r["size"] == size])
+        front += f
+        h_front, = ax.plot([p["ms"] for p in f], [p["acc"] for p in f], "k--",
+                           linewidth=1, marker="o", markersize=15, markerfacecolor="none",
+                           markeredgewidth=1, zorder=2, label="Pareto front (per size)")
     handles.append(h_front)
 
     # Left panel: error vs time.
     ax.set_xscale("log")
-    ax.xaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
-    ax.xaxis.set_minor_formatter(ticker.NullFormatter())
+    log_ticks(ax.xaxis, ticker, [r["ms"] for r in rows])
     ax.set_xlabel("median time, ms (log; left is faster)")
     ax.set_ylabel("PSNR after tone map x/(1+x), dB (up is more accurate)")
     ax.axhline(BUDGET_DB, color="0.35", linestyle=":", linewidth=1.2, zorder=1)
-    ax.annotate(f"{BUDGET_DB:g} dB budget", (0.01, BUDGET_DB), xycoords=("axes fraction", "data"),
-                xytext=(0, 3), textcoords="offset points", fontsize=8, color="0.3")
+    # Labelled at the right end, under the line: the cheap methods that sit just above the
+    # budget are on the left.
+    ax.annotate(f"{BUDGET_DB:g} dB budget", (0.99, BUDGET_DB), xycoords=("axes fraction", "data"),
+                xytext=(0, -3), textcoords="offset points", fontsize=8, color="0.3",
+                ha="right", va="top",
+                bbox=dict(boxstyle="square,pad=0.1", facecolor="white", edgecolor="none",
+                          alpha=0.8))
 
     low = min(finite + [BUDGET_DB]) - 8
     if any(r["exact"] for r in rows):
@@ -229,10 +289,11 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
     ax_size.set_yscale("log")
     if len(sizes) <= 12:
         ax_size.set_xticks(sizes)
+    else:
+        log_ticks(ax_size.xaxis, ticker, sizes)
     ax_size.xaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
     ax_size.xaxis.set_minor_formatter(ticker.NullFormatter())
-    ax_size.yaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
-    ax_size.yaxis.set_minor_formatter(ticker.NullFormatter())
+    log_ticks(ax_size.yaxis, ticker, [r["ms"] for r in rows])
     ax_size.set_xlabel("kernel size, px (log)")
     ax_size.set_ylabel("median time, ms (log)")
     ax_size.grid(True, which="major", color="0.9", linewidth=0.6)
@@ -249,6 +310,24 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
     fig.subplots_adjust(left=0.07, right=0.985, top=0.87, wspace=0.22,
                         bottom=(0.55 + 0.25 * nrows) / (4.6 + 0.25 * nrows))
 
+    # Text last, once limits and layout are final: sizes next to their points, then the
+    # budget label wherever along its line it is clear of both.
+    ax.autoscale_view()
+    placer = Placer(ax, [(r["ms"], r["acc"]) for r in rows])
+    for x, y, text, colour in size_labels:
+        placer.place((x, y), text, SIZE_LABEL_OFFSETS, 7.5, color=colour)
+    budget_at = [((fx, BUDGET_DB), (dx, dy)) for fx, dx in ((0.99, -1), (0.01, 1), (0.5, 1))
+                 for dy in (-11, 2)]
+    px_budget = [placer.at(xy, ax.get_yaxis_transform()) for xy, _ in budget_at]
+    for ((fx, y), (dx, dy)), (px, py) in zip(budget_at, px_budget):
+        w = 0.6 * 8 * len("40 dB budget")
+        x0 = px + dx if dx >= 0 else px + dx - w
+        if placer.free((x0, py + dy, x0 + w, py + dy + 8)) or (fx, dy) == budget_at[-1][0][:1] + (2,):
+            break
+    ax.annotate(f"{BUDGET_DB:g} dB budget", (fx, BUDGET_DB), xycoords=ax.get_yaxis_transform(),
+                xytext=(dx, dy), textcoords="offset points", fontsize=8, color="0.3",
+                ha="left" if dx >= 0 else "right", va="bottom")
+
     base = os.path.join(outdir, re.sub(r"[^A-Za-z0-9._-]+", "_", task))
     # No dates or random ids in the files, so a re-run with the same data changes nothing.
     fig.savefig(base + ".png", dpi=100, metadata={"Software": None})
@@ -264,9 +343,9 @@ def main():
     ap.add_argument("--title-suffix", default="", help="text appended to every chart title")
     args = ap.parse_args()
 
-    rows = read_rows(args.csv)
+    task_names, rows = read_rows(args.csv)
     if not rows:
-        fail(args.csv, "no data rows")
+        fail(args.csv, "no usable data rows")
 
     try:
         import matplotlib
@@ -283,11 +362,9 @@ def main():
     except OSError as e:
         fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
 
-    tasks = {}
-    for r in rows:
-        tasks.setdefault(r["task"], []).append(r)
     tables = []
-    for task, task_rows in tasks.items():
+    for task in task_names:
+        task_rows = [r for r in rows if r["task"] == task]
         if not task_rows:
             note(f"{args.csv}: task {task!r} has no usable rows, skipped")
             continue
