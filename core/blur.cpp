@@ -146,24 +146,12 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
         }
     });
 
-    // Output in column strips x row chunks; each task owns its outputs.
-    constexpr int kStrip = 256, kRows = 16;
-    const int nstrips = (out.w + kStrip - 1) / kStrip;
-    const int nrows   = (out.h + kRows - 1) / kRows;
-    parallel_for_chunks(0, int64_t(nstrips) * nrows, 1, nthreads, [&](int64_t t, int64_t) {
-        const int xs = int(t % nstrips) * kStrip, xe = std::min(out.w, xs + kStrip);
-        const int ys = int(t / nstrips) * kRows, ye = std::min(out.h, ys + kRows);
-        const size_t i0 = size_t(xs) * size_t(nc), n = size_t(xe - xs) * size_t(nc);
-        std::vector<double> acc(n);
-        for (int y = ys; y < ye; ++y) {
-            std::fill(acc.begin(), acc.end(), 0.0);
-            for (const Span& s : spans) {
-                const double* p  = prefix.get() + size_t(y + k.ry + s.dy) * pstride + i0;
-                const double* hi = p + size_t(k.rx + s.x1 + 1) * size_t(nc);
-                const double* lo = p + size_t(k.rx + s.x0) * size_t(nc);
-                add_span(acc.data(), hi, lo, s.weight, n);
-            }
-            to_float(out.row(y) + i0, acc.data(), n);
+    accumulate_in_strips(out, nthreads, [&](int y, size_t i0, std::vector<double>& acc) {
+        for (const Span& s : spans) {
+            const double* p  = prefix.get() + size_t(y + k.ry + s.dy) * pstride + i0;
+            const double* hi = p + size_t(k.rx + s.x1 + 1) * size_t(nc);
+            const double* lo = p + size_t(k.rx + s.x0) * size_t(nc);
+            add_span(acc.data(), hi, lo, s.weight, acc.size());
         }
     });
     return out;

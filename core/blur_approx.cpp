@@ -302,25 +302,15 @@ Plane convolve_rects(const Plane& in, const KernelWeights& kernel, int nthreads)
         }
     });
 
-    constexpr int kStrip2 = 256, kRows = 16;
-    const int nstrips = (out.w + kStrip2 - 1) / kStrip2;
-    const int nrows   = (out.h + kRows - 1) / kRows;
-    parallel_for_chunks(0, int64_t(nstrips) * nrows, 1, nthreads, [&](int64_t t, int64_t) {
-        const int xs = int(t % nstrips) * kStrip2, xe = std::min(out.w, xs + kStrip2);
-        const int ys = int(t / nstrips) * kRows, ye = std::min(out.h, ys + kRows);
-        const size_t i0 = size_t(xs) * size_t(nc), n = size_t(xe - xs) * size_t(nc);
-        std::vector<double> acc(n);
-        for (int y = ys; y < ye; ++y) {
-            std::fill(acc.begin(), acc.end(), 0.0);
-            for (const Rect& r : rects) {
-                // Rows y + ry + y0 .. y + ry + y1 of `in`: SAT rows (y + ry + y0) and (.. y1 + 1).
-                const double* top = sat.get() + size_t(y + k.ry + r.y0) * sstride + i0;
-                const double* bot = sat.get() + size_t(y + k.ry + r.y1 + 1) * sstride + i0;
-                const size_t hi = size_t(k.rx + r.x1 + 1) * size_t(nc), lo = size_t(k.rx + r.x0) * size_t(nc);
-                add_span(acc.data(), bot + hi, bot + lo, r.weight, n);
-                add_span(acc.data(), top + lo, top + hi, r.weight, n);
-            }
-            to_float(out.row(y) + i0, acc.data(), n);
+    accumulate_in_strips(out, nthreads, [&](int y, size_t i0, std::vector<double>& acc) {
+        const size_t n = acc.size();
+        for (const Rect& r : rects) {
+            // Rows y + ry + y0 .. y + ry + y1 of `in`: SAT rows (y + ry + y0) and (.. y1 + 1).
+            const double* top = sat.get() + size_t(y + k.ry + r.y0) * sstride + i0;
+            const double* bot = sat.get() + size_t(y + k.ry + r.y1 + 1) * sstride + i0;
+            const size_t hi = size_t(k.rx + r.x1 + 1) * size_t(nc), lo = size_t(k.rx + r.x0) * size_t(nc);
+            add_span(acc.data(), bot + hi, bot + lo, r.weight, n);
+            add_span(acc.data(), top + lo, top + hi, r.weight, n);
         }
     });
     return out;

@@ -8,8 +8,11 @@
 #pragma once
 
 #include <bokeh/blur.h>
+#include <bokeh/parallel.h>
 
+#include <algorithm>
 #include <cstddef>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
@@ -92,6 +95,28 @@ struct Iris {
     bool forward(Plane& p, std::string& err, int nthreads);
     void inverse(Plane& p, int nthreads) const;
 };
+
+/// For every output row y, in tiles of 256-pixel column strips x 16 rows run in parallel
+/// (each task owns its outputs; the input rows a tile reads stay in L2): `fn(y, i0, acc)`
+/// adds into `acc` (zeroed; the values of out.row(y) from float index i0 on, in double),
+/// which is then stored as float.
+template<class RowFn> void accumulate_in_strips(Plane& out, int nthreads, RowFn fn)
+{
+    constexpr int kStrip = 256, kRows = 16;
+    const int nstrips = (out.w + kStrip - 1) / kStrip;
+    const int nrows   = (out.h + kRows - 1) / kRows;
+    parallel_for_chunks(0, int64_t(nstrips) * nrows, 1, nthreads, [&](int64_t t, int64_t) {
+        const int xs = int(t % nstrips) * kStrip, xe = std::min(out.w, xs + kStrip);
+        const int ys = int(t / nstrips) * kRows, ye = std::min(out.h, ys + kRows);
+        const size_t i0 = size_t(xs) * size_t(out.nc), n = size_t(xe - xs) * size_t(out.nc);
+        std::vector<double> acc(n);
+        for (int y = ys; y < ye; ++y) {
+            std::fill(acc.begin(), acc.end(), 0.0);
+            fn(y, i0, acc);
+            to_float(out.row(y) + i0, acc.data(), n);
+        }
+    });
+}
 
 /// The plane transposed (rows become columns), for passes written along x only.
 Plane transposed(const Plane& in, int nthreads);

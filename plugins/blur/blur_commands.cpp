@@ -100,14 +100,15 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "parallelograms, disk/polygon: bands); taps: the seed's 9x9/17x17 "
                            "bilinear-fetch disk; reference: brute force"),
         OptionSpec::Int("bands", 8, 1, 64, "method=bands: bands per half kernel"),
-        OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
-                          "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
         OptionSpec::Float("sigma", 0.0, 0.0, 1024.0, "Gaussian sigma in pixels (0: W/4)"),
         OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
         OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon: degrees (0: a vertex up)"),
         OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon: 0 straight blades .. 1 circle"),
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk/polygon: catadioptric hole (radius fraction)"),
     };
+    const OptionSpec iris = OptionSpec::Float(
+        "iris", 0.0, -1000.0, 1000.0, "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)");
+    c.options.push_back(iris);
     r.add(c);
 
     bokeh::Command conv = bokeh::make_command(
@@ -116,11 +117,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         "allowed; normalised per channel; by FFT)",
         convolve_command);
     conv.needs_scene_linear = true;
-    conv.options = {
-        OptionSpec::Choice("border", { "black", "clamp", "mirror" }, "pixels outside the image"),
-        OptionSpec::Bool("grow", false, "grow the data window by the kernel radius"),
-        OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
-                          "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
-    };
+    // The options blur_options() reads, shared by both commands.
+    conv.options = { c.options[2], c.options[3], iris };
     r.add(conv);
 }

@@ -6,13 +6,17 @@ OUTDIR/<task>.svg with two panels:
 
   left   error vs time: median ms (log x) against PSNR after tone mapping (higher is
          better), one colour/marker per method, peers hollow, every point labelled with its
-         kernel size; the Pareto front (points no other point beats on both speed and
-         accuracy) is ringed and joined by a dashed line; a dotted line marks the 40 dB
-         budget. Bit-exact results (PSNR written as 999) sit on a band labelled "exact".
+         kernel size; for each kernel size, the Pareto front (points no other point of
+         that size beats on both speed and accuracy) is ringed and joined by a dashed
+         line; a dotted line marks the 40 dB budget. Bit-exact results (PSNR written as
+         999) sit on a band labelled "exact"; when the PSNRs fall into two groups far
+         apart (approximations, float round-off), the upper one is drawn compressed.
   right  time vs kernel size per method (log-log), so a flat line means a cost that does
          not grow with the kernel.
 
 It also prints, per task, a Markdown table of the Pareto-front points for the docs.
+Methods are compared at equal kernel size: a small kernel is no substitute for a large
+one, so a front across sizes would mostly list the smallest size of the fastest method.
 
     python3 tools/bokeh-bench/chart.py CSV OUTDIR [--title-suffix TEXT]
 
@@ -110,6 +114,18 @@ def pareto_front(points):
     return sorted(front, key=lambda p: p["ms"])
 
 
+def psnr_knee(finite):
+    """Where to change the PSNR scale, or None to keep it linear: just above the lower
+    side of a gap of at least 60 dB between finite PSNRs, when there are points on both
+    sides of it (the 40 dB budget counts as one below)."""
+    values = sorted(set(finite + [BUDGET_DB]))
+    gaps = [(b - a, a) for a, b in zip(values, values[1:])]
+    if not gaps or not finite or min(finite) > max(gaps)[1]:
+        return None
+    gap, below = max(gaps)
+    return below + 10 if gap >= 60 else None
+
+
 def series_of(rows):
     """Group a task's rows into series (one per method), ours first, then peers, each in
     order of first appearance. If a method was run with several thread counts, each count
@@ -135,7 +151,7 @@ def label_of(key):
             method = f"{peer}: {method}"
         method += " (peer)"
     if len(key) > 2:
-        method += f", {key[2]} threads"
+        method += f", {key[2]} thread" + ("" if key[2] == "1" else "s")
     return method
 
 
@@ -144,11 +160,14 @@ def ms_text(ms):
 
 
 def markdown_front(task, front, labels):
+    if not front:
+        return f"### {task}\n\nNo Pareto front: one result per kernel size, nothing to compare."
     lines = [f"### {task}", "", "| method | size px | median ms | PSNR dB |",
              "|---|---:|---:|---:|"]
     for p in front:
         db = "exact" if p["exact"] else f"{p['psnr']:.1f}"
-        lines.append(f"| {labels[id(p)]} | {p['size']:g} | {ms_text(p['ms'])} | {db} |")
+        method = labels[id(p)].replace("|", "\\|")   # a bare | would end the cell
+        lines.append(f"| {method} | {p['size']:g} | {ms_text(p['ms'])} | {db} |")
     return "\n".join(lines)
 
 
@@ -159,9 +178,11 @@ def plain_number(x, _pos=None):
 
 def log_ticks(axis, ticker, values):
     """Plain-number ticks on a log axis. Timings often span less than a decade, where the
-    default locator leaves no labelled tick at all, so use 1-2-5 or 1..9 steps then."""
+    default locator leaves no labelled tick at all, so use finer steps the narrower it is."""
     span = math.log10(max(values) / min(values)) if values else 2
-    subs = (1.0,) if span >= 2 else (1.0, 2.0, 5.0) if span >= 0.6 else tuple(range(1, 10))
+    subs = ((1,) if span >= 2 else (1, 2, 5) if span >= 1 else (1, 2, 3, 5) if span >= 0.5
+            else range(1, 10))
+    subs = tuple(float(s) for s in subs)
     axis.set_major_locator(ticker.LogLocator(base=10, subs=subs))
     axis.set_major_formatter(ticker.FuncFormatter(plain_number))
     axis.set_minor_formatter(ticker.NullFormatter())
@@ -176,6 +197,8 @@ class Placer:
         self.ax = ax
         self.to_points = 72 / ax.figure.dpi
         half = marker_pt / 2
+        x0, y0, x1, y1 = ax.get_window_extent().extents * self.to_points
+        self.inside = (x0, y0, x1, y1)
         self.taken = [(x - half, y - half, x + half, y + half)
                       for x, y in (self.at(p) for p in points)]
 
@@ -184,22 +207,26 @@ class Placer:
         return tuple(v * self.to_points for v in t.transform(xy))
 
     def free(self, box):
+        x0, y0, x1, y1 = self.inside
+        if box[0] < x0 or box[1] < y0 or box[2] > x1 or box[3] > y1:
+            return False   # out of the axes: into the title, ticks or the other panel
         return not any(box[0] < b[2] and b[0] < box[2] and box[1] < b[3] and b[1] < box[3]
                        for b in self.taken)
 
-    def place(self, xy, text, candidates, fontsize, transform=None, **kw):
-        """Annotate text at the first candidate (dx, dy) offset, in points, whose box is
-        free; the first candidate if none is. A positive dx puts the text to the right of
-        xy, a negative one to the left; dy is where the text's bottom goes."""
-        px, py = self.at(xy, transform)
-        w, h = 0.6 * fontsize * len(text), fontsize   # a digit or letter is ~0.6 em
+    def place(self, text, candidates, fontsize, transform=None, **kw):
+        """Annotate text at the first candidate (xy, (dx, dy)) whose box is free, or at the
+        first one if none is. xy is in the transform's coordinates (data by default), the
+        offset in points: a positive dx puts the text right of xy, a negative one left of
+        it; dy is where the text's bottom goes."""
+        w, h = 0.6 * fontsize * len(text), fontsize   # a digit or letter is ~0.6 em wide
         boxes = []
-        for dx, dy in candidates:
+        for xy, (dx, dy) in candidates:
+            px, py = self.at(xy, transform)
             x0 = px + dx if dx >= 0 else px + dx - w
             boxes.append((x0, py + dy, x0 + w, py + dy + h))
         i = next((i for i, b in enumerate(boxes) if self.free(b)), 0)
         self.taken.append(boxes[i])
-        dx, dy = candidates[i]
+        xy, (dx, dy) = candidates[i]
         self.ax.annotate(text, xy, xycoords=transform or "data", xytext=(dx, dy),
                          textcoords="offset points", fontsize=fontsize,
                          ha="left" if dx >= 0 else "right", va="bottom", **kw)
@@ -209,10 +236,14 @@ SIZE_LABEL_OFFSETS = [(5, 3), (5, -11), (-5, 3), (-5, -11), (5, 11), (5, -19), (
                       (-5, -19), (9, -4), (-9, -4)]
 
 
-def draw_task(plt, ticker, task, rows, outdir, suffix):
+def draw_task(plt, ticker, task, rows, base, suffix):
+    """Write base.png and base.svg for one task; return its Markdown front table."""
     series = series_of(rows)
-    colours = plt.get_cmap("tab10").colors
-    markers = "osD^vP*Xph<>"
+    # tab10 without its grey, which the grid and budget line use; peers are hollow, so
+    # they get bold shapes (a hollow star or plus is hard to see).
+    colours = [c for i, c in enumerate(plt.get_cmap("tab10").colors) if i != 7]
+    ours_markers, peer_markers = "o^sDvPXph<>", "sDo^v"
+    n_ours = 0
 
     finite = [r["psnr"] for r in rows if not r["exact"]]
     # Bit-exact points have no finite PSNR; draw them on a ceiling 10 dB above the best
@@ -226,9 +257,15 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
                                       gridspec_kw={"width_ratios": [1.35, 1]})
     handles, labels, size_labels = [], {}, []
     for i, (key, pts) in enumerate(series):
-        colour, marker = colours[i % len(colours)], markers[i % len(markers)]
         peer = bool(key[1])
-        style = dict(marker=marker, color=colour, markersize=7, markeredgewidth=1.6,
+        colour = colours[i % len(colours)]
+        if peer:
+            marker = peer_markers[(i - n_ours) % len(peer_markers)]
+        else:
+            marker = ours_markers[i % len(ours_markers)]
+            n_ours += 1
+        style = dict(marker=marker, color=colour, markersize=8 if peer else 7,
+                     markeredgewidth=1.8 if peer else 1,
                      markerfacecolor="none" if peer else colour)
         label = label_of(key)
         for p in pts:
@@ -243,15 +280,22 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
         ax_size.plot([p["size"] for p in by_size], [p["ms"] for p in by_size],
                      linestyle="--" if peer else "-", linewidth=1.3, zorder=3, **style)
 
-    # One front per kernel size: methods compete at the same size, not across sizes.
-    front = []
+    # One front per kernel size: methods compete at the same size, not across sizes. A size
+    # measured with one method only has no competition, so nothing to ring or list.
+    front, h_front = [], None
     for size in sorted({r["size"] for r in rows}):
-        f = pareto_front([r for r in rows if r["size"] == size])
+        at_size = [r for r in rows if r["size"] == size]
+        if len(at_size) < 2:
+            continue
+        f = pareto_front(at_size)
         front += f
-        h_front, = ax.plot([p["ms"] for p in f], [p["acc"] for p in f], "k--",
-                           linewidth=1, marker="o", markersize=15, markerfacecolor="none",
-                           markeredgewidth=1, zorder=2, label="Pareto front (per size)")
-    handles.append(h_front)
+        # Light, so several sizes' fronts don't hide the points they join.
+        h_front, = ax.plot([p["ms"] for p in f], [p["acc"] for p in f], linestyle="--",
+                           color="0.45", linewidth=0.9, marker="o", markersize=15,
+                           markerfacecolor="none", markeredgecolor="black",
+                           markeredgewidth=0.9, zorder=2, label="Pareto front (per size)")
+    if h_front:
+        handles.append(h_front)
 
     # Left panel: error vs time.
     ax.set_xscale("log")
@@ -259,41 +303,68 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
     ax.set_xlabel("median time, ms (log; left is faster)")
     ax.set_ylabel("PSNR after tone map x/(1+x), dB (up is more accurate)")
     ax.axhline(BUDGET_DB, color="0.35", linestyle=":", linewidth=1.2, zorder=1)
-    # Labelled at the right end, under the line: the cheap methods that sit just above the
-    # budget are on the left.
-    ax.annotate(f"{BUDGET_DB:g} dB budget", (0.99, BUDGET_DB), xycoords=("axes fraction", "data"),
-                xytext=(0, -3), textcoords="offset points", fontsize=8, color="0.3",
-                ha="right", va="top",
-                bbox=dict(boxstyle="square,pad=0.1", facecolor="white", edgecolor="none",
-                          alpha=0.8))
 
     low = min(finite + [BUDGET_DB]) - 8
-    if any(r["exact"] for r in rows):
-        high = ceiling + 6
+    has_exact = any(r["exact"] for r in rows)
+    high = ceiling + 6 if has_exact else top_finite + 8
+    knee = psnr_knee(finite)
+    nice = lambda n, lo, hi: ticker.MaxNLocator(n, steps=[1, 2, 5, 10]).tick_values(lo, hi)
+    if knee is None:
+        ticks = [t for t in nice(7, low, top_finite) if low <= t <= top_finite + 2]
+    else:
+        # Approximations (30-70 dB) and float round-off (150+ dB) with nothing between:
+        # on one linear axis the approximations, which are what a reader compares, would
+        # be squeezed into the bottom fifth. Give the range below the knee most of the
+        # height, compress the range above it, and mark the change of scale on both spines.
+        frac = 0.62
+        below = lambda y: (y - low) / (knee - low) * frac
+        above = lambda y: frac + (y - knee) / (high - knee) * (1 - frac)
+        below_inv = lambda v: low + v / frac * (knee - low)
+        above_inv = lambda v: knee + (v - frac) / (1 - frac) * (high - knee)
+        # Arithmetic on booleans keeps these elementwise for matplotlib's arrays.
+        ax.set_yscale("function", functions=(
+            lambda y: (y <= knee) * below(y) + (y > knee) * above(y),
+            lambda v: (v <= frac) * below_inv(v) + (v > frac) * above_inv(v)))
+        ticks = [t for t in nice(6, low, knee) if low <= t < knee - 3]
+        ticks += [t for t in nice(3, knee, top_finite) if knee + 8 < t <= top_finite + 2]
+        ax.axhline(knee, color="0.7", linewidth=0.8, zorder=1)
+        ax.plot([0, 1], [knee, knee], transform=ax.get_yaxis_transform(), linestyle="none",
+                marker=[(-1, -0.6), (1, 0.6)], markersize=9, color="0.3", clip_on=False)
+    if has_exact:
         ax.axhspan(ceiling - 4, ceiling + 4, color="0.92", zorder=0)
         ax.axhline(top_finite + 5, color="0.7", linewidth=0.8, zorder=1)  # finite | exact
-        ticks = [t for t in ticker.MaxNLocator(7).tick_values(low, top_finite)
-                 if low <= t <= top_finite + 2]
-        ax.set_yticks(ticks + [ceiling])
-        ax.set_yticklabels([f"{t:g}" for t in ticks] + ["exact"])
-    else:
-        high = top_finite + 8
+    ax.set_yticks(ticks + ([ceiling] if has_exact else []))
+    ax.set_yticklabels([f"{t:g}" for t in ticks] + (["exact"] if has_exact else []))
+    ax.yaxis.set_minor_locator(ticker.NullLocator())
     ax.set_ylim(low, high)
     ax.grid(True, which="major", color="0.9", linewidth=0.6)
     ax.set_title("error vs time (labels: kernel size, px)", fontsize=10)
 
     # Right panel: cost vs kernel size. Sizes usually double from case to case, so a log x
     # axis spaces them evenly, and on log-log a slope of 1 or 2 reads as O(size), O(size^2).
-    sizes = sorted({r["size"] for r in rows})
     ax_size.set_xscale("log")
     ax_size.set_yscale("log")
-    if len(sizes) <= 12:
-        ax_size.set_xticks(sizes)
+    # Tick the sizes measured, minus any too close to the previous one to be read apart
+    # (15 next to 17).
+    ticks = []
+    for s in sorted({r["size"] for r in rows}):
+        if not ticks or math.log10(s / ticks[-1]) >= 0.08:
+            ticks.append(s)
+    if len(ticks) <= 12:
+        ax_size.set_xticks(ticks)
+        ax_size.xaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
+        ax_size.xaxis.set_minor_formatter(ticker.NullFormatter())
     else:
-        log_ticks(ax_size.xaxis, ticker, sizes)
-    ax_size.xaxis.set_major_formatter(ticker.FuncFormatter(plain_number))
-    ax_size.xaxis.set_minor_formatter(ticker.NullFormatter())
-    log_ticks(ax_size.yaxis, ticker, [r["ms"] for r in rows])
+        log_ticks(ax_size.xaxis, ticker, ticks)
+    # Show at least a decade of time: zoomed into 40..48 ms, timing noise would look like
+    # a cost that depends on size, which is what this panel is there to answer.
+    times = [r["ms"] for r in rows]
+    lo, hi = min(times), max(times)
+    if hi / lo < 10:
+        mid = math.sqrt(lo * hi)
+        lo, hi = mid / math.sqrt(10), mid * math.sqrt(10)
+    ax_size.set_ylim(lo / 1.25, hi * 1.25)
+    log_ticks(ax_size.yaxis, ticker, [lo, hi])
     ax_size.set_xlabel("kernel size, px (log)")
     ax_size.set_ylabel("median time, ms (log)")
     ax_size.grid(True, which="major", color="0.9", linewidth=0.6)
@@ -315,20 +386,14 @@ def draw_task(plt, ticker, task, rows, outdir, suffix):
     ax.autoscale_view()
     placer = Placer(ax, [(r["ms"], r["acc"]) for r in rows])
     for x, y, text, colour in size_labels:
-        placer.place((x, y), text, SIZE_LABEL_OFFSETS, 7.5, color=colour)
-    budget_at = [((fx, BUDGET_DB), (dx, dy)) for fx, dx in ((0.99, -1), (0.01, 1), (0.5, 1))
-                 for dy in (-11, 2)]
-    px_budget = [placer.at(xy, ax.get_yaxis_transform()) for xy, _ in budget_at]
-    for ((fx, y), (dx, dy)), (px, py) in zip(budget_at, px_budget):
-        w = 0.6 * 8 * len("40 dB budget")
-        x0 = px + dx if dx >= 0 else px + dx - w
-        if placer.free((x0, py + dy, x0 + w, py + dy + 8)) or (fx, dy) == budget_at[-1][0][:1] + (2,):
-            break
-    ax.annotate(f"{BUDGET_DB:g} dB budget", (fx, BUDGET_DB), xycoords=ax.get_yaxis_transform(),
-                xytext=(dx, dy), textcoords="offset points", fontsize=8, color="0.3",
-                ha="left" if dx >= 0 else "right", va="bottom")
+        placer.place(text, [((x, y), off) for off in SIZE_LABEL_OFFSETS], 7.5, color=colour)
+    # Budget label: under the line at the right end if clear (cheap methods that just
+    # make the budget tend to sit above it on the left), else another spot along it.
+    budget = [((fx, BUDGET_DB), (dx, dy)) for fx, dx in ((0.99, -2), (0.01, 2), (0.5, 2))
+              for dy in (-10, 2)]
+    placer.place(f"{BUDGET_DB:g} dB budget", budget, 8, transform=ax.get_yaxis_transform(),
+                 color="0.3")
 
-    base = os.path.join(outdir, re.sub(r"[^A-Za-z0-9._-]+", "_", task))
     # No dates or random ids in the files, so a re-run with the same data changes nothing.
     fig.savefig(base + ".png", dpi=100, metadata={"Software": None})
     fig.savefig(base + ".svg", metadata={"Date": None})
@@ -350,27 +415,36 @@ def main():
     try:
         import matplotlib
     except ImportError:
-        fail(args.csv, f"matplotlib is not available to {sys.executable} "
-             "(Debian: apt install python3-matplotlib, run with /usr/bin/python3)")
+        note(f"matplotlib is not available to {sys.executable} "
+             "(Debian: apt install python3-matplotlib, then run with /usr/bin/python3)")
+        sys.exit(1)
     matplotlib.use("Agg")
     matplotlib.rcParams["svg.hashsalt"] = "openbokeh"   # stable ids in the SVG
     import matplotlib.pyplot as plt
     from matplotlib import ticker
 
+    if os.path.exists(args.outdir) and not os.path.isdir(args.outdir):
+        fail(args.outdir, "not a directory")
     try:
         os.makedirs(args.outdir, exist_ok=True)
     except OSError as e:
         fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
 
-    tables = []
+    tables, bases = [], set()
     for task in task_names:
         task_rows = [r for r in rows if r["task"] == task]
         if not task_rows:
             note(f"{args.csv}: task {task!r} has no usable rows, skipped")
             continue
+        # Task names become file names; "disk hard" and "disk_hard" must not overwrite.
+        base = os.path.join(args.outdir, re.sub(r"[^A-Za-z0-9._-]+", "_", task))
+        n = 1
+        while base + ("" if n == 1 else f"_{n}") in bases:
+            n += 1
+        base += "" if n == 1 else f"_{n}"
+        bases.add(base)
         try:
-            tables.append(draw_task(plt, ticker, task, task_rows, args.outdir,
-                                    args.title_suffix))
+            tables.append(draw_task(plt, ticker, task, task_rows, base, args.title_suffix))
         except OSError as e:
             fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
     print("\n\n".join(tables))
