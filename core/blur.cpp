@@ -92,16 +92,6 @@ void weighted_rows(Plane& out, const std::vector<double>& w, Source source, int 
 
 // --- brute force -------------------------------------------------------------------
 
-// The weights point-reflected: out(x) = sum_d w(d) in(x - d) = sum_d w(-d) in(x + d), so a
-// point spreads into the kernel's own shape (this matters for shapes without point
-// symmetry, such as a pentagon).
-KernelWeights reflected(const KernelWeights& k)
-{
-    KernelWeights r = k;
-    std::reverse(r.w.begin(), r.w.end());
-    return r;
-}
-
 Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads)
 {
     const KernelWeights k = reflected(kernel);
@@ -268,6 +258,16 @@ double box_width_for_variance(double variance)
 }  // namespace
 
 namespace detail {
+
+// The weights point-reflected: out(x) = sum_d w(d) in(x - d) = sum_d w(-d) in(x + d), so a
+// point spreads into the kernel's own shape (this matters for shapes without point
+// symmetry, such as a pentagon).
+KernelWeights reflected(const KernelWeights& k)
+{
+    KernelWeights r = k;
+    std::reverse(r.w.begin(), r.w.end());
+    return r;
+}
 
 // Skyline decomposition of each kernel row into stacked horizontal bars.
 std::vector<Span> kernel_spans(const KernelWeights& k)

@@ -205,14 +205,15 @@ Plane segment_pass(const Plane& in, double ex, double ey, int nthreads)
     return transposed(segment_pass_x(transposed(in, nthreads), ey, ex, nthreads), nthreads);
 }
 
-void add_into(Plane& a, const Plane& b, int nthreads)
+// a = (a + b) * scale.
+void add_into(Plane& a, const Plane& b, float scale, int nthreads)
 {
     parallel_for_chunks(0, a.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
         for (int y = int(y0); y < int(y1); ++y) {
             float* p       = a.row(y);
             const float* q = b.row(y);
             for (size_t i = 0; i < a.stride(); ++i)
-                p[i] += q[i];
+                p[i] = (p[i] + q[i]) * scale;
         }
     });
 }
@@ -268,13 +269,15 @@ std::vector<Rect> kernel_rects(const KernelWeights& k)
     return rects;
 }
 
-Plane convolve_rects(const Plane& in, const KernelWeights& kernel, int nthreads)
+}  // namespace
+
+namespace detail {
+
+Plane convolve_banded(const Plane& in, const KernelWeights& kernel, int nthreads)
 {
     const int nc = in.nc;
     Plane out(in.w - 2 * kernel.rx, in.h - 2 * kernel.ry, nc);
-    // out(x) = sum_d w(d) in(x - d): the rectangles of the point-reflected kernel.
-    KernelWeights k = kernel;
-    std::reverse(k.w.begin(), k.w.end());
+    const KernelWeights k         = reflected(kernel);
     const std::vector<Rect> rects = kernel_rects(k);
 
     // S[y][(x + 1) nc + c] = sum of in over rows < y, columns <= x (row 0 is zeros).
@@ -316,7 +319,7 @@ Plane convolve_rects(const Plane& in, const KernelWeights& kernel, int nthreads)
     return out;
 }
 
-}  // namespace
+}  // namespace detail
 
 // --- public --------------------------------------------------------------------------
 
@@ -325,7 +328,6 @@ KernelWeights banded_weights(const Kernel& k, int bands)
     const KernelWeights exact = kernel_weights(k);
     if (exact.is_identity() || bands < 1)
         return exact;
-    const int nx = 2 * exact.rx + 1;
     // Row areas and centres, rows 0..ry of the lower half (the kernel is symmetric in y
     // for every shape here: the band split is mirrored).
     const int n = exact.ry + 1;
@@ -403,7 +405,6 @@ KernelWeights banded_weights(const Kernel& k, int bands)
                 }
             }
     }
-    (void)nx;
     double sum = 0.0;
     for (double v : out.w)
         sum += v;
@@ -464,17 +465,10 @@ Plane hexagon_parallelograms(const Plane& in, const Kernel& k, int nthreads)
     Plane a = segment_pass(in, p0x, p0y, nthreads);
     Plane b = segment_pass(in, p2x, p2y, nthreads);
     Plane r0 = segment_pass(a, p2x, p2y, nthreads);
-    add_into(a, b, nthreads);
+    add_into(a, b, 1.0f, nthreads);
     b        = Plane();
     Plane r12 = segment_pass(a, p4x, p4y, nthreads);
-    add_into(r12, r0, nthreads);
-    parallel_for_chunks(0, r12.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y) {
-            float* p = r12.row(y);
-            for (size_t i = 0; i < r12.stride(); ++i)
-                p[i] *= float(1.0 / 3.0);
-        }
-    });
+    add_into(r12, r0, float(1.0 / 3.0), nthreads);
     return r12;
 }
 
@@ -486,11 +480,6 @@ int hexagon_reach(const Kernel& k, bool along_x)
         r = std::max(r, std::abs(along_x ? x : y));
     }
     return int(std::ceil(r)) + 2;  // + the shear's interpolation
-}
-
-Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads)
-{
-    return convolve_rects(in, banded, nthreads);
 }
 
 }  // namespace detail

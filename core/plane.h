@@ -68,6 +68,9 @@ void add_scaled(double* acc, const float* src, double w, size_t n);
 /// out[i] = float(acc[i]).
 void to_float(float* out, const double* acc, size_t n);
 
+/// The weights point-reflected, so that out(x) = sum_d w(d) in(x - d) (blur.cpp).
+KernelWeights reflected(const KernelWeights& k);
+
 /// One bar of a kernel row: weight `weight` on offsets dx in [x0, x1] of row dy.
 struct Span {
     int dy, x0, x1;

@@ -86,13 +86,18 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         "anamorphic). Exact methods match the brute-force reference",
         blur_command);
     c.needs_scene_linear = true;
+    // The options blur_options() reads, for both commands.
+    const std::vector<OptionSpec> shared = {
+        OptionSpec::Choice("border", { "black", "clamp", "mirror" }, "pixels outside the image"),
+        OptionSpec::Bool("grow", false, "grow the data window by the kernel radius"),
+        OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
+                          "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
+    };
     c.options = {
         OptionSpec::Choice("kernel", { "gaussian", "box", "disk", "hex", "polygon" },
                            "kernel shape (gaussian: sigma = W/4 as oiiotool, not truncated)"),
         OptionSpec::Choice("edge", { "aa", "hard" },
                            "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk)"),
-        OptionSpec::Choice("border", { "black", "clamp", "mirror" }, "pixels outside the image"),
-        OptionSpec::Bool("grow", false, "grow the data window by the kernel radius"),
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps" },
@@ -106,9 +111,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon: 0 straight blades .. 1 circle"),
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk/polygon: catadioptric hole (radius fraction)"),
     };
-    const OptionSpec iris = OptionSpec::Float(
-        "iris", 0.0, -1000.0, 1000.0, "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)");
-    c.options.push_back(iris);
+    c.options.insert(c.options.end(), shared.begin(), shared.end());
     r.add(c);
 
     bokeh::Command conv = bokeh::make_command(
@@ -117,7 +120,6 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         "allowed; normalised per channel; by FFT)",
         convolve_command);
     conv.needs_scene_linear = true;
-    // The options blur_options() reads, shared by both commands.
-    conv.options = { c.options[2], c.options[3], iris };
+    conv.options            = shared;
     r.add(conv);
 }
