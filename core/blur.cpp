@@ -125,16 +125,7 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
     const size_t pstride = size_t(in.w + 1) * size_t(nc);
     // Every entry is written below: no need to zero 8 bytes x 4 channels x the plane.
     std::unique_ptr<double[]> prefix(new double[size_t(in.h) * pstride]);
-    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int64_t y = y0; y < y1; ++y) {
-            double* p       = prefix.get() + size_t(y) * pstride;
-            const float* v  = in.row(int(y));
-            for (int c = 0; c < nc; ++c)
-                p[c] = 0.0;
-            for (size_t i = 0, n = size_t(in.w) * size_t(nc); i < n; ++i)
-                p[i + size_t(nc)] = p[i] + v[i];
-        }
-    });
+    row_prefix_sums(in, prefix.get(), nthreads);
 
     accumulate_in_strips(out, nthreads, [&](int y, size_t i0, std::vector<double>& acc) {
         for (const Span& s : spans) {
@@ -258,6 +249,20 @@ double box_width_for_variance(double variance)
 }  // namespace
 
 namespace detail {
+
+void row_prefix_sums(const Plane& in, double* prefix, int nthreads)
+{
+    const size_t nc = size_t(in.nc), pstride = size_t(in.w + 1) * nc;
+    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int64_t y = y0; y < y1; ++y) {
+            double* p      = prefix + size_t(y) * pstride;
+            const float* v = in.row(int(y));
+            std::fill_n(p, nc, 0.0);
+            for (size_t i = 0, n = size_t(in.w) * nc; i < n; ++i)
+                p[i + nc] = p[i] + v[i];
+        }
+    });
+}
 
 // The weights point-reflected: out(x) = sum_d w(d) in(x - d) = sum_d w(-d) in(x + d), so a
 // point spreads into the kernel's own shape (this matters for shapes without point

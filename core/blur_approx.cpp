@@ -284,15 +284,7 @@ Plane convolve_banded(const Plane& in, const KernelWeights& kernel, int nthreads
     const size_t sstride = size_t(in.w + 1) * size_t(nc);
     std::unique_ptr<double[]> sat(new double[size_t(in.h + 1) * sstride]);
     std::fill_n(sat.get(), sstride, 0.0);
-    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int64_t y = y0; y < y1; ++y) {
-            double* p      = sat.get() + size_t(y + 1) * sstride;
-            const float* v = in.row(int(y));
-            std::fill_n(p, nc, 0.0);
-            for (size_t i = 0, n = size_t(in.w) * size_t(nc); i < n; ++i)
-                p[i + size_t(nc)] = p[i] + v[i];
-        }
-    });
+    row_prefix_sums(in, sat.get() + sstride, nthreads);
     // Down the columns, in strips so each task owns its columns.
     constexpr size_t kStrip = 512;
     parallel_for_chunks(0, int64_t((sstride + kStrip - 1) / kStrip), 1, nthreads, [&](int64_t s, int64_t) {

@@ -68,6 +68,10 @@ void add_scaled(double* acc, const float* src, double w, size_t n);
 /// out[i] = float(acc[i]).
 void to_float(float* out, const double* acc, size_t n);
 
+/// Row prefix sums in double: prefix[y][(x + 1) nc + c] = sum of in[y][0..x] in channel c,
+/// and prefix[y][c] = 0; rows of (in.w + 1) * nc values (blur.cpp).
+void row_prefix_sums(const Plane& in, double* prefix, int nthreads);
+
 /// The weights point-reflected, so that out(x) = sum_d w(d) in(x - d) (blur.cpp).
 KernelWeights reflected(const KernelWeights& k);
 
