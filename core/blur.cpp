@@ -112,32 +112,6 @@ Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads)
     return out;
 }
 
-// --- row spans ---------------------------------------------------------------------
-
-Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
-{
-    const int nc = in.nc;
-    Plane out(in.w - 2 * kernel.rx, in.h - 2 * kernel.ry, nc);
-    const KernelWeights k         = reflected(kernel);
-    const std::vector<Span> spans = kernel_spans(k);
-
-    // Row prefix sums: P[y][(x + 1) nc + c] = sum of in[y][0..x] in channel c.
-    const size_t pstride = size_t(in.w + 1) * size_t(nc);
-    // Every entry is written below: no need to zero 8 bytes x 4 channels x the plane.
-    std::unique_ptr<double[]> prefix(new double[size_t(in.h) * pstride]);
-    row_prefix_sums(in, prefix.get(), nthreads);
-
-    accumulate_in_strips(out, nthreads, [&](int y, size_t i0, std::vector<double>& acc) {
-        for (const Span& s : spans) {
-            const double* p  = prefix.get() + size_t(y + k.ry + s.dy) * pstride + i0;
-            const double* hi = p + size_t(k.rx + s.x1 + 1) * size_t(nc);
-            const double* lo = p + size_t(k.rx + s.x0) * size_t(nc);
-            add_span(acc.data(), hi, lo, s.weight, acc.size());
-        }
-    });
-    return out;
-}
-
 // --- separable passes --------------------------------------------------------------
 
 // Horizontal then vertical direct convolution with 1-D weights (Gaussian).
@@ -301,6 +275,32 @@ std::vector<Span> kernel_spans(const KernelWeights& k)
         }
     }
     return spans;
+}
+
+// --- row spans ---------------------------------------------------------------------
+
+Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
+{
+    const int nc = in.nc;
+    Plane out(in.w - 2 * kernel.rx, in.h - 2 * kernel.ry, nc);
+    const KernelWeights k         = reflected(kernel);
+    const std::vector<Span> spans = kernel_spans(k);
+
+    // Row prefix sums: P[y][(x + 1) nc + c] = sum of in[y][0..x] in channel c.
+    const size_t pstride = size_t(in.w + 1) * size_t(nc);
+    // Every entry is written below: no need to zero 8 bytes x 4 channels x the plane.
+    std::unique_ptr<double[]> prefix(new double[size_t(in.h) * pstride]);
+    row_prefix_sums(in, prefix.get(), nthreads);
+
+    accumulate_in_strips(out, nthreads, [&](int y, size_t i0, std::vector<double>& acc) {
+        for (const Span& s : spans) {
+            const double* p  = prefix.get() + size_t(y + k.ry + s.dy) * pstride + i0;
+            const double* hi = p + size_t(k.rx + s.x1 + 1) * size_t(nc);
+            const double* lo = p + size_t(k.rx + s.x0) * size_t(nc);
+            add_span(acc.data(), hi, lo, s.weight, acc.size());
+        }
+    });
+    return out;
 }
 
 }  // namespace detail

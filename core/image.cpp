@@ -80,11 +80,16 @@ bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, int nthreads, std:
     const bool premultiply = dst.has_alpha && !is_premultiplied(spec);
     const int g = ch.g >= 0 ? ch.g : ch.r, b = ch.b >= 0 ? ch.b : ch.r;
 
+    const size_t nc = size_t(spec.nchannels);
     parallel_rows(dst.roi, nthreads, [&](int y0, int y1) {
-        std::vector<float> px(size_t(spec.nchannels));
-        for (int y = y0; y < y1; ++y)
+        // A row at a time in float, whatever the stored type.
+        std::vector<float> row(size_t(dst.width()) * nc);
+        for (int y = y0; y < y1; ++y) {
+            src.get_pixels(OIIO::ROI(dst.roi.xbegin, dst.roi.xend, y, y + 1, dst.roi.zbegin,
+                                     dst.roi.zbegin + 1, 0, spec.nchannels),
+                           OIIO::TypeFloat, row.data());
             for (int x = dst.roi.xbegin; x < dst.roi.xend; ++x) {
-                src.getpixel(x, y, 0, px.data(), spec.nchannels);
+                const float* px = row.data() + size_t(x - dst.roi.xbegin) * nc;
                 float* o    = dst.rgba_at(x, y);
                 const float a = ch.a >= 0 ? px[size_t(ch.a)] : 1.0f;
                 const float k = premultiply ? a : 1.0f;
@@ -95,6 +100,7 @@ bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, int nthreads, std:
                 if (ch.z >= 0)
                     dst.z[dst.index(x, y)] = px[size_t(ch.z)];
             }
+        }
     });
     return true;
 }

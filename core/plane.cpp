@@ -12,11 +12,6 @@
 
 namespace bokeh::detail {
 
-namespace {
-
-constexpr int kOutside = std::numeric_limits<int>::min();
-
-// Index of coordinate i in [begin, end) under the border rule; kOutside = black.
 int border_index(int i, int begin, int end, Border b)
 {
     if (i >= begin && i < end)
@@ -35,6 +30,8 @@ int border_index(int i, int begin, int end, Border b)
     }
     return kOutside;
 }
+
+namespace {
 
 // p = f(p, channel) on every channel but `skip`.
 template<class F> void map_channels(Plane& p, int skip, int nthreads, F f)

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -44,6 +45,10 @@ struct Plane {
     float* row(int y) { return px.get() + size_t(y) * stride(); }
     const float* row(int y) const { return px.get() + size_t(y) * stride(); }
 };
+
+/// Index of coordinate i in [begin, end) under the border rule; kOutside = black.
+constexpr int kOutside = std::numeric_limits<int>::min();
+int border_index(int i, int begin, int end, Border b);
 
 /// The source over `region`, border-filled. `src` is float with local pixels.
 Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads);
@@ -82,6 +87,8 @@ struct Span {
 };
 /// Skyline decomposition of each kernel row into stacked horizontal bars (blur.cpp).
 std::vector<Span> kernel_spans(const KernelWeights& k);
+/// Exact "valid" convolution by row spans: the output is `in` less (rx, ry) on each side.
+Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads);
 
 /// Approximations (blur_approx.cpp). Planes are the padded input's size.
 Plane hexagon_parallelograms(const Plane& in, const Kernel& k, int nthreads);

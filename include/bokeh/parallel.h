@@ -37,6 +37,13 @@ void parallel_for_chunks(int64_t begin, int64_t end, int64_t chunk, int nthreads
     if (chunk < 1)
         chunk = 1;
     const int64_t nchunks = (end - begin + chunk - 1) / chunk;
+    if (nthreads == 1) {
+        // One thread: the same chunks in order, without an arena (work already running
+        // inside a parallel loop, per tile, calls in here this way).
+        for (int64_t c = 0; c < nchunks; ++c)
+            fn(begin + c * chunk, std::min(end, begin + (c + 1) * chunk));
+        return;
+    }
     run_in_arena(nthreads, [&] {
         tbb::parallel_for(int64_t(0), nchunks, [&](int64_t c) {
             const int64_t b = begin + c * chunk;

@@ -6,11 +6,16 @@
 // on the whole frame would take minutes for large kernels). Error: RMSE in linear light
 // and PSNR after the fixed tone map x / (1 + x) per channel (peak 1), stated in the CSV.
 //
-//   bokeh-bench [--threads N] [--reps N] [--csv FILE] [--quick]
+// --task defocus runs the depth-defocus task instead (defocus_task.cpp).
+//
+//   bokeh-bench [--task blur|defocus] [--threads N] [--reps N] [--csv FILE] [--quick]
+//               [--size WxH] [--data DIR]
 
+#include "defocus_task.h"
 #include "gegl_peer.h"
 
 #include <bokeh/blur.h>
+#include <bokeh/metrics.h>
 #include <bokeh/scene.h>
 
 #include <algorithm>
@@ -52,23 +57,6 @@ double median_seconds(const std::function<void()>& fn, int reps)
     return t[t.size() / 2];
 }
 
-// RMSE (linear) and PSNR of x/(1+x) tone-mapped values.
-std::pair<double, double> errors(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b)
-{
-    double se = 0.0, se_tm = 0.0;
-    size_t n = 0;
-    OIIO::ImageBuf::ConstIterator<float> ia(a), ib(b);
-    for (; !ia.done() && !ib.done(); ++ia, ++ib)
-        for (int c = 0; c < a.nchannels(); ++c, ++n) {
-            const double x = ia[c], y = ib[c];
-            se += (x - y) * (x - y);
-            const double tx = x / (1.0 + std::abs(x)), ty = y / (1.0 + std::abs(y));
-            se_tm += (tx - ty) * (tx - ty);
-        }
-    const double rmse = std::sqrt(se / double(n)), mse_tm = se_tm / double(n);
-    return { rmse, mse_tm > 0 ? 10.0 * std::log10(1.0 / mse_tm) : 999.0 };
-}
-
 bokeh::Kernel kernel(bokeh::KernelShape s, double size, int blades = 6)
 {
     bokeh::Kernel k;
@@ -79,17 +67,42 @@ bokeh::Kernel kernel(bokeh::KernelShape s, double size, int blades = 6)
     return k;
 }
 
+// Write the rows to `path` (none when empty); the exit status.
+int write_csv(const std::string& path, const std::vector<std::string>& rows)
+{
+    if (path.empty())
+        return 0;
+    std::ofstream f(path);
+    for (const std::string& r : rows)
+        f << r << "\n";
+    if (!f) {
+        std::fprintf(stderr, "bokeh-bench: cannot write %s\n", path.c_str());
+        return 1;
+    }
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char* argv[])
 {
     int threads = 2, reps = 5;
     bool quick  = false;
-    std::string csv;
+    std::string csv, task = "blur";
+    bokeh_bench::BenchArgs args;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         if (a == "--threads" && i + 1 < argc)
             threads = std::atoi(argv[++i]);
+        else if (a == "--task" && i + 1 < argc && (std::string(argv[i + 1]) == "blur"
+                                                   || std::string(argv[i + 1]) == "defocus"))
+            task = argv[++i];
+        else if (a == "--size" && i + 1 < argc
+                 && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
+                 && args.height > 0)
+            ++i;
+        else if (a == "--data" && i + 1 < argc)
+            args.data_dir = argv[++i];
         else if (a == "--reps" && i + 1 < argc)
             reps = std::max(1, std::atoi(argv[++i]));
         else if (a == "--csv" && i + 1 < argc)
@@ -98,10 +111,21 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--threads N] [--reps N] [--csv FILE] [--quick]\n",
+                                 "usage: bokeh-bench [--task blur|defocus] [--threads N] [--reps N] "
+                                 "[--csv FILE] [--quick] [--size WxH] [--data DIR]\n",
                          a.c_str());
             return 1;
         }
+    }
+
+    std::vector<std::string> rows;
+    rows.push_back("task,method,peer,size_px,threads,median_ms,reps,rmse_linear,psnr_db_tonemapped");
+    if (task == "defocus") {
+        args.threads = threads;
+        args.reps    = reps;
+        if (!bokeh_bench::run_defocus_task(args, rows))
+            return 1;
+        return write_csv(csv, rows);
     }
 
     bokeh::SceneOptions so;
@@ -160,8 +184,6 @@ int main(int argc, char* argv[])
         std::printf("(GEGL not built in: the gegl:lens-blur peer is left out)\n");
     }
 
-    std::vector<std::string> rows;
-    rows.push_back("task,method,peer,size_px,threads,median_ms,reps,rmse_linear,psnr_db_tonemapped");
     std::printf("%-9s %-32s %6s %10s %12s %10s\n", "task", "method", "size", "median ms",
                 "RMSE", "PSNR dB");
     for (const Case& c : cases) {
@@ -211,21 +233,15 @@ int main(int argc, char* argv[])
         }
         OIIO::ImageBuf ref;
         bokeh::convolve_reference(ref, small, bokeh::kernel_weights(c.kernel), {}, {}, threads);
-        const auto [rmse, psnr] = errors(result_small, ref);
+        bokeh::ImageError e;
+        std::string err;
+        bokeh::compare(e, result_small, ref, err, {}, threads);
+        const double rmse = e.rmse_linear, psnr = e.psnr_db;
         std::printf("%-9s %-32s %6.0f %10.2f %12.3g %10.1f\n", c.task.c_str(), c.method.c_str(),
                     c.size, ms, rmse, psnr);
         std::fflush(stdout);
         rows.push_back(format("{},{},{},{},{},{:.3f},{},{:.6g},{:.2f}", c.task, c.method, c.peer,
                               c.size, threads, ms, n, rmse, psnr));
     }
-    if (!csv.empty()) {
-        std::ofstream f(csv);
-        for (const std::string& r : rows)
-            f << r << "\n";
-        if (!f) {
-            std::fprintf(stderr, "bokeh-bench: cannot write %s\n", csv.c_str());
-            return 1;
-        }
-    }
-    return 0;
+    return write_csv(csv, rows);
 }

@@ -1,0 +1,877 @@
+// defocus.cpp — depth defocus of a flat RGBA + Z image: layered scatter with occlusion,
+// its exact reference, and the seed 001 gather.
+//
+// The layer model (ours; the idea of layers composited back to front is ZDefocus's and
+// SEEDS.md section 11's). Pixels are sorted into layers by signed CoC (front to back).
+// Layer k, with CoC c_k, is the blur by the aperture of diameter |c_k| of
+//     numerator  [R, G, B, A] * w_k(p)               (p's share in the layer)
+//     visibility 1 - A(p) * nearer_k(p)             (p's share in nearer layers, hiding k)
+// and its colour and coverage are numerator / visibility. Dividing by the blurred
+// visibility, not by the kernel's area, leaves out the pixels where a nearer layer hides
+// this one: behind a sharp foreground the background keeps full coverage (its hidden part
+// is taken as its visible surroundings), so no dark rim appears around in-focus objects,
+// while a blurred foreground thins out softly over what is behind it. Layers are
+// composited with "over", back to front, so an in-focus object never bleeds into the
+// background's bokeh: they are in different layers.
+//
+// * Reference: every distinct CoC (quantised to reference_step_px) is its own layer, at
+//   full resolution, with the exact anti-aliased kernel. Exact for the model; slow.
+// * Layers: CoCs on a geometric ladder (0, +-1, +-r, +-r^2, ...); a pixel between two rungs
+//   is shared between them with weights that keep its kernel's second moment (so the mixed
+//   kernel has the spread of the true one). A layer whose CoC allows it is built in a
+//   buffer reduced by 2..16 (area-exact box), blurred there with the exact kernel, and
+//   enlarged bilinearly as it is composited (SEEDS.md sections 4 and 11: large bokeh lose
+//   nothing at low resolution). Cost: one pass over each layer's region, with kernels of at
+//   most 2 q px (q = min_reduced_coc_px) unless at full resolution.
+// * Gather (SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
+//   few representative CoCs (4 behind focus, 3 in front; large ones in 1/2 and 1/4
+//   buffers), per-pixel smoothstep blend between the two levels around its CoC, a back-
+//   bokeh mask taken from the previous level, and a front-edge blur inside a widened Sobel
+//   mask. Known and kept limits: in-focus colour bleeds into the first back level, front
+//   silhouettes stay partly hard, nothing spreads past the data window.
+//
+// Known limits of the model: a flat image holds no background behind its foreground, so
+// the hidden background is extrapolated from its visible neighbours (deep images remove
+// this: deep.h); alpha is taken as coverage, so a semi-transparent pixel lets the layers
+// behind it through.
+
+#include <bokeh/defocus.h>
+#include <bokeh/parallel.h>
+
+#include "plane.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using namespace detail;
+
+namespace {
+
+using OIIO::Strutil::fmt::format;
+
+// --- the image being defocused ------------------------------------------------------
+
+struct Frame {
+    WorkImage img;           // premultiplied RGBA over the data window
+    std::vector<float> coc;  // signed CoC per pixel of the data window
+    OIIO::ROI data, out;     // the data window; the output region
+    Border border = Border::Clamp;
+
+    // Index of the data-window pixel that stands for (x, y) by the border rule; -1 when
+    // it is outside and empty.
+    int64_t source(int x, int y) const
+    {
+        const int sx = border_index(x, data.xbegin, data.xend, border);
+        const int sy = border_index(y, data.ybegin, data.yend, border);
+        if (sx == kOutside || sy == kOutside)
+            return -1;
+        return int64_t(img.index(sx, sy));
+    }
+};
+
+// Each pixel's place among the layers: its share 1 - upper in layer `lower` and `upper` in
+// layer lower + 1.
+struct Membership {
+    std::vector<float> coc_px;     // the layers' CoCs, ascending (front to back)
+    std::vector<int> reduction;    // each layer's buffer reduction
+    std::vector<uint16_t> lower;   // per data-window pixel
+    std::vector<float> upper;
+};
+
+// The mean over s x s full-resolution pixels of `fetch(x, y, v)` (which adds nc values
+// into v), for the reduced pixels of `low`: reduced pixel (i, j) covers full resolution
+// [gx + i s, gx + (i + 1) s) x [gy + j s, ...).
+template<class Fetch>
+Plane reduce_region(const OIIO::ROI& low, int gx, int gy, int s, int nc, int nthreads, Fetch fetch)
+{
+    Plane p(low.width(), low.height(), nc);
+    const float inv = 1.0f / float(s * s);
+    parallel_for_chunks(0, p.h, 4, nthreads, [&](int64_t j0, int64_t j1) {
+        std::vector<float> v(static_cast<size_t>(nc));
+        for (int j = int(j0); j < int(j1); ++j) {
+            float* row = p.row(j);
+            for (int i = 0; i < p.w; ++i) {
+                std::fill(v.begin(), v.end(), 0.0f);
+                const int x0 = gx + (low.xbegin + i) * s, y0 = gy + (low.ybegin + j) * s;
+                for (int y = y0; y < y0 + s; ++y)
+                    for (int x = x0; x < x0 + s; ++x)
+                        fetch(x, y, v.data());
+                for (int c = 0; c < nc; ++c)
+                    row[size_t(i) * size_t(nc) + size_t(c)] = s == 1 ? v[size_t(c)] : v[size_t(c)] * inv;
+            }
+        }
+    });
+    return p;
+}
+
+// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
+// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
+inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
+                   float out[4])
+{
+    const float u  = (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin);
+    const float v  = (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin);
+    const float fu = std::floor(u), fv = std::floor(v);
+    const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
+    const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
+    const float tx = u - fu, ty = v - fv;
+    const size_t nc = size_t(p.nc);
+    const float *a = p.row(j0) + size_t(i0) * nc, *b = p.row(j0) + size_t(i1) * nc;
+    const float *c = p.row(j1) + size_t(i0) * nc, *d = p.row(j1) + size_t(i1) * nc;
+    if (tx == 0.0f && ty == 0.0f) {
+        std::copy_n(a, 4, out);
+        return;
+    }
+    for (int k = 0; k < 4; ++k) {
+        const float top = a[k] + (b[k] - a[k]) * tx, bottom = c[k] + (d[k] - c[k]) * tx;
+        out[k]          = top + (bottom - top) * ty;
+    }
+}
+
+// The aperture at diameter |coc_px| / s (and the aspect), as exact weights. In front of
+// focus the rays reach the sensor before they cross, behind it after: the two bokeh are
+// the aperture and its point reflection, which shows with an odd number of blades.
+KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s)
+{
+    Kernel k = o.aperture;
+    if (coc_px < 0.0f)
+        k.rotation_deg += 180.0f;
+    k.width_px  = std::abs(coc_px) / float(s);
+    k.height_px = std::abs(coc_px) * o.aspect / float(s);
+    return kernel_weights(k);
+}
+
+// Full-resolution reach of a CoC: half the kernel, rounded up, plus one for bilinear reads.
+int reach_x(float coc_px) { return int(std::ceil(0.5f * std::abs(coc_px))) + 1; }
+int reach_y(float coc_px, float aspect) { return int(std::ceil(0.5f * std::abs(coc_px) * aspect)) + 1; }
+
+// Floor division for the reduced grid.
+int floor_div(int a, int s) { return a >= 0 ? a / s : -((-a + s - 1) / s); }
+
+// --- layers --------------------------------------------------------------------------
+
+// Layers are computed in tiles of kTile x kTile reduced pixels, only where the layer has
+// pixels within reach: sparse layers (a few lights, a thin band of floor) cost what they
+// hold, not their bounding box. Tiles are independent, so they run in parallel.
+constexpr int kTile = 64;
+
+// Which tiles of each layer's grid (tile size kTile * reduction, from the output's
+// origin) must be computed: those holding a share of the layer, those the border rule
+// repeats them into, and their neighbours within the kernel's reach.
+std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& m,
+                                              const DefocusOptions& o, std::vector<int>& cols)
+{
+    const size_t K = m.coc_px.size();
+    std::vector<std::vector<uint8_t>> tiles(K);
+    std::vector<int> rows(K), size(K);
+    cols.assign(K, 0);
+    for (size_t k = 0; k < K; ++k) {
+        size[k] = kTile * m.reduction[k];
+        cols[k] = (f.out.width() + size[k] - 1) / size[k];
+        rows[k] = (f.out.height() + size[k] - 1) / size[k];
+        tiles[k].assign(size_t(cols[k]) * size_t(rows[k]), 0);
+    }
+    auto mark = [&](size_t k, int x0, int x1, int y) {  // pixels [x0, x1] of row y
+        const int t = size[k], ty = (y - f.out.ybegin) / t;
+        for (int tx = (x0 - f.out.xbegin) / t; tx <= (x1 - f.out.xbegin) / t; ++tx)
+            tiles[k][size_t(ty) * size_t(cols[k]) + size_t(tx)] = 1;
+    };
+    for (int y = f.data.ybegin; y < f.data.yend; ++y) {
+        int x = f.data.xbegin;
+        while (x < f.data.xend) {  // runs of equal membership
+            const size_t i  = f.img.index(x, y);
+            const int lo    = m.lower[i];
+            const float up  = m.upper[i];
+            int e           = x + 1;
+            while (e < f.data.xend && m.lower[i + size_t(e - x)] == lo
+                   && (m.upper[i + size_t(e - x)] > 0.0f) == (up > 0.0f)
+                   && (m.upper[i + size_t(e - x)] < 1.0f) == (up < 1.0f))
+                ++e;
+            if (up < 1.0f)
+                mark(size_t(lo), x, e - 1, y);
+            if (up > 0.0f)
+                mark(size_t(lo) + 1, x, e - 1, y);
+            x = e;
+        }
+    }
+    for (size_t k = 0; k < K; ++k) {
+        const int t = size[k], nx = cols[k], ny = rows[k];
+        std::vector<uint8_t> held = tiles[k];
+        // Tiles touching a data-window edge repeat past it (clamp, mirror) to the output's edge.
+        auto tile_of_x = [&](int x) { return std::clamp((x - f.out.xbegin) / t, 0, nx - 1); };
+        auto tile_of_y = [&](int y) { return std::clamp((y - f.out.ybegin) / t, 0, ny - 1); };
+        if (o.border != Border::Black) {
+            const int ex0 = tile_of_x(f.data.xbegin), ex1 = tile_of_x(f.data.xend - 1);
+            const int ey0 = tile_of_y(f.data.ybegin), ey1 = tile_of_y(f.data.yend - 1);
+            const std::vector<uint8_t> inside = held;
+            for (int ty = 0; ty < ny; ++ty)
+                for (int tx = 0; tx < nx; ++tx) {
+                    if (!inside[size_t(ty) * size_t(nx) + size_t(tx)])
+                        continue;
+                    const int x0 = tx == ex0 ? 0 : tx, x1 = tx == ex1 ? nx - 1 : tx;
+                    const int y0 = ty == ey0 ? 0 : ty, y1 = ty == ey1 ? ny - 1 : ty;
+                    for (int j = y0; j <= y1; ++j)
+                        for (int i2 = x0; i2 <= x1; ++i2)
+                            held[size_t(j) * size_t(nx) + size_t(i2)] = 1;
+                }
+        }
+        // Neighbours within reach of a held tile.
+        const float c = m.coc_px[k];
+        const int rx = (reach_x(c) + t - 1) / t, ry = (reach_y(c, o.aspect) + t - 1) / t;
+        for (int ty = 0; ty < ny; ++ty)
+            for (int tx = 0; tx < nx; ++tx) {
+                uint8_t any = 0;
+                for (int j = std::max(0, ty - ry); j <= std::min(ny - 1, ty + ry) && !any; ++j)
+                    for (int i2 = std::max(0, tx - rx); i2 <= std::min(nx - 1, tx + rx); ++i2)
+                        if (held[size_t(j) * size_t(nx) + size_t(i2)]) {
+                            any = 1;
+                            break;
+                        }
+                tiles[k][size_t(ty) * size_t(nx) + size_t(tx)] = any;
+            }
+    }
+    return tiles;
+}
+
+// Layer k's input over reduced pixels `low` (grid origin gx, gy; reduction s): the mean
+// of [R, G, B, A] * share and the visibility 1 - A * nearer over each s x s block.
+Plane layer_input(const Frame& f, const Membership& m, int k, const OIIO::ROI& low, int gx,
+                  int gy, int s)
+{
+    Plane p(low.width(), low.height(), 5);
+    std::fill_n(p.px.get(), p.size(), 0.0f);
+    // Source column of every full-resolution column the block reads (kOutside: empty).
+    const int x_first = gx + low.xbegin * s;
+    std::vector<int> sx(size_t(low.width()) * size_t(s));
+    for (size_t i = 0; i < sx.size(); ++i)
+        sx[i] = border_index(x_first + int(i), f.data.xbegin, f.data.xend, f.border);
+    const float inv = 1.0f / float(s * s);
+    for (int j = 0; j < p.h; ++j) {
+        float* row = p.row(j);
+        for (int y = gy + (low.ybegin + j) * s; y < gy + (low.ybegin + j + 1) * s; ++y) {
+            const int sy = border_index(y, f.data.ybegin, f.data.yend, f.border);
+            for (size_t i = 0; i < sx.size(); ++i) {
+                float* v = row + (i / size_t(s)) * 5;
+                if (sy == kOutside || sx[i] == kOutside) {
+                    v[4] += 1.0f;  // empty: seen through, hides nothing
+                    continue;
+                }
+                const size_t at    = f.img.index(sx[i], sy);
+                const int lo       = m.lower[at];
+                const float up     = m.upper[at];
+                const float share  = lo == k ? 1.0f - up : lo + 1 == k ? up : 0.0f;
+                const float nearer = lo + 1 < k ? 1.0f : lo + 1 == k ? 1.0f - up : 0.0f;
+                const float* px    = f.img.rgba.data() + at * 4;
+                if (share > 0.0f)
+                    for (int c = 0; c < 4; ++c)
+                        v[c] += px[c] * share;
+                v[4] += 1.0f - px[3] * nearer;
+            }
+        }
+        if (s > 1)
+            for (int i = 0; i < p.w * 5; ++i)
+                row[i] *= inv;
+    }
+    return p;
+}
+
+// Colour and coverage over visibility, in place (5-channel planes).
+void divide_by_visibility(Plane& p)
+{
+    for (int j = 0; j < p.h; ++j) {
+        float* px = p.row(j);
+        for (int i = 0; i < p.w; ++i, px += 5) {
+            const float inv = px[4] > 1e-6f ? 1.0f / px[4] : 0.0f;
+            for (int c = 0; c < 4; ++c)
+                px[c] *= inv;
+        }
+    }
+}
+
+// Composite every layer of `m`, back to front, into `out` (RGBA over f.out).
+void composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
+                      int nthreads)
+{
+    std::vector<int> cols;
+    const std::vector<std::vector<uint8_t>> tiles = layer_tiles(f, m, o, cols);
+    const int gx = f.out.xbegin, gy = f.out.ybegin;
+    for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
+        const float c = m.coc_px[size_t(k)];
+        const int s   = m.reduction[size_t(k)], t = kTile * s;
+        const KernelWeights w = aperture_weights(o, c, s);
+        std::vector<int> todo;
+        for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
+            if (tiles[size_t(k)][i])
+                todo.push_back(int(i));
+        parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
+            const int tx = todo[size_t(n)] % cols[size_t(k)], ty = todo[size_t(n)] / cols[size_t(k)];
+            const OIIO::ROI region = OIIO::roi_intersection(
+                OIIO::ROI(gx + tx * t, gx + (tx + 1) * t, gy + ty * t, gy + (ty + 1) * t), f.out);
+            // The tile's reduced pixels, one more each side for bilinear reads.
+            const OIIO::ROI low(tx * kTile - 1, floor_div(region.xend - 1 - gx, s) + 2,
+                                ty * kTile - 1, floor_div(region.yend - 1 - gy, s) + 2);
+            Plane p     = layer_input(f, m, k, grown(low, w.rx, w.ry), gx, gy, s);
+            Plane layer = w.is_identity() ? std::move(p) : convolve_spans(p, w, 1);
+            divide_by_visibility(layer);
+            for (int y = region.ybegin; y < region.yend; ++y) {
+                float* dst = out.row(y - gy) + size_t(region.xbegin - gx) * 4;
+                for (int x = region.xbegin; x < region.xend; ++x, dst += 4) {
+                    float l[4];
+                    sample(layer, low, gx, gy, s, x, y, l);
+                    const float behind = 1.0f - l[3];
+                    for (int c4 = 0; c4 < 4; ++c4)
+                        dst[c4] = l[c4] + behind * dst[c4];
+                }
+            }
+        });
+    }
+}
+
+// The layered method's CoC ladder over [lo, hi]: 0, then +-1, +-r, +-r^2 ... on each side
+// up to the extreme, the last rung moved onto the extreme so it gets its exact kernel.
+std::vector<float> coc_ladder(float lo, float hi, double ratio)
+{
+    std::vector<float> rungs = { 0.0f };
+    for (int side = -1; side <= 1; side += 2) {
+        const float extreme = side < 0 ? -lo : hi;
+        if (extreme <= 0.0f)
+            continue;
+        for (double r = 1.0;; r *= ratio) {
+            if (r >= extreme * 0.999) {
+                rungs.push_back(float(side) * extreme);
+                break;
+            }
+            rungs.push_back(float(side * r));
+        }
+    }
+    std::sort(rungs.begin(), rungs.end());
+    return rungs;
+}
+
+// Shares of every pixel in the ladder `rungs`: a CoC between two rungs goes to both with
+// weights that keep the second moment (c^2 = (1 - u) c_lo^2 + u c_hi^2), since a disk's
+// spread is proportional to its diameter.
+Membership share_between_rungs(const Frame& f, std::vector<float> rungs, int nthreads)
+{
+    Membership m;
+    m.coc_px = std::move(rungs);
+    m.lower.resize(f.coc.size());
+    m.upper.resize(f.coc.size());
+    const std::vector<float>& r = m.coc_px;
+    parallel_for_chunks(0, int64_t(f.coc.size()), 4096, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i) {
+            const float c = std::clamp(f.coc[size_t(i)], r.front(), r.back());
+            size_t j      = size_t(std::upper_bound(r.begin(), r.end(), c) - r.begin());
+            j             = j == 0 ? 0 : std::min(j - 1, r.size() - 1);
+            float u       = 0.0f;
+            if (j + 1 < r.size()) {
+                const double a2 = double(r[j]) * r[j], b2 = double(r[j + 1]) * r[j + 1];
+                u = float(std::clamp((double(c) * c - a2) / (b2 - a2), 0.0, 1.0));
+            }
+            m.lower[size_t(i)] = uint16_t(j);
+            m.upper[size_t(i)] = u;
+        }
+    });
+    return m;
+}
+
+// The reference's layers: one per distinct CoC after quantising to `step`.
+Membership one_layer_per_coc(const Frame& f, float step, int nthreads)
+{
+    Membership m;
+    std::vector<float> q(f.coc.size());
+    parallel_for_chunks(0, int64_t(q.size()), 4096, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i)
+            q[size_t(i)] = std::round(f.coc[size_t(i)] / step) * step;
+    });
+    m.coc_px = q;
+    std::sort(m.coc_px.begin(), m.coc_px.end());
+    m.coc_px.erase(std::unique(m.coc_px.begin(), m.coc_px.end()), m.coc_px.end());
+    m.reduction.assign(m.coc_px.size(), 1);
+    m.lower.resize(q.size());
+    m.upper.assign(q.size(), 0.0f);
+    parallel_for_chunks(0, int64_t(q.size()), 4096, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i)
+            m.lower[size_t(i)] = uint16_t(std::lower_bound(m.coc_px.begin(), m.coc_px.end(), q[size_t(i)])
+                                          - m.coc_px.begin());
+    });
+    return m;
+}
+
+// Layer settings an accuracy budget asks for: the ladder's ratio and the smallest reduced
+// kernel diameter. From the defocus chart (docs/benchmarks.md): finer settings than these
+// buy dB the budget does not ask for.
+struct LayerSettings {
+    double ratio;
+    float min_reduced_coc_px;
+};
+LayerSettings settings_for_budget(float budget_db)
+{
+    if (budget_db <= 30.0f) return { 2.0, 4.0f };
+    if (budget_db <= 40.0f) return { 1.5, 8.0f };
+    if (budget_db <= 50.0f) return { 1.25, 16.0f };
+    return { 1.125, 32.0f };
+}
+
+// The reduction for a layer of CoC c: the largest power of two s <= max_reduction that
+// leaves a kernel of at least q reduced pixels.
+int reduction_for(float c, float q, int max_reduction)
+{
+    int s = 1;
+    while (s * 2 <= max_reduction && std::abs(c) / float(s * 2) >= q)
+        s *= 2;
+    return s;
+}
+
+Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads)
+{
+    const LayerSettings set = settings_for_budget(o.budget_db);
+    double ratio            = set.ratio;
+    if (o.layers > 0) {
+        // The ratio that puts o.layers rungs (0 and both sides) over the range.
+        const double span = std::log(std::max(1.0f, -lo)) + std::log(std::max(1.0f, hi));
+        const int sides   = (lo < -1.0f ? 1 : 0) + (hi > 1.0f ? 1 : 0);
+        const int steps   = std::max(1, o.layers - 1 - sides);
+        ratio             = span > 0.0 ? std::exp(span / steps) : 2.0;
+        ratio             = std::max(ratio, 1.01);
+    }
+    Membership m = share_between_rungs(f, coc_ladder(lo, hi, ratio), nthreads);
+    const float q = o.min_reduced_coc_px > 0.0f ? o.min_reduced_coc_px : set.min_reduced_coc_px;
+    for (float c : m.coc_px)
+        m.reduction.push_back(reduction_for(c, q, o.max_reduction));
+    return m;
+}
+
+// --- gather (seed 001) ---------------------------------------------------------------
+
+float smoothstep(float t)
+{
+    t = std::clamp(t, 0.0f, 1.0f);
+    return t * t * (3.0f - 2.0f * t);
+}
+
+// A blurred level: RGBA of the pixels `mask` accepts, blurred with CoC `c` at reduction
+// s and normalised by the blurred mask (SEEDS.md section 2: masked texels are dropped from
+// the weight), over the output region.
+struct Level {
+    float coc_px = 0.0f;
+    int s        = 1;
+    OIIO::ROI low;
+    Plane p;
+};
+
+template<class Mask>
+Level blurred_level(const Frame& f, const DefocusOptions& o, float c, Mask mask, int nthreads)
+{
+    Level l;
+    l.coc_px = c;
+    l.s      = std::abs(c) >= 32.0f ? 4 : std::abs(c) >= 16.0f ? 2 : 1;  // "1/2 down to 1/4"
+    const KernelWeights w = aperture_weights(o, c, l.s);
+    const int gx = f.out.xbegin, gy = f.out.ybegin, s = l.s;
+    l.low = OIIO::ROI(-1, floor_div(f.out.width() - 1, s) + 2, -1, floor_div(f.out.height() - 1, s) + 2);
+    Plane p = reduce_region(grown(l.low, w.rx, w.ry), gx, gy, s, 5, nthreads,
+                            [&](int x, int y, float* v) {
+                                const int64_t i = f.source(x, y);
+                                if (i < 0 || !mask(f.coc[size_t(i)]))
+                                    return;
+                                const float* px = f.img.rgba.data() + size_t(i) * 4;
+                                for (int c4 = 0; c4 < 4; ++c4)
+                                    v[c4] += px[c4];
+                                v[4] += 1.0f;
+                            });
+    l.p = w.is_identity() ? std::move(p) : convolve_spans(p, w, nthreads);
+    divide_by_visibility(l.p);  // here: by the blurred mask
+    return l;
+}
+
+// Representative CoCs for n levels up to `extreme` (> 0), geometric from extreme / 2^(n-1).
+std::vector<float> level_cocs(float extreme, int n)
+{
+    std::vector<float> c;
+    for (int i = n - 1; i >= 0; --i)
+        c.push_back(extreme / float(1 << i));
+    return c;
+}
+
+void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads)
+{
+    const int gx = f.out.xbegin, gy = f.out.ybegin;
+    // Level 0 is the sharp image; back levels mask texels in front of the previous level.
+    std::vector<Level> back, front;
+    if (hi > 1.0f) {
+        float previous = 0.0f;
+        for (float c : level_cocs(hi, 4)) {
+            const float keep_from = previous;
+            back.push_back(blurred_level(f, o, c, [keep_from](float t) { return t >= keep_from; }, nthreads));
+            previous = c;
+        }
+    }
+    if (lo < -1.0f)
+        for (float c : level_cocs(-lo, 3))
+            front.push_back(blurred_level(f, o, -c, [](float) { return true; }, nthreads));
+
+    auto read_level = [&](const Level& l, int x, int y, float v[4]) {
+        float tmp[5];
+        sample(l.p, l.low, gx, gy, l.s, x, y, tmp);
+        std::copy_n(tmp, 4, v);
+    };
+    // The CoC standing for output pixel (x, y); 0 where the border leaves it empty.
+    auto coc_at = [&](int x, int y) {
+        const int64_t i = f.source(x, y);
+        return i < 0 ? 0.0f : f.coc[size_t(i)];
+    };
+    auto blend = [&](int x, int y, float c, float v[4]) {
+        const std::vector<Level>& levels = c >= 0.0f ? back : front;
+        const float a = std::abs(c);
+        // Between level j (CoC cj, level -1 = sharp) and j + 1.
+        float c_lo    = 0.0f;
+        float lo_v[4] = { 0, 0, 0, 0 };
+        const int64_t i = f.source(x, y);
+        if (i >= 0)
+            std::copy_n(f.img.rgba.data() + size_t(i) * 4, 4, lo_v);
+        for (const Level& l : levels) {
+            const float cl = std::abs(l.coc_px);
+            float hi_v[4];
+            read_level(l, x, y, hi_v);
+            if (a <= cl) {
+                const float t = smoothstep((a - c_lo) / (cl - c_lo));
+                for (int k = 0; k < 4; ++k)
+                    v[k] = lo_v[k] + (hi_v[k] - lo_v[k]) * t;
+                return;
+            }
+            c_lo = cl;
+            std::copy_n(hi_v, 4, lo_v);
+        }
+        std::copy_n(lo_v, 4, v);
+    };
+    parallel_for_chunks(f.out.ybegin, f.out.yend, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y)
+            for (int x = f.out.xbegin; x < f.out.xend; ++x)
+                blend(x, y, coc_at(x, y), out.row(y - gy) + size_t(x - gx) * 4);
+    });
+    if (front.empty())
+        return;
+
+    // Front-edge blur: a Sobel of the front CoC with taps 5 px apart finds where a blurred
+    // foreground meets what is behind it; there the result is blurred again, by the front
+    // CoC found nearby, so the foreground's silhouette softens over the background.
+    constexpr int kTap = 5;
+    auto front_coc     = [&](int x, int y) { return std::max(0.0f, -coc_at(x, y)); };
+    Frame pass = f;  // the gathered result as the source of the edge blur
+    pass.data  = f.out;
+    pass.img.roi = f.out;
+    pass.img.rgba.assign(out.px.get(), out.px.get() + out.size());
+    pass.coc.assign(size_t(f.out.width()) * size_t(f.out.height()), 0.0f);
+    std::vector<Level> soft;
+    for (const Level& l : front)
+        soft.push_back(blurred_level(pass, o, l.coc_px, [](float) { return true; }, nthreads));
+    parallel_for_chunks(f.out.ybegin, f.out.yend, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y)
+            for (int x = f.out.xbegin; x < f.out.xend; ++x) {
+                const float gxs = front_coc(x + kTap, y - kTap) + 2.0f * front_coc(x + kTap, y)
+                                  + front_coc(x + kTap, y + kTap) - front_coc(x - kTap, y - kTap)
+                                  - 2.0f * front_coc(x - kTap, y) - front_coc(x - kTap, y + kTap);
+                const float gys = front_coc(x - kTap, y + kTap) + 2.0f * front_coc(x, y + kTap)
+                                  + front_coc(x + kTap, y + kTap) - front_coc(x - kTap, y - kTap)
+                                  - 2.0f * front_coc(x, y - kTap) - front_coc(x + kTap, y - kTap);
+                // |gradient| / 8 is the CoC step across the edge; a 2 px step is a full edge.
+                const float mask = std::min(1.0f, std::hypot(gxs, gys) / 16.0f);
+                if (mask <= 0.0f)
+                    continue;
+                float near = 0.0f;
+                for (int dy = -kTap; dy <= kTap; dy += kTap)
+                    for (int dx = -kTap; dx <= kTap; dx += kTap)
+                        near = std::max(near, front_coc(x + dx, y + dy));
+                float v[4];
+                const Level* pick = &soft.back();
+                for (const Level& l : soft)
+                    if (std::abs(l.coc_px) >= near) {
+                        pick = &l;
+                        break;
+                    }
+                read_level(*pick, x, y, v);
+                float* d = out.row(y - gy) + size_t(x - gx) * 4;
+                for (int k = 0; k < 4; ++k)
+                    d[k] += (v[k] - d[k]) * mask;
+            }
+    });
+}
+
+// --- preparation ---------------------------------------------------------------------
+
+void apply_bloom(WorkImage& w, float threshold, float gain, int nthreads)
+{
+    parallel_for_chunks(0, int64_t(w.rgba.size() / 4), 4096, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i) {
+            float* p = w.rgba.data() + size_t(i) * 4;
+            if (p[3] <= 0.0f)
+                continue;
+            for (int c = 0; c < 3; ++c) {
+                const float x = p[c] / p[3];  // unpremultiplied
+                if (x > threshold)
+                    p[c] = (x + (gain - 1.0f) * (x - threshold)) * p[3];
+            }
+        }
+    });
+}
+
+// Each pixel takes the nearest (smallest signed) CoC within `r` px: a separable min filter.
+void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads)
+{
+    std::vector<float> tmp(coc.size());
+    parallel_for_chunks(0, h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y)
+            for (int x = 0; x < w; ++x) {
+                float m = coc[size_t(y) * size_t(w) + size_t(x)];
+                for (int i = std::max(0, x - r); i <= std::min(w - 1, x + r); ++i)
+                    m = std::min(m, coc[size_t(y) * size_t(w) + size_t(i)]);
+                tmp[size_t(y) * size_t(w) + size_t(x)] = m;
+            }
+    });
+    parallel_for_chunks(0, h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y)
+            for (int x = 0; x < w; ++x) {
+                float m = tmp[size_t(y) * size_t(w) + size_t(x)];
+                for (int j = std::max(0, y - r); j <= std::min(h - 1, y + r); ++j)
+                    m = std::min(m, tmp[size_t(j) * size_t(w) + size_t(x)]);
+                coc[size_t(y) * size_t(w) + size_t(x)] = m;
+            }
+    });
+}
+
+bool check_options(const DefocusOptions& o, std::string& err)
+{
+    Kernel k    = o.aperture;
+    k.width_px  = 1.0f;
+    k.height_px = 1.0f;
+    if (!validate(k, err))
+        return false;
+    if (!(o.aspect >= 0.05f && o.aspect <= 20.0f)) {
+        err = format("aspect {} is outside 0.05..20", o.aspect);
+        return false;
+    }
+    if (o.layers < 0 || o.layers > 1024) {
+        err = format("layers {} is outside 0..1024 (0: automatic)", o.layers);
+        return false;
+    }
+    if (o.max_reduction < 1 || o.max_reduction > 16 || (o.max_reduction & (o.max_reduction - 1))) {
+        err = format("max reduction {} is not one of 1, 2, 4, 8, 16", o.max_reduction);
+        return false;
+    }
+    if (!(o.min_reduced_coc_px >= 0.0f && o.min_reduced_coc_px <= 256.0f)) {
+        err = format("minimum reduced CoC {} is outside 0..256", o.min_reduced_coc_px);
+        return false;
+    }
+    if (!(o.budget_db > 0.0f && o.budget_db <= 120.0f)) {
+        err = format("budget {} dB is outside 0..120", o.budget_db);
+        return false;
+    }
+    if (!std::isfinite(o.bloom_threshold) || !(o.bloom_gain >= 0.0f && o.bloom_gain <= 1e4f)) {
+        err = format("bloom threshold {} / gain {}: finite, gain 0..10000", o.bloom_threshold,
+                     o.bloom_gain);
+        return false;
+    }
+    if (o.depth_dilate_px < 0 || o.depth_dilate_px > 64) {
+        err = format("depth dilation {} px is outside 0..64", o.depth_dilate_px);
+        return false;
+    }
+    if (!(o.reference_step_px >= 1.0f / 64.0f && o.reference_step_px <= 8.0f)) {
+        err = format("reference step {} px is outside 1/64..8", o.reference_step_px);
+        return false;
+    }
+    return true;
+}
+
+// Everything but the method: the scrubbed, premultiplied pixels, their CoC, the regions.
+bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport& rep,
+             int nthreads, std::string& err)
+{
+    if (!check_options(o, err))
+        return false;
+    if (src.deep()) {
+        err = "a deep image cannot be defocused here; flatten it first (--flatten)";
+        return false;
+    }
+    CocOptions coc = o.coc;
+    if (!resolve_coc_options(coc, src, err) || !to_work_image(f.img, src, nthreads, err))
+        return false;
+    // The bad-value policy (DESIGN.md): colour -> 0, depth -> far ("no depth"), counted.
+    using Counts  = std::array<int64_t, 2>;
+    const int64_t npx = int64_t(f.img.z.size());
+    const Counts bad  = parallel_reduce_chunks(
+        0, npx, 1 << 14, nthreads, Counts{ 0, 0 },
+        [&](int64_t b, int64_t e) {
+            Counts n{ 0, 0 };
+            for (int64_t i = b; i < e; ++i) {
+                float* px = f.img.rgba.data() + size_t(i) * 4;
+                for (int c = 0; c < 4; ++c)
+                    if (!std::isfinite(px[c])) {
+                        px[c] = 0.0f;
+                        ++n[0];
+                    }
+                const float z = f.img.z[size_t(i)];
+                n[1] += std::isnan(z) || z == -std::numeric_limits<float>::infinity();
+            }
+            return n;
+        },
+        [](Counts& a, const Counts& p) {
+            a[0] += p[0];
+            a[1] += p[1];
+        });
+    rep.nonfinite.colour = bad[0];
+    rep.nonfinite.depth  = bad[1];
+    if (o.nonfinite == NonFinitePolicy::Error && bad[0] + bad[1] > 0) {
+        err = format("{} non-finite colour and {} non-finite depth values (nonfinite=error)",
+                     bad[0], bad[1]);
+        return false;
+    }
+    const int width_px = src.spec().full_width > 0 ? src.spec().full_width : f.img.width();
+    const CocOfDepth coc_of(coc, width_px);
+    f.coc.resize(size_t(npx));
+    parallel_for_chunks(0, npx, 1 << 14, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i)
+            f.coc[size_t(i)] = coc_of(f.img.z[size_t(i)]);
+    });
+    f.data   = f.img.roi;
+    f.border = o.border;
+    if (o.depth_dilate_px > 0)
+        dilate_nearest(f.coc, f.data.width(), f.data.height(), o.depth_dilate_px, nthreads);
+    if (o.bloom_gain != 1.0f)
+        apply_bloom(f.img, o.bloom_threshold, o.bloom_gain, nthreads);
+
+    const auto [lo, hi] = std::minmax_element(f.coc.begin(), f.coc.end());
+    rep.min_coc_px      = f.coc.empty() ? 0.0f : *lo;
+    rep.max_coc_px      = f.coc.empty() ? 0.0f : *hi;
+    const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
+    f.out               = f.data;
+    if (o.grow) {
+        const OIIO::ImageSpec& s = src.spec();
+        const OIIO::ROI display(s.full_x, s.full_x + s.full_width, s.full_y, s.full_y + s.full_height);
+        const OIIO::ROI limit = OIIO::roi_union(display, f.data);
+        // Half the largest kernel: how far bokeh spread past the data window.
+        const int gx = int(std::ceil(0.5f * extreme)), gy = int(std::ceil(0.5f * extreme * o.aspect));
+        f.out = OIIO::roi_intersection(grown(f.data, gx, gy), limit);
+    }
+    f.out.chbegin = 0;
+    f.out.chend   = 4;
+    return true;
+}
+
+}  // namespace
+
+const char* method_name(DefocusMethod m)
+{
+    switch (m) {
+    case DefocusMethod::Auto: return "auto";
+    case DefocusMethod::Layers: return "layers";
+    case DefocusMethod::Gather: return "gather";
+    case DefocusMethod::Reference: return "reference";
+    }
+    return "?";
+}
+
+bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
+             DefocusReport* report, int nthreads)
+{
+    DefocusReport rep;
+    Frame f;
+    std::string err;
+    if (!prepare(f, src, opts, rep, nthreads, err)) {
+        dst.errorfmt("defocus: {}", err);
+        return false;
+    }
+    rep.method = opts.method == DefocusMethod::Auto ? DefocusMethod::Layers : opts.method;
+    Plane out(f.out.width(), f.out.height(), 4);
+    std::fill_n(out.px.get(), out.size(), 0.0f);
+    switch (rep.method) {
+    case DefocusMethod::Gather: gather(out, f, opts, rep.min_coc_px, rep.max_coc_px, nthreads); break;
+    case DefocusMethod::Reference: {
+        const Membership m = one_layer_per_coc(f, opts.reference_step_px, nthreads);
+        if (m.coc_px.size() > 65535) {
+            dst.errorfmt("defocus: {} distinct CoC values; raise the reference step", m.coc_px.size());
+            return false;
+        }
+        rep.layer_coc_px    = m.coc_px;
+        rep.layer_reduction = m.reduction;
+        composite_layers(out, f, m, opts, nthreads);
+        break;
+    }
+    default: {
+        const Membership m  = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
+        rep.layer_coc_px    = m.coc_px;
+        rep.layer_reduction = m.reduction;
+        composite_layers(out, f, m, opts, nthreads);
+    }
+    }
+    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}", method_name(rep.method),
+                         rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width(),
+                         f.out.height(),
+                         rep.nonfinite.total() ? format(", {} non-finite values replaced",
+                                                        rep.nonfinite.total())
+                                               : std::string());
+
+    OIIO::ImageSpec spec = src.spec();
+    const int nc         = f.img.has_alpha ? 4 : 3;
+    spec.nchannels       = nc;
+    spec.set_format(OIIO::TypeFloat);
+    spec.channelformats.clear();
+    spec.channelnames = { "R", "G", "B" };
+    if (nc == 4)
+        spec.channelnames.push_back("A");
+    spec.alpha_channel = nc == 4 ? 3 : -1;
+    spec.z_channel     = -1;
+    spec.x             = f.out.xbegin;
+    spec.y             = f.out.ybegin;
+    spec.width         = f.out.width();
+    spec.height        = f.out.height();
+    spec.erase_attribute("oiio:UnassociatedAlpha");
+    dst.reset(spec, OIIO::InitializePixels::No);
+    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y) {
+            float* d       = static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y));
+            const float* s = out.row(y);
+            for (int x = 0; x < out.w; ++x)
+                for (int c = 0; c < nc; ++c)
+                    d[size_t(x) * size_t(nc) + size_t(c)] = s[size_t(x) * 4 + size_t(c)];
+        }
+    });
+    if (report)
+        *report = std::move(rep);
+    return true;
+}
+
+bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts, int nthreads)
+{
+    DefocusReport rep;
+    Frame f;
+    std::string err;
+    if (!prepare(f, src, opts, rep, nthreads, err)) {
+        dst.errorfmt("layer map: {}", err);
+        return false;
+    }
+    const Membership m = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
+    OIIO::ImageSpec spec(src.spec());
+    spec.nchannels = 1;
+    spec.set_format(OIIO::TypeFloat);
+    spec.channelformats.clear();
+    spec.channelnames  = { "layer" };
+    spec.alpha_channel = -1;
+    spec.z_channel     = -1;
+    dst.reset(spec, OIIO::InitializePixels::No);
+    for (int y = f.data.ybegin; y < f.data.yend; ++y) {
+        float* d = static_cast<float*>(dst.pixeladdr(f.data.xbegin, y));
+        for (int x = f.data.xbegin; x < f.data.xend; ++x) {
+            const size_t i      = f.img.index(x, y);
+            d[x - f.data.xbegin] = float(m.lower[i]) + m.upper[i];
+        }
+    }
+    return true;
+}
+
+}  // namespace bokeh

@@ -1,0 +1,88 @@
+// defocus.h — depth defocus of a flat RGBA + Z image: the seed's layered gather, a
+// layered scatter with occlusion, and the exact reference they are measured against.
+//
+// Every method turns the signed CoC map (lens.h) into a depth-of-field image whose out-of-
+// focus points take the aperture's shape (blur.h's Kernel: disk, bladed polygon with
+// curvature and hole; an anamorphic aspect), composites nearer over farther, and grows
+// the data window to hold bokeh that spread past it.
+#pragma once
+
+#include <bokeh/blur.h>
+#include <bokeh/image.h>
+#include <bokeh/lens.h>
+
+#include <string>
+#include <vector>
+
+#include <OpenImageIO/imagebuf.h>
+
+namespace bokeh {
+
+enum class DefocusMethod {
+    Auto,       ///< Layers with the settings the accuracy budget needs
+    Layers,     ///< layered scatter with occlusion, large CoCs in reduced buffers
+    Gather,     ///< the seed 001 method as published (blurred levels, masks, edge blur)
+    Reference,  ///< one full-resolution layer per distinct CoC value, exact kernels
+};
+
+struct DefocusOptions {
+    CocOptions coc;
+    /// The aperture: shape, blades, rotation, curvature, hole, edge. Its size is ignored
+    /// (each pixel's CoC sets it); use `aspect` for an anamorphic squeeze.
+    Kernel aperture;
+    float aspect = 1.0f;  ///< bokeh height / width (2 for a 2x anamorphic's tall ovals)
+    DefocusMethod method = DefocusMethod::Auto;
+    /// Layers: number of layers (0: from the CoC histogram and the budget).
+    int layers = 0;
+    /// Layers: coarsest buffer reduction (1 = all at full resolution; 1, 2, 4, 8, 16).
+    int max_reduction = 16;
+    /// Layers: smallest kernel diameter, in reduced pixels, before a layer may be reduced
+    /// (0: from the budget). Larger keeps more layers at full resolution.
+    float min_reduced_coc_px = 0.0f;
+    /// Auto: the PSNR (dB, after the bench's tone map) the result should reach against
+    /// the reference; sets the layer spacing and the reductions.
+    float budget_db = 40.0f;
+    /// Highlights: colour above `bloom_threshold` (unpremultiplied, per channel) is
+    /// multiplied by `bloom_gain` before the blur (ZDefocus's bloom). Gain 1 = off.
+    float bloom_threshold = 1.0f;
+    float bloom_gain      = 1.0f;
+    /// Edge-halo remedy for anti-aliased (filtered) depth: each pixel takes the CoC of the
+    /// nearest depth within this many pixels, so edge pixels whose depth was averaged
+    /// between a foreground and a background go with the foreground. 0 = off.
+    int depth_dilate_px = 0;
+    /// Past the data window: Clamp repeats the edge pixels (and their depth), Black is
+    /// empty (transparent), Mirror reflects.
+    Border border = Border::Clamp;
+    /// Grow the data window by the largest CoC radius, within the display window.
+    bool grow = true;
+    NonFinitePolicy nonfinite = NonFinitePolicy::Zero;
+    /// Reference: CoC values are quantised to this step (px) to count as one layer.
+    float reference_step_px = 0.25f;
+};
+
+/// What a defocus decided and found, for `-v` and for tests.
+struct DefocusReport {
+    DefocusMethod method = DefocusMethod::Auto;  ///< the method that ran
+    std::vector<float> layer_coc_px;  ///< Layers, Reference: each layer's CoC, front to back
+    std::vector<int> layer_reduction; ///< Layers: each layer's buffer reduction
+    float min_coc_px = 0.0f, max_coc_px = 0.0f;
+    NonFiniteCount nonfinite;
+    std::string summary;  ///< one line
+};
+
+/// Defocus `src` (R, G, B, optional A, and Z) into `dst`: premultiplied R, G, B(, A) as
+/// float over the grown data window, with src's metadata. Z and other channels are not
+/// carried (a defocused image has no single depth per pixel). False + dst.geterror().
+bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
+             DefocusReport* report = nullptr, int nthreads = 0);
+
+/// The layer map of the Layers method: per pixel the index of the nearer of the two
+/// layers it is shared between, plus its share in the farther one (channel "layer" =
+/// index + share), so a user sees where layer boundaries fall.
+bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
+               int nthreads = 0);
+
+/// Method names for messages ("layers", "gather", ...).
+const char* method_name(DefocusMethod m);
+
+}  // namespace bokeh

@@ -1,0 +1,20 @@
+// defocus_task.h — bokeh-bench's defocus task (defocus_task.cpp).
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace bokeh_bench {
+
+struct BenchArgs {
+    int threads = 2, reps = 5;
+    int width = 1920, height = 1080;  ///< size of the built-in scenes
+    std::string data_dir;             ///< ../shared/data, or empty to skip the real files
+    int lrlv_focus_x = 300, lrlv_focus_y = 300;
+};
+
+/// Run the task, print a table, append CSV rows (blur task's columns; size_px = the
+/// largest |CoC|). False on an error, reported on stderr.
+bool run_defocus_task(const BenchArgs& args, std::vector<std::string>& rows);
+
+}  // namespace bokeh_bench
