@@ -1,5 +1,5 @@
 # The commands a newcomer types. Each one installs what is missing, configures, builds.
-#   make demo   render the built-in scene and write out/demo.exr + out/demo.png
+#   make demo   render the built-in scene, defocus it: out/demo.exr + out/demo.png
 #   make test   build and run every test (ctest)
 #   make bench  run the speed/accuracy benchmarks
 BUILD ?= build
@@ -23,8 +23,9 @@ build: deps configure
 
 demo: build
 	@mkdir -p out
-	$(BOKEHTOOL) -v --scene lights -o out/demo.exr --ch R,G,B -o out/demo.png
-	@echo "demo: wrote out/demo.exr (RGBA+Z, float) and out/demo.png (sRGB preview)"
+	$(BOKEHTOOL) -v --scene lights -o out/sharp.exr --defocus:focus=6:fstop=2 -o out/demo.exr --ch R,G,B -o out/demo.png
+	$(BOKEHTOOL) out/sharp.exr --defocus:focus=6:fstop=2:output=focalplane -o out/focalplane.png
+	@echo "demo: wrote out/sharp.exr (the scene, RGBA+Z), out/demo.exr + out/demo.png (its depth of field), out/focalplane.png"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
@@ -32,7 +33,9 @@ test: build
 bench: build
 	@mkdir -p docs/bench
 	$(BUILD)/bin/bokeh-bench --threads 2 --reps 5 --csv docs/bench/blur.csv
+	$(BUILD)/bin/bokeh-bench --task defocus --threads 2 --reps 5 --data ../shared/data --images docs/bench --csv docs/bench/defocus.csv
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/blur.csv docs/bench
+	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/defocus.csv docs/bench
 
 install: build
 	cmake --install $(BUILD) --prefix $(or $(PREFIX),/usr/local)

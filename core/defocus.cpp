@@ -562,7 +562,18 @@ void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float
     // foreground meets what is behind it; there the result is blurred again, by the front
     // CoC found nearby, so the foreground's silhouette softens over the background.
     constexpr int kTap = 5;
-    auto front_coc     = [&](int x, int y) { return std::max(0.0f, -coc_at(x, y)); };
+    // The front CoC over the output grown by the taps' reach, read directly below.
+    const OIIO::ROI fr = grown(f.out, kTap, kTap);
+    std::vector<float> fcoc(size_t(fr.width()) * size_t(fr.height()));
+    parallel_for_chunks(fr.ybegin, fr.yend, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y)
+            for (int x = fr.xbegin; x < fr.xend; ++x)
+                fcoc[size_t(y - fr.ybegin) * size_t(fr.width()) + size_t(x - fr.xbegin)]
+                    = std::max(0.0f, -coc_at(x, y));
+    });
+    auto front_coc = [&](int x, int y) {
+        return fcoc[size_t(y - fr.ybegin) * size_t(fr.width()) + size_t(x - fr.xbegin)];
+    };
     Frame pass = f;  // the gathered result as the source of the edge blur
     pass.data  = f.out;
     pass.img.roi = f.out;

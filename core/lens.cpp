@@ -247,7 +247,8 @@ bool focal_plane_view(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocO
                 l             = l / (1.0f + l);
                 const float c = coc[w.index(x, y)];
                 const bool sharp = std::abs(c) <= 1.0f;
-                const float t    = sharp ? 1.0f : std::min(1.0f, std::abs(c) / full);
+                // Any defocus shows (at least 0.3), growing to full tint at full_tint_px.
+                const float t = sharp ? 1.0f : 0.3f + 0.7f * std::min(1.0f, std::abs(c) / full);
                 const float tint[3] = { !sharp && c < 0.0f ? 1.0f : 0.0f, sharp ? 1.0f : 0.0f,
                                         !sharp && c > 0.0f ? 1.0f : 0.0f };
                 float* out = static_cast<float*>(dst.pixeladdr(x, y));

@@ -97,7 +97,8 @@ bool coc_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocOptions& o
              int nthreads = 0);
 
 /// The focal-plane view: the image's luminance tinted red in front of focus, green in
-/// focus (|CoC| <= 1 px), blue behind, the tint growing with |CoC| up to `full_tint_px`.
+/// focus (|CoC| <= 1 px), blue behind, the tint growing with |CoC| (from 30 % just out of
+/// focus to full at `full_tint_px`).
 bool focal_plane_view(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocOptions& opts,
                       float full_tint_px = 32.0f, int nthreads = 0);
 

@@ -108,6 +108,21 @@ std::vector<Shot> shots(const BenchArgs& a)
     return out;
 }
 
+// A 640-pixel-wide sRGB JPEG of `img` (premultiplied RGB over black) for the picture sheet.
+void write_preview(const OIIO::ImageBuf& img, const std::string& path, int threads)
+{
+    const OIIO::ROI full(img.spec().full_x, img.spec().full_x + img.spec().full_width, img.spec().full_y,
+                         img.spec().full_y + img.spec().full_height, 0, 1, 0, 3);
+    OIIO::ImageBuf rgb = IBA::channels(img, 3, { 0, 1, 2 });
+    rgb                = IBA::cut(rgb, full);  // display window, black outside the data
+    const int w = 640, h = std::max(1, full.height() * 640 / std::max(1, full.width()));
+    OIIO::ImageBuf small = IBA::resize(rgb, "box", 0.0f, OIIO::ROI(0, w, 0, h, 0, 1, 0, 3), threads);
+    OIIO::ImageBuf srgb  = IBA::colorconvert(small, "linear", "sRGB", true, "", "", nullptr, {}, threads);
+    srgb.specmod().attribute("Compression", "jpeg:90");
+    if (!srgb.write(path, OIIO::TypeUInt8))
+        std::fprintf(stderr, "bokeh-bench: cannot write %s: %s\n", path.c_str(), srgb.geterror().c_str());
+}
+
 }  // namespace
 
 bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
@@ -137,6 +152,10 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
                                   extreme, a.threads, ms, n, e.rmse_linear, e.psnr_db));
         };
         report(format("reference ({} layers)", rep.layer_coc_px.size()), ref_ms, 1, ref);
+        if (!a.images_dir.empty()) {
+            write_preview(shot.image, a.images_dir + "/defocus_" + shot.name + "_sharp.jpg", a.threads);
+            write_preview(ref, a.images_dir + "/defocus_" + shot.name + "_reference.jpg", a.threads);
+        }
 
         struct Variant {
             std::string name;
@@ -166,6 +185,12 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
             OIIO::ImageBuf out;
             const double ms = median_ms([&] { bokeh::defocus(out, shot.image, o, nullptr, a.threads); }, a.reps);
             report(v.name, ms, a.reps, out);
+            if (!a.images_dir.empty() && (v.name.find("default") != std::string::npos
+                                          || v.name.find("gather") != std::string::npos))
+                write_preview(out, a.images_dir + "/defocus_" + shot.name + "_"
+                                       + (v.name.find("gather") != std::string::npos ? "gather" : "layers")
+                                       + ".jpg",
+                              a.threads);
         }
     }
     return true;

@@ -9,7 +9,7 @@
 // --task defocus runs the depth-defocus task instead (defocus_task.cpp).
 //
 //   bokeh-bench [--task blur|defocus] [--threads N] [--reps N] [--csv FILE] [--quick]
-//               [--size WxH] [--data DIR]
+//               [--size WxH] [--data DIR] [--images DIR]
 
 #include "defocus_task.h"
 #include "gegl_peer.h"
@@ -103,6 +103,8 @@ int main(int argc, char* argv[])
             ++i;
         else if (a == "--data" && i + 1 < argc)
             args.data_dir = argv[++i];
+        else if (a == "--images" && i + 1 < argc)
+            args.images_dir = argv[++i];
         else if (a == "--reps" && i + 1 < argc)
             reps = std::max(1, std::atoi(argv[++i]));
         else if (a == "--csv" && i + 1 < argc)
@@ -112,7 +114,7 @@ int main(int argc, char* argv[])
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
                                  "usage: bokeh-bench [--task blur|defocus] [--threads N] [--reps N] "
-                                 "[--csv FILE] [--quick] [--size WxH] [--data DIR]\n",
+                                 "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR]\n",
                          a.c_str());
             return 1;
         }
