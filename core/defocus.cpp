@@ -381,26 +381,50 @@ Membership share_between_rungs(const Frame& f, std::vector<float> rungs, int nth
     return m;
 }
 
-// The reference's layers: one per distinct CoC after quantising to `step`.
-Membership one_layer_per_coc(const Frame& f, float step, int nthreads)
+constexpr float kRungStep_px   = 0.25f;  // CoCs closer than this count as one
+constexpr size_t kMaxExactRungs = 64;
+
+// The frame's CoCs in bins `step` wide: each occupied bin's mean CoC (ascending), and
+// every pixel's bin among them. A bin holding one CoC value has it exactly.
+struct CocBins {
+    std::vector<float> mean_px;
+    std::vector<uint32_t> of_pixel;
+};
+CocBins coc_bins(const Frame& f, float lo, float hi, float step)
 {
+    const int64_t first = int64_t(std::floor(lo / step)), last = int64_t(std::floor(hi / step));
+    const size_t n = size_t(last - first + 1);
+    std::vector<double> sum(n, 0.0);
+    std::vector<int64_t> count(n, 0);
+    auto bin = [&](float c) { return size_t(std::clamp(int64_t(std::floor(c / step)) - first, int64_t(0), int64_t(n) - 1)); };
+    for (float c : f.coc) {
+        const size_t b = bin(c);
+        sum[b] += c;
+        ++count[b];
+    }
+    CocBins r;
+    std::vector<uint32_t> index(n, 0);
+    for (size_t b = 0; b < n; ++b)
+        if (count[b]) {
+            index[b] = uint32_t(r.mean_px.size());
+            r.mean_px.push_back(float(sum[b] / double(count[b])));
+        }
+    r.of_pixel.resize(f.coc.size());
+    for (size_t i = 0; i < f.coc.size(); ++i)
+        r.of_pixel[i] = index[bin(f.coc[i])];
+    return r;
+}
+
+// The reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC
+// (exact when a bin holds one value, as in scenes of few depths).
+Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step)
+{
+    CocBins bins = coc_bins(f, lo, hi, step);
     Membership m;
-    std::vector<float> q(f.coc.size());
-    parallel_for_chunks(0, int64_t(q.size()), 4096, nthreads, [&](int64_t b, int64_t e) {
-        for (int64_t i = b; i < e; ++i)
-            q[size_t(i)] = std::round(f.coc[size_t(i)] / step) * step;
-    });
-    m.coc_px = q;
-    std::sort(m.coc_px.begin(), m.coc_px.end());
-    m.coc_px.erase(std::unique(m.coc_px.begin(), m.coc_px.end()), m.coc_px.end());
+    m.coc_px = std::move(bins.mean_px);
     m.reduction.assign(m.coc_px.size(), 1);
-    m.lower.resize(q.size());
-    m.upper.assign(q.size(), 0.0f);
-    parallel_for_chunks(0, int64_t(q.size()), 4096, nthreads, [&](int64_t b, int64_t e) {
-        for (int64_t i = b; i < e; ++i)
-            m.lower[size_t(i)] = uint16_t(std::lower_bound(m.coc_px.begin(), m.coc_px.end(), q[size_t(i)])
-                                          - m.coc_px.begin());
-    });
+    m.lower.assign(bins.of_pixel.begin(), bins.of_pixel.end());
+    m.upper.assign(f.coc.size(), 0.0f);
     return m;
 }
 
@@ -413,10 +437,10 @@ struct LayerSettings {
 };
 LayerSettings settings_for_budget(float budget_db)
 {
-    if (budget_db <= 30.0f) return { 2.0, 4.0f };
-    if (budget_db <= 40.0f) return { 1.5, 8.0f };
-    if (budget_db <= 50.0f) return { 1.25, 16.0f };
-    return { 1.125, 32.0f };
+    if (budget_db <= 30.0f) return { 1.5, 8.0f };
+    if (budget_db <= 40.0f) return { 1.25, 16.0f };
+    if (budget_db <= 50.0f) return { 1.125, 32.0f };
+    return { 1.0625, 64.0f };
 }
 
 // The reduction for a layer of CoC c: the largest power of two s <= max_reduction that
@@ -441,7 +465,23 @@ Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float h
         ratio             = span > 0.0 ? std::exp(span / steps) : 2.0;
         ratio             = std::max(ratio, 1.01);
     }
-    Membership m = share_between_rungs(f, coc_ladder(lo, hi, ratio), nthreads);
+    // A scene of few depths (planes, a handful of lights) gets one rung per CoC it holds,
+    // so its layers are exact but for the reductions; others get the ladder.
+    std::vector<float> rungs;
+    if (o.layers == 0) {
+        if ((hi - lo) / kRungStep_px < 1e6f) {
+            rungs = coc_bins(f, lo, hi, kRungStep_px).mean_px;
+            if (rungs.size() > kMaxExactRungs)
+                rungs.clear();
+        }
+        if (!rungs.empty() && rungs.front() > 0.0f)
+            rungs.insert(rungs.begin(), 0.0f);
+        if (!rungs.empty() && rungs.back() < 0.0f)
+            rungs.push_back(0.0f);
+    }
+    if (rungs.empty())
+        rungs = coc_ladder(lo, hi, ratio);
+    Membership m = share_between_rungs(f, std::move(rungs), nthreads);
     const float q = o.min_reduced_coc_px > 0.0f ? o.min_reduced_coc_px : set.min_reduced_coc_px;
     for (float c : m.coc_px)
         m.reduction.push_back(reduction_for(c, q, o.max_reduction));
@@ -803,7 +843,12 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
     switch (rep.method) {
     case DefocusMethod::Gather: gather(out, f, opts, rep.min_coc_px, rep.max_coc_px, nthreads); break;
     case DefocusMethod::Reference: {
-        const Membership m = one_layer_per_coc(f, opts.reference_step_px, nthreads);
+        if ((rep.max_coc_px - rep.min_coc_px) / opts.reference_step_px > 65535.0f) {
+            dst.errorfmt("defocus: CoC range {} .. {} px holds too many {} px steps; raise the "
+                         "reference step", rep.min_coc_px, rep.max_coc_px, opts.reference_step_px);
+            return false;
+        }
+        const Membership m = one_layer_per_coc(f, rep.min_coc_px, rep.max_coc_px, opts.reference_step_px);
         if (m.coc_px.size() > 65535) {
             dst.errorfmt("defocus: {} distinct CoC values; raise the reference step", m.coc_px.size());
             return false;
