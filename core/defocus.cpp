@@ -474,10 +474,10 @@ Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float h
             if (rungs.size() > kMaxExactRungs)
                 rungs.clear();
         }
-        if (!rungs.empty() && rungs.front() > 0.0f)
-            rungs.insert(rungs.begin(), 0.0f);
-        if (!rungs.empty() && rungs.back() < 0.0f)
-            rungs.push_back(0.0f);
+        // A rung at 0, so no two neighbouring rungs lie on opposite sides of focus (the
+        // shares below keep the second moment of one side's disks).
+        if (!rungs.empty() && !std::binary_search(rungs.begin(), rungs.end(), 0.0f))
+            rungs.insert(std::upper_bound(rungs.begin(), rungs.end(), 0.0f), 0.0f);
     }
     if (rungs.empty())
         rungs = coc_ladder(lo, hi, ratio);
@@ -486,6 +486,34 @@ Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float h
     for (float c : m.coc_px)
         m.reduction.push_back(reduction_for(c, q, o.max_reduction));
     return m;
+}
+
+// What the layers leave transparent where the source is opaque is background that a
+// flat image never held: behind a blurred foreground's fringe over a sharp background (the
+// sharp background's kernel cannot reach in from its visible neighbours). It is filled
+// with the source pixel itself, up to the source's coverage: the foreground stands in for
+// the unknown background, which keeps an opaque image opaque (a deep image has the real
+// background: deep.h).
+void fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads)
+{
+    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y) {
+            float* d = out.row(y);
+            for (int x = 0; x < out.w; ++x, d += 4) {
+                const int64_t i = f.source(f.out.xbegin + x, f.out.ybegin + y);
+                // Only pixels with something behind them in depth can have lost it.
+                if (i < 0 || f.coc[size_t(i)] >= farthest)
+                    continue;
+                const float* px = f.img.rgba.data() + size_t(i) * 4;
+                if (px[3] <= d[3])
+                    continue;
+                // Only the coverage the source had and the layers lost.
+                const float w = (px[3] - d[3]) / px[3];
+                for (int c = 0; c < 4; ++c)
+                    d[c] += w * px[c];
+            }
+        }
+    });
 }
 
 // --- gather (seed 001) ---------------------------------------------------------------
@@ -865,6 +893,8 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         composite_layers(out, f, m, opts, nthreads);
     }
     }
+    if (rep.method != DefocusMethod::Gather)
+        fill_disocclusions(out, f, rep.max_coc_px, nthreads);
     rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}", method_name(rep.method),
                          rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width(),
                          f.out.height(),

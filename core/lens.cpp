@@ -72,7 +72,7 @@ double distance_from_depth(double value, DepthMode mode, bool negate)
 {
     if (negate)
         value = -value;
-    if (!std::isfinite(value))
+    if (!std::isfinite(value) || value == 0.0)  // "no depth", in every mode
         return kInf;
     switch (mode) {
     case DepthMode::Depth: return value > 0.0 ? value : kInf;

@@ -21,7 +21,7 @@ enum class DepthMode {
     Direct,        ///< the signed CoC in pixels itself (times CocOptions::direct_scale)
     Depth,         ///< camera distance in depth units (most renderers' Z)
     InverseDepth,  ///< 1 / distance: far = 0 (ZDefocus "far = 0", Nuke's ScanlineRender)
-    FarIsOne,      ///< 1 - 1 / distance: near (1 unit) = 0, far = 1 (ZDefocus "far = 1")
+    FarIsOne,      ///< 1 - 1 / distance: far = 1 (ZDefocus "far = 1"); 0 is still "no depth"
 };
 
 /// A physical thin lens. Lengths of the lens in millimetres; distances in the depth

@@ -1,0 +1,154 @@
+// bokehtool --defocus and --diff as a user runs them: outputs, diagnostics, -v, bad input.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/strutil.h>
+
+#include "test_util.h"
+
+using namespace bokeh_test;
+using OIIO::Strutil::fmt::format;
+
+namespace {
+
+// One error line "bokehtool ERROR: <what>", exit 1, nothing at `output`.
+void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output)
+{
+    EXPECT_EQ(r.status, 1) << r.err;
+    EXPECT_TRUE(OIIO::Strutil::starts_with(r.err, "bokehtool ERROR: ")) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
+    EXPECT_NE(r.err.find(what), std::string::npos) << "expected '" << what << "' in: " << r.err;
+    EXPECT_FALSE(exists(output)) << output << " was written";
+}
+
+const char* kScene = "--scene lights:width=160:height=90";
+
+}  // namespace
+
+TEST(CliDefocus, WritesRgba)
+{
+    const std::string dir = fresh_dir("cli_defocus_rgba");
+    const RunResult r = bokehtool(format("{} --defocus:focus=6:fstop=2 -o {}/out.exr", kScene, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf out(dir + "/out.exr");
+    ASSERT_TRUE(out.read(0, 0, true, OIIO::TypeFloat)) << out.geterror();
+    const OIIO::ImageSpec& s = out.spec();
+    EXPECT_EQ(s.nchannels, 4);
+    EXPECT_EQ(s.channelnames, (std::vector<std::string>{ "R", "G", "B", "A" }));
+    EXPECT_EQ(s.full_width, 160);
+    EXPECT_EQ(s.full_height, 90);
+    // A real image: finite, alpha within 0..1, not black. (Whether an opaque input stays
+    // opaque is DefocusOcclusion.OpaqueInputStaysOpaque's business.)
+    double sum = 0.0;
+    for (int y = s.y; y < s.y + s.height; ++y)
+        for (int x = s.x; x < s.x + s.width; ++x) {
+            float px[4];
+            out.getpixel(x, y, px);
+            ASSERT_TRUE(std::isfinite(px[0] + px[1] + px[2] + px[3])) << x << "," << y;
+            ASSERT_GE(px[3], 0.0f) << x << "," << y;
+            ASSERT_LE(px[3], 1.0f + 1e-4f) << x << "," << y;
+            sum += px[0] + px[1] + px[2];
+        }
+    EXPECT_GT(sum, 100.0);
+    // Differs from the sharp scene (it was defocused).
+    ASSERT_EQ(bokehtool(format("{} --ch R,G,B,A -o {}/sharp.exr", kScene, dir)).status, 0);
+    OIIO::ImageBuf sharp(dir + "/sharp.exr");
+    EXPECT_GT(max_difference(out, sharp), 0.01);
+}
+
+TEST(CliDefocus, DiagnosticOutputs)
+{
+    const std::string dir = fresh_dir("cli_defocus_diag");
+    const std::pair<const char*, int> outputs[] = { { "coc", 1 }, { "focalplane", 3 }, { "layers", 1 } };
+    for (const auto& [what, channels] : outputs) {
+        SCOPED_TRACE(what);
+        const std::string path = dir + "/" + what + ".exr";
+        const RunResult r = bokehtool(format("{} --defocus:focus=6:fstop=2:output={} -o {}", kScene, what, path));
+        ASSERT_EQ(r.status, 0) << r.err;
+        OIIO::ImageBuf img(path);
+        ASSERT_TRUE(img.read(0, 0, true, OIIO::TypeFloat)) << img.geterror();
+        EXPECT_EQ(img.spec().nchannels, channels);
+        EXPECT_EQ(img.spec().width, 160);
+        EXPECT_EQ(img.spec().height, 90);
+    }
+    // The CoC map holds both signs (the lights scene has front and back bokeh) and 0 near
+    // the in-focus sphere's depth.
+    OIIO::ImageBuf coc(dir + "/coc.exr");
+    ASSERT_TRUE(coc.read(0, 0, true, OIIO::TypeFloat));
+    float lo = 1e9f, hi = -1e9f;
+    for (int y = 0; y < 90; ++y)
+        for (int x = 0; x < 160; ++x) {
+            const float c = coc.getchannel(x, y, 0, 0);
+            lo            = std::min(lo, c);
+            hi            = std::max(hi, c);
+        }
+    EXPECT_LT(lo, -0.5f);
+    EXPECT_GT(hi, 0.5f);
+}
+
+TEST(CliDefocus, VerboseNamesTheLayers)
+{
+    const std::string dir = fresh_dir("cli_defocus_verbose");
+    const RunResult r = bokehtool(format("-v {} --defocus:focus=6:fstop=2 -o {}/out.exr", kScene, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    std::vector<std::string> lines;
+    OIIO::Strutil::split(r.out, lines, "\n");
+    bool found = false;
+    for (const std::string& l : lines)
+        found = found || (l.find("layers") != std::string::npos && l.find("CoC") != std::string::npos);
+    EXPECT_TRUE(found) << "no line with 'layers' and 'CoC' in:\n" << r.out;
+    // Without -v it says nothing.
+    const RunResult q = bokehtool(format("{} --defocus:focus=6:fstop=2 -o {}/q.exr", kScene, dir));
+    ASSERT_EQ(q.status, 0) << q.err;
+    EXPECT_EQ(q.out.find("CoC"), std::string::npos) << q.out;
+}
+
+TEST(CliDefocus, BadInputFailsCleanly)
+{
+    const std::string dir = fresh_dir("cli_defocus_bad");
+    const std::string out = dir + "/out.exr";
+    struct Case {
+        std::string args, expected;
+    };
+    const Case cases[] = {
+        { format("{} --defocus:focus=abc -o {}", kScene, out), "focus 'abc'" },
+        { format("{} --defocus:focus=500,500 -o {}", kScene, out), "focus pixel 500,500 is outside" },
+        { format("{} --defocus:unit=furlong -o {}", kScene, out), "furlong" },
+        { format("{} --ch R,G,B --defocus:focus=6 -o {}", kScene, out), "no depth channel" },
+        { format("{} --defocus:focus=0.01 -o {}", kScene, out), "focal length" },
+    };
+    for (const Case& k : cases) {
+        SCOPED_TRACE(k.args);
+        const RunResult r = bokehtool(k.args);
+        expect_clean_failure(r, k.expected, out);
+        EXPECT_NE(r.err.find("--defocus"), std::string::npos) << "names the command: " << r.err;
+    }
+    std::vector<std::string> files;
+    OIIO::Filesystem::get_directory_entries(dir, files);
+    EXPECT_TRUE(files.empty()) << "left behind: " << (files.empty() ? "" : files[0]);
+}
+
+TEST(CliDefocus, DiffPrintsPsnr)
+{
+    const std::string dir = fresh_dir("cli_defocus_diff");
+    const RunResult r = bokehtool(format("{0} --defocus:focus=6:fstop=2:method=reference -o {1}/ref.exr "
+                                         "{0} --defocus:focus=6:fstop=2:method=layers -o {1}/lay.exr --diff",
+                                         kScene, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    const size_t at = r.out.find("PSNR");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    // "PSNR 52.34 dB": the figure is a number, and layers are within the 40 dB budget.
+    const double db = std::atof(r.out.c_str() + at + 5);
+    std::printf("[ figures  ] --diff: %s", r.out.c_str());
+    EXPECT_GE(db, 40.0) << r.out;
+    // The same two files given by name.
+    const RunResult f = bokehtool(format("{0}/ref.exr {0}/lay.exr --diff", dir));
+    ASSERT_EQ(f.status, 0) << f.err;
+    EXPECT_NE(f.out.find("PSNR"), std::string::npos) << f.out;
+}
