@@ -128,9 +128,8 @@ TEST(LensDepth, DistanceFromDepthInEveryMode)
 }
 
 // lens.h's file comment: "a depth of 0 or a non-finite one means 'no depth here' and is
-// taken as infinitely far" — in every mode. (DepthMode::FarIsOne's own comment says
-// "near (1 unit) = 0", which contradicts it; this test holds the library to the general
-// rule, as the Beachball renders need, and is kept apart so the contradiction shows alone.)
+// taken as infinitely far" — in every mode, FarIsOne included (where 1 - 1/d = 0 would
+// otherwise read as 1 unit away), as the Beachball renders' empty Z = 0 pixels need.
 TEST(LensDepth, ZeroIsNoDepthInEveryMode)
 {
     for (DepthMode m : { DepthMode::Depth, DepthMode::InverseDepth, DepthMode::FarIsOne })
