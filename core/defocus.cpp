@@ -585,9 +585,7 @@ void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float
             front.push_back(blurred_level(f, o, -c, [](float) { return true; }, nthreads));
 
     auto read_level = [&](const Level& l, int x, int y, float v[4]) {
-        float tmp[5];
-        sample(l.p, l.low, gx, gy, l.s, x, y, tmp);
-        std::copy_n(tmp, 4, v);
+        sample(l.p, l.low, gx, gy, l.s, x, y, v);
     };
     // The CoC standing for output pixel (x, y); 0 where the border leaves it empty.
     auto coc_at = [&](int x, int y) {
@@ -642,8 +640,10 @@ void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float
     auto front_coc = [&](int x, int y) {
         return fcoc[size_t(y - fr.ybegin) * size_t(fr.width()) + size_t(x - fr.xbegin)];
     };
-    Frame pass = f;  // the gathered result as the source of the edge blur
-    pass.data  = f.out;
+    Frame pass;  // the gathered result as the source of the edge blur
+    pass.data    = f.out;
+    pass.out     = f.out;
+    pass.border  = f.border;
     pass.img.roi = f.out;
     pass.img.rgba.assign(out.px.get(), out.px.get() + out.size());
     pass.coc.assign(size_t(f.out.width()) * size_t(f.out.height()), 0.0f);
@@ -902,22 +902,11 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
                                                         rep.nonfinite.total())
                                                : std::string());
 
-    OIIO::ImageSpec spec = src.spec();
-    const int nc         = f.img.has_alpha ? 4 : 3;
-    spec.nchannels       = nc;
-    spec.set_format(OIIO::TypeFloat);
-    spec.channelformats.clear();
-    spec.channelnames = { "R", "G", "B" };
-    if (nc == 4)
-        spec.channelnames.push_back("A");
-    spec.alpha_channel = nc == 4 ? 3 : -1;
-    spec.z_channel     = -1;
-    spec.x             = f.out.xbegin;
-    spec.y             = f.out.ybegin;
-    spec.width         = f.out.width();
-    spec.height        = f.out.height();
-    spec.erase_attribute("oiio:UnassociatedAlpha");
-    dst.reset(spec, OIIO::InitializePixels::No);
+    const int nc = f.img.has_alpha ? 4 : 3;
+    dst.reset(derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
+                                               : std::vector<std::string>{ "R", "G", "B" },
+                           f.out),
+              OIIO::InitializePixels::No);
     parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
         for (int y = int(y0); y < int(y1); ++y) {
             float* d       = static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y));
@@ -942,14 +931,7 @@ bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOpti
         return false;
     }
     const Membership m = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
-    OIIO::ImageSpec spec(src.spec());
-    spec.nchannels = 1;
-    spec.set_format(OIIO::TypeFloat);
-    spec.channelformats.clear();
-    spec.channelnames  = { "layer" };
-    spec.alpha_channel = -1;
-    spec.z_channel     = -1;
-    dst.reset(spec, OIIO::InitializePixels::No);
+    dst.reset(derived_spec(src.spec(), { "layer" }), OIIO::InitializePixels::No);
     for (int y = f.data.ybegin; y < f.data.yend; ++y) {
         float* d = static_cast<float*>(dst.pixeladdr(f.data.xbegin, y));
         for (int x = f.data.xbegin; x < f.data.xend; ++x) {

@@ -105,6 +105,29 @@ bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, int nthreads, std:
     return true;
 }
 
+OIIO::ImageSpec derived_spec(const OIIO::ImageSpec& like, const std::vector<std::string>& names,
+                             OIIO::ROI data)
+{
+    OIIO::ImageSpec spec = like;
+    spec.nchannels       = int(names.size());
+    spec.set_format(OIIO::TypeFloat);
+    spec.channelformats.clear();
+    spec.channelnames  = names;
+    spec.alpha_channel = -1;
+    for (size_t c = 0; c < names.size(); ++c)
+        if (names[c] == "A")
+            spec.alpha_channel = int(c);
+    spec.z_channel = -1;
+    spec.erase_attribute("oiio:UnassociatedAlpha");
+    if (data.defined()) {
+        spec.x      = data.xbegin;
+        spec.y      = data.ybegin;
+        spec.width  = data.width();
+        spec.height = data.height();
+    }
+    return spec;
+}
+
 bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads, std::string& err)
 {
     const OIIO::ImageSpec& spec = dst.spec();

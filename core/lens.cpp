@@ -202,14 +202,7 @@ bool coc_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocOptions& o
         dst.errorfmt("coc: {}", err);
         return false;
     }
-    OIIO::ImageSpec spec(src.spec());
-    spec.nchannels = 1;
-    spec.set_format(OIIO::TypeFloat);
-    spec.channelformats.clear();
-    spec.channelnames  = { "coc" };
-    spec.alpha_channel = -1;
-    spec.z_channel     = -1;
-    dst.reset(spec, OIIO::InitializePixels::No);
+    dst.reset(derived_spec(src.spec(), { "coc" }), OIIO::InitializePixels::No);
     const OIIO::ROI d = src.roi();
     for (int y = d.ybegin; y < d.yend; ++y)
         std::copy_n(coc.data() + size_t(y - d.ybegin) * size_t(d.width()), d.width(),
@@ -229,14 +222,7 @@ bool focal_plane_view(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocO
         dst.errorfmt("focal plane: {}", err);
         return false;
     }
-    OIIO::ImageSpec spec(src.spec());
-    spec.nchannels = 3;
-    spec.set_format(OIIO::TypeFloat);
-    spec.channelformats.clear();
-    spec.channelnames  = { "R", "G", "B" };
-    spec.alpha_channel = -1;
-    spec.z_channel     = -1;
-    dst.reset(spec, OIIO::InitializePixels::No);
+    dst.reset(derived_spec(src.spec(), { "R", "G", "B" }), OIIO::InitializePixels::No);
     const float full = std::max(full_tint_px, 1.0f);
     parallel_rows(w.roi, nthreads, [&](int y0, int y1) {
         for (int y = y0; y < y1; ++y)

@@ -7,6 +7,8 @@
 #include <bokeh/metrics.h>
 #include <bokeh/scene.h>
 
+#include "test_util.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -37,28 +39,13 @@ using PixelFn = std::function<Px(int x, int y)>;
 // (x0, y0), display window `full` (default: the data window).
 OIIO::ImageBuf make_image(int w, int h, const PixelFn& fn, int x0 = 0, int y0 = 0, OIIO::ROI full = {})
 {
-    OIIO::ImageSpec spec(w, h, 5, OIIO::TypeFloat);
-    spec.channelnames  = { "R", "G", "B", "A", "Z" };
-    spec.alpha_channel = 3;
-    spec.z_channel     = 4;
-    spec.x             = x0;
-    spec.y             = y0;
-    if (full.defined()) {
-        spec.full_x      = full.xbegin;
-        spec.full_y      = full.ybegin;
-        spec.full_width  = full.width();
-        spec.full_height = full.height();
-    } else {
-        spec.full_x = x0, spec.full_y = y0, spec.full_width = w, spec.full_height = h;
-    }
-    OIIO::ImageBuf img(spec);
-    for (int y = y0; y < y0 + h; ++y)
-        for (int x = x0; x < x0 + w; ++x) {
-            const Px p        = fn(x, y);
-            const float v[5] = { p.r, p.g, p.b, p.a, p.z };
-            img.setpixel(x, y, v);
-        }
-    return img;
+    return bokeh_test::rgbaz_image(
+        w, h,
+        [&](int x, int y) {
+            const Px p = fn(x, y);
+            return std::array<float, 5>{ p.r, p.g, p.b, p.a, p.z };
+        },
+        x0, y0, full);
 }
 
 // Options for a Direct-mode image (Z is the signed CoC in px).

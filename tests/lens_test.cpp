@@ -39,27 +39,9 @@ constexpr double kHandCocPx = 2500.0 / (2.0 * 1950.0) / (36.0 / 1920.0);  // 34.
 OIIO::ImageBuf rgbaz(int w, int h, const std::function<float(int, int)>& z, int x0 = 0, int y0 = 0,
                      OIIO::ROI full = {})
 {
-    OIIO::ImageSpec spec(w, h, 5, OIIO::TypeFloat);
-    spec.channelnames  = { "R", "G", "B", "A", "Z" };
-    spec.alpha_channel = 3;
-    spec.z_channel     = 4;
-    spec.x             = x0;
-    spec.y             = y0;
-    if (full.defined()) {
-        spec.full_x      = full.xbegin;
-        spec.full_y      = full.ybegin;
-        spec.full_width  = full.width();
-        spec.full_height = full.height();
-    } else {
-        spec.full_x = x0, spec.full_y = y0, spec.full_width = w, spec.full_height = h;
-    }
-    OIIO::ImageBuf img(spec);
-    for (int y = y0; y < y0 + h; ++y)
-        for (int x = x0; x < x0 + w; ++x) {
-            const float px[5] = { 0.5f, 0.5f, 0.5f, 1.0f, z(x, y) };
-            img.setpixel(x, y, px);
-        }
-    return img;
+    return bokeh_test::rgbaz_image(
+        w, h, [&](int x, int y) { return std::array<float, 5>{ 0.5f, 0.5f, 0.5f, 1.0f, z(x, y) }; },
+        x0, y0, full);
 }
 
 CocOptions depth_options(double focus_m = 5.0)

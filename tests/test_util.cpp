@@ -66,4 +66,26 @@ double max_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b)
     return cmp.error ? std::numeric_limits<double>::infinity() : cmp.maxerror;
 }
 
+OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5>(int, int)>& fn,
+                           int x0, int y0, OIIO::ROI full)
+{
+    OIIO::ImageSpec spec(w, h, 5, OIIO::TypeFloat);
+    spec.channelnames  = { "R", "G", "B", "A", "Z" };
+    spec.alpha_channel = 3;
+    spec.z_channel     = 4;
+    spec.x             = x0;
+    spec.y             = y0;
+    if (!full.defined())
+        full = OIIO::ROI(x0, x0 + w, y0, y0 + h);
+    spec.full_x      = full.xbegin;
+    spec.full_y      = full.ybegin;
+    spec.full_width  = full.width();
+    spec.full_height = full.height();
+    OIIO::ImageBuf img(spec);
+    for (int y = y0; y < y0 + h; ++y)
+        for (int x = x0; x < x0 + w; ++x)
+            img.setpixel(x, y, fn(x, y).data());
+    return img;
+}
+
 }  // namespace bokeh_test

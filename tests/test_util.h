@@ -1,6 +1,8 @@
 // test_util.h — helpers shared by the unit and CLI tests.
 #pragma once
 
+#include <array>
+#include <functional>
 #include <string>
 
 #include <OpenImageIO/imagebuf.h>
@@ -26,6 +28,11 @@ struct RunResult {
 
 /// RunResult bokehtool with `args` (shell words), with `env` ("NAME=value ...") before it.
 RunResult bokehtool(const std::string& args, const std::string& env = "");
+
+/// A float R, G, B, A, Z image (alpha_channel 3, z_channel 4) over a w x h data window at
+/// (x0, y0), display window `full` (default: the data window); `fn(x, y)` gives the pixel.
+OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5>(int, int)>& fn,
+                           int x0 = 0, int y0 = 0, OIIO::ROI full = {});
 
 /// Largest absolute difference of two images over all channels (inf if sizes differ).
 double max_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b);

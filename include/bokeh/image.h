@@ -57,6 +57,12 @@ bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, int nthreads,
 bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads,
                      std::string& err);
 
+/// The spec of an image derived from one with spec `like`: its metadata and display
+/// window, float channels `names` (alpha where one is named "A", no depth channel, stored
+/// premultiplied), over `data` (default: like's data window).
+OIIO::ImageSpec derived_spec(const OIIO::ImageSpec& like, const std::vector<std::string>& names,
+                             OIIO::ROI data = {});
+
 /// What to do with NaN and Inf pixel values (DESIGN.md, "bad values").
 enum class NonFinitePolicy {
     Zero,   ///< colour -> 0, depth -> +inf ("no depth": infinitely far); counted
