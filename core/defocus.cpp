@@ -16,13 +16,17 @@
 //
 // * Reference: every distinct CoC (quantised to reference_step_px) is its own layer, at
 //   full resolution, with the exact anti-aliased kernel. Exact for the model; slow.
-// * Layers: CoCs on a geometric ladder (0, +-1, +-r, +-r^2, ...); a pixel between two rungs
-//   is shared between them with weights that keep its kernel's second moment (so the mixed
-//   kernel has the spread of the true one). A layer whose CoC allows it is built in a
-//   buffer reduced by 2..16 (area-exact box), blurred there with the exact kernel, and
-//   enlarged bilinearly as it is composited (SEEDS.md sections 4 and 11: large bokeh lose
-//   nothing at low resolution). Cost: one pass over each layer's region, with kernels of at
-//   most 2 q px (q = min_reduced_coc_px) unless at full resolution.
+// * Layers: a scene of at most 64 distinct CoCs (0.25 px bins) gets one rung per CoC,
+//   exact but for the reductions; others get a geometric ladder (0, +-1, +-r, +-r^2, ...),
+//   a pixel between two rungs shared between them with weights that keep its kernel's
+//   second moment (so the mixed kernel has the spread of the true one). A layer whose CoC
+//   allows it is built in a buffer reduced by 2..16 (area-exact box), blurred there with
+//   the exact kernel, and enlarged bilinearly as it is composited (SEEDS.md sections 4 and
+//   11: large bokeh lose little at low resolution). The accuracy budget sets r and the
+//   smallest reduced kernel q (settings_for_budget, from the defocus chart). Cost: layers
+//   are computed in tiles, only where they hold pixels (trimmed to the pixels' reach), with
+//   kernels of at most 2 q px unless at full resolution.
+// * Iris mode: the layers average exp(k colour) and come back by log / k (IrisSpace).
 // * Gather (SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
 //   few representative CoCs (4 behind focus, 3 in front; large ones in 1/2 and 1/4
 //   buffers), per-pixel smoothstep blend between the two levels around its CoC, a back-
@@ -57,8 +61,20 @@ using OIIO::Strutil::fmt::format;
 
 // --- the image being defocused ------------------------------------------------------
 
+// Iris mode (SEEDS.md section 3) in the layers: colour is carried as
+// A exp(k (colour / A - shift)) (premultiplied exp-space colour), so each layer averages
+// exp(k x) weighted by coverage; every layer comes back by shift + log(mean) / k before it
+// is composited ("over" is linear). The shift (the channel's minimum for k > 0, maximum for
+// k < 0) keeps the exponents in [0, 80], as blur's Iris does.
+struct IrisSpace {
+    float k = 0.0f;
+    std::array<float, 3> shift{};
+};
+
 struct Frame {
-    WorkImage img;           // premultiplied RGBA over the data window
+    WorkImage img;           // premultiplied RGBA over the data window (iris: exp space)
+    std::vector<float> linear_rgba;  // iris mode: img.rgba before the exp; else empty
+    IrisSpace iris;
     std::vector<float> coc;  // signed CoC per pixel of the data window
     OIIO::ROI data, out;     // the data window; the output region
     Border border = Border::Clamp;
@@ -73,6 +89,8 @@ struct Frame {
             return -1;
         return int64_t(img.index(sx, sy));
     }
+    // The source's premultiplied RGBA in linear light (not in iris space).
+    const std::vector<float>& linear() const { return linear_rgba.empty() ? img.rgba : linear_rgba; }
 };
 
 // Each pixel's place among the layers: its share 1 - upper in layer `lower` and `upper` in
@@ -239,12 +257,62 @@ std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& 
     return tiles;
 }
 
-// Layer k's input over reduced pixels `low` (grid origin gx, gy; reduction s): the mean
-// of [R, G, B, A] * share and the visibility 1 - A * nearer over each s x s block.
-Plane layer_input(const Frame& f, const Membership& m, int k, const OIIO::ROI& low, int gx,
-                  int gy, int s)
+// Layer k's share and the visibility it needs at full-resolution pixel `at`.
+struct LayerPixel {
+    float share, nearer;
+};
+inline LayerPixel layer_pixel(const Membership& m, int k, size_t at)
 {
-    Plane p(low.width(), low.height(), 5);
+    const int lo    = m.lower[at];
+    const float up  = m.upper[at];
+    return { lo == k ? 1.0f - up : lo + 1 == k ? up : 0.0f,
+             lo + 1 < k ? 1.0f : lo + 1 == k ? 1.0f - up : 0.0f };
+}
+
+// What a tile of layer k holds over reduced pixels `low` (grid origin gx, gy; reduction
+// s): the reduced pixels with a share of the layer (empty when none), and whether a
+// nearer layer hides any of it.
+struct TileContent {
+    OIIO::ROI held;
+    bool hidden = false;
+};
+TileContent tile_content(const Frame& f, const Membership& m, int k, const OIIO::ROI& low, int gx,
+                         int gy, int s)
+{
+    TileContent t;
+    t.held = OIIO::ROI(low.xend, low.xbegin, low.yend, low.ybegin);  // empty; grows below
+    for (int j = low.ybegin; j < low.yend; ++j)
+        for (int y = gy + j * s; y < gy + (j + 1) * s; ++y) {
+            const int sy = border_index(y, f.data.ybegin, f.data.yend, f.border);
+            if (sy == kOutside)
+                continue;
+            for (int i = low.xbegin; i < low.xend; ++i)
+                for (int x = gx + i * s; x < gx + (i + 1) * s; ++x) {
+                    const int sx = border_index(x, f.data.xbegin, f.data.xend, f.border);
+                    if (sx == kOutside)
+                        continue;
+                    const size_t at       = f.img.index(sx, sy);
+                    const LayerPixel p    = layer_pixel(m, k, at);
+                    t.hidden = t.hidden || p.nearer * f.img.rgba[at * 4 + 3] > 0.0f;
+                    if (p.share > 0.0f) {
+                        t.held.xbegin = std::min(t.held.xbegin, i);
+                        t.held.xend   = std::max(t.held.xend, i + 1);
+                        t.held.ybegin = std::min(t.held.ybegin, j);
+                        t.held.yend   = std::max(t.held.yend, j + 1);
+                    }
+                }
+        }
+    return t;
+}
+
+// Layer k's input over reduced pixels `low` (grid origin gx, gy; reduction s): the mean
+// of [R, G, B, A] * share over each s x s block and, when `with_visibility`, of the
+// visibility 1 - A * nearer (channel 4). Without it the visibility is 1 everywhere.
+Plane layer_input(const Frame& f, const Membership& m, int k, const OIIO::ROI& low, int gx,
+                  int gy, int s, bool with_visibility)
+{
+    const int nc = with_visibility ? 5 : 4;
+    Plane p(low.width(), low.height(), nc);
     std::fill_n(p.px.get(), p.size(), 0.0f);
     // Source column of every full-resolution column the block reads (kOutside: empty).
     const int x_first = gx + low.xbegin * s;
@@ -257,31 +325,48 @@ Plane layer_input(const Frame& f, const Membership& m, int k, const OIIO::ROI& l
         for (int y = gy + (low.ybegin + j) * s; y < gy + (low.ybegin + j + 1) * s; ++y) {
             const int sy = border_index(y, f.data.ybegin, f.data.yend, f.border);
             for (size_t i = 0; i < sx.size(); ++i) {
-                float* v = row + (i / size_t(s)) * 5;
+                float* v = row + (i / size_t(s)) * size_t(nc);
                 if (sy == kOutside || sx[i] == kOutside) {
-                    v[4] += 1.0f;  // empty: seen through, hides nothing
+                    if (with_visibility)
+                        v[4] += 1.0f;  // empty: seen through, hides nothing
                     continue;
                 }
                 const size_t at    = f.img.index(sx[i], sy);
-                const int lo       = m.lower[at];
-                const float up     = m.upper[at];
-                const float share  = lo == k ? 1.0f - up : lo + 1 == k ? up : 0.0f;
-                const float nearer = lo + 1 < k ? 1.0f : lo + 1 == k ? 1.0f - up : 0.0f;
+                const LayerPixel q = layer_pixel(m, k, at);
                 const float* px    = f.img.rgba.data() + at * 4;
-                if (share > 0.0f)
+                if (q.share > 0.0f)
                     for (int c = 0; c < 4; ++c)
-                        v[c] += px[c] * share;
-                v[4] += 1.0f - px[3] * nearer;
+                        v[c] += px[c] * q.share;
+                if (with_visibility)
+                    v[4] += 1.0f - px[3] * q.nearer;
             }
         }
         if (s > 1)
-            for (int i = 0; i < p.w * 5; ++i)
+            for (int i = 0; i < p.w * nc; ++i)
                 row[i] *= inv;
     }
     return p;
 }
 
-// Colour and coverage over visibility, in place (5-channel planes).
+// Iris-space colour (4 or more channels, premultiplied) back to linear, in place.
+void from_iris_space(Plane& p, const IrisSpace& iris)
+{
+    if (iris.k == 0.0f)
+        return;
+    const size_t nc = size_t(p.nc);
+    for (int j = 0; j < p.h; ++j) {
+        float* px = p.row(j);
+        for (int i = 0; i < p.w; ++i, px += nc) {
+            const float a = px[3];
+            for (int c = 0; c < 3; ++c)
+                // exp-space colour / coverage is >= exp(0) up to rounding.
+                px[c] = a > 0.0f ? a * (iris.shift[size_t(c)] + std::log(std::max(px[c] / a, 1e-30f)) / iris.k)
+                                 : 0.0f;
+        }
+    }
+}
+
+// Colour and coverage over visibility (channel 4), in place.
 void divide_by_visibility(Plane& p)
 {
     for (int j = 0; j < p.h; ++j) {
@@ -316,14 +401,35 @@ void composite_layers(Plane& out, const Frame& f, const Membership& m, const Def
             // The tile's reduced pixels, one more each side for bilinear reads.
             const OIIO::ROI low(tx * kTile - 1, floor_div(region.xend - 1 - gx, s) + 2,
                                 ty * kTile - 1, floor_div(region.yend - 1 - gy, s) + 2);
-            Plane p     = layer_input(f, m, k, grown(low, w.rx, w.ry), gx, gy, s);
+            // Only where the layer's pixels reach: past its pixels' bounding box grown by
+            // the kernel the layer is exactly 0 (so compositing it changes nothing). One
+            // reduced pixel more keeps the bilinear reads at the edge exact.
+            const TileContent content = tile_content(f, m, k, grown(low, w.rx, w.ry), gx, gy, s);
+            if (content.held.xbegin >= content.held.xend)
+                return;
+            const OIIO::ROI need = OIIO::roi_intersection(grown(content.held, w.rx + 1, w.ry + 1), low);
+            if (need.xbegin >= need.xend || need.ybegin >= need.yend)
+                return;
+            // Full-resolution pixels whose bilinear taps lie in `need` (the others read
+            // only zeros), or all of the region's where `need` is the tile's edge.
+            auto first_px = [&](int lo, int g, int r0) { return lo == r0 ? std::numeric_limits<int>::min() : g + lo * s + s / 2; };
+            auto end_px   = [&](int hi, int g, int r1) { return hi == r1 ? std::numeric_limits<int>::max() : g + (hi - 1) * s + s / 2 + 1; };
+            const OIIO::ROI draw = OIIO::roi_intersection(
+                OIIO::ROI(first_px(need.xbegin, gx, low.xbegin), end_px(need.xend, gx, low.xend),
+                          first_px(need.ybegin, gy, low.ybegin), end_px(need.yend, gy, low.yend)),
+                region);
+            if (draw.xbegin >= draw.xend || draw.ybegin >= draw.yend)
+                return;
+            Plane p     = layer_input(f, m, k, grown(need, w.rx, w.ry), gx, gy, s, content.hidden);
             Plane layer = w.is_identity() ? std::move(p) : convolve_spans(p, w, 1);
-            divide_by_visibility(layer);
-            for (int y = region.ybegin; y < region.yend; ++y) {
-                float* dst = out.row(y - gy) + size_t(region.xbegin - gx) * 4;
-                for (int x = region.xbegin; x < region.xend; ++x, dst += 4) {
+            if (content.hidden)
+                divide_by_visibility(layer);
+            from_iris_space(layer, f.iris);
+            for (int y = draw.ybegin; y < draw.yend; ++y) {
+                float* dst = out.row(y - gy) + size_t(draw.xbegin - gx) * 4;
+                for (int x = draw.xbegin; x < draw.xend; ++x, dst += 4) {
                     float l[4];
-                    sample(layer, low, gx, gy, s, x, y, l);
+                    sample(layer, need, gx, gy, s, x, y, l);
                     const float behind = 1.0f - l[3];
                     for (int c4 = 0; c4 < 4; ++c4)
                         dst[c4] = l[c4] + behind * dst[c4];
@@ -428,19 +534,21 @@ Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step)
     return m;
 }
 
-// Layer settings an accuracy budget asks for: the ladder's ratio and the smallest reduced
-// kernel diameter. From the defocus chart (docs/benchmarks.md): finer settings than these
-// buy dB the budget does not ask for.
+// Layer settings an accuracy budget asks for: the ladder's ratio r and the smallest reduced
+// kernel diameter q. From the defocus chart (docs/benchmarks.md), the coarsest settings at
+// which every synthetic scene meets the budget: the ladder's spacing sets the error of
+// scenes of continuous depth (lights), q that of hard bokeh and silhouette edges in
+// reduced buffers (edges, giant: q = 16 gave 41.6 and 35.5 dB, q = 24 gives 92.8 and 42.0).
 struct LayerSettings {
     double ratio;
     float min_reduced_coc_px;
 };
 LayerSettings settings_for_budget(float budget_db)
 {
-    if (budget_db <= 30.0f) return { 1.5, 8.0f };
-    if (budget_db <= 40.0f) return { 1.25, 16.0f };
-    if (budget_db <= 50.0f) return { 1.125, 32.0f };
-    return { 1.0625, 64.0f };
+    if (budget_db <= 30.0f) return { 2.0, 12.0f };
+    if (budget_db <= 40.0f) return { 1.5, 24.0f };
+    if (budget_db <= 50.0f) return { 1.125, 64.0f };
+    return { 1.0625, 96.0f };
 }
 
 // The reduction for a layer of CoC c: the largest power of two s <= max_reduction that
@@ -451,6 +559,13 @@ int reduction_for(float c, float q, int max_reduction)
     while (s * 2 <= max_reduction && std::abs(c) / float(s * 2) >= q)
         s *= 2;
     return s;
+}
+
+// The smallest reduced kernel diameter: the user's, or the budget's.
+float min_reduced_coc_px(const DefocusOptions& o)
+{
+    return o.min_reduced_coc_px > 0.0f ? o.min_reduced_coc_px
+                                       : settings_for_budget(o.budget_db).min_reduced_coc_px;
 }
 
 Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads)
@@ -481,8 +596,8 @@ Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float h
     }
     if (rungs.empty())
         rungs = coc_ladder(lo, hi, ratio);
-    Membership m = share_between_rungs(f, std::move(rungs), nthreads);
-    const float q = o.min_reduced_coc_px > 0.0f ? o.min_reduced_coc_px : set.min_reduced_coc_px;
+    Membership m  = share_between_rungs(f, std::move(rungs), nthreads);
+    const float q = min_reduced_coc_px(o);
     for (float c : m.coc_px)
         m.reduction.push_back(reduction_for(c, q, o.max_reduction));
     return m;
@@ -504,7 +619,7 @@ void fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads
                 // Only pixels with something behind them in depth can have lost it.
                 if (i < 0 || f.coc[size_t(i)] >= farthest)
                     continue;
-                const float* px = f.img.rgba.data() + size_t(i) * 4;
+                const float* px = f.linear().data() + size_t(i) * 4;
                 if (px[3] <= d[3])
                     continue;
                 // Only the coverage the source had and the layers lost.
@@ -700,6 +815,43 @@ void apply_bloom(WorkImage& w, float threshold, float gain, int nthreads)
     });
 }
 
+// Iris mode: f.img's colour into iris space (see IrisSpace), the linear copy kept for the
+// disocclusion fill. False + err when |k| times a channel's range exceeds 80.
+bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
+{
+    std::array<float, 3> lo, hi;
+    lo.fill(std::numeric_limits<float>::infinity());
+    hi.fill(-std::numeric_limits<float>::infinity());
+    for (size_t i = 0; i < f.img.rgba.size(); i += 4)
+        if (f.img.rgba[i + 3] > 0.0f)
+            for (size_t c = 0; c < 3; ++c) {
+                const float x = f.img.rgba[i + c] / f.img.rgba[i + 3];
+                lo[c]         = std::min(lo[c], x);
+                hi[c]         = std::max(hi[c], x);
+            }
+    f.iris.k = k;
+    for (size_t c = 0; c < 3; ++c) {
+        if (!(hi[c] >= lo[c]))
+            lo[c] = hi[c] = 0.0f;  // no covered pixel
+        if (std::abs(double(k)) * (double(hi[c]) - double(lo[c])) > 80.0) {
+            err = format("iris {} times channel {}'s range {} .. {} exceeds 80: exp() would overflow; "
+                         "lower iris",
+                         k, "RGB"[c], lo[c], hi[c]);
+            return false;
+        }
+        f.iris.shift[c] = k > 0.0f ? lo[c] : hi[c];
+    }
+    f.linear_rgba = f.img.rgba;
+    parallel_for_chunks(0, int64_t(f.img.rgba.size() / 4), 4096, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i) {
+            float* p = f.img.rgba.data() + size_t(i) * 4;
+            for (size_t c = 0; c < 3; ++c)
+                p[c] = p[3] > 0.0f ? p[3] * std::exp(k * (p[c] / p[3] - f.iris.shift[c])) : 0.0f;
+        }
+    });
+    return true;
+}
+
 // Each pixel takes the nearest (smallest signed) CoC within `r` px: a separable min filter.
 void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads)
 {
@@ -754,6 +906,10 @@ bool check_options(const DefocusOptions& o, std::string& err)
     if (!std::isfinite(o.bloom_threshold) || !(o.bloom_gain >= 0.0f && o.bloom_gain <= 1e4f)) {
         err = format("bloom threshold {} / gain {}: finite, gain 0..10000", o.bloom_threshold,
                      o.bloom_gain);
+        return false;
+    }
+    if (!(std::abs(o.iris) <= 1000.0f)) {
+        err = format("iris {} is outside -1000..1000", o.iris);
         return false;
     }
     if (o.depth_dilate_px < 0 || o.depth_dilate_px > 64) {
@@ -823,6 +979,8 @@ bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, Defoc
         dilate_nearest(f.coc, f.data.width(), f.data.height(), o.depth_dilate_px, nthreads);
     if (o.bloom_gain != 1.0f)
         apply_bloom(f.img, o.bloom_threshold, o.bloom_gain, nthreads);
+    if (o.iris != 0.0f && !to_iris_space(f, o.iris, nthreads, err))
+        return false;
 
     const auto [lo, hi] = std::minmax_element(f.coc.begin(), f.coc.end());
     rep.min_coc_px      = f.coc.empty() ? 0.0f : *lo;
@@ -833,8 +991,16 @@ bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, Defoc
         const OIIO::ImageSpec& s = src.spec();
         const OIIO::ROI display(s.full_x, s.full_x + s.full_width, s.full_y, s.full_y + s.full_height);
         const OIIO::ROI limit = OIIO::roi_union(display, f.data);
-        // Half the largest kernel: how far bokeh spread past the data window.
-        const int gx = int(std::ceil(0.5f * extreme)), gy = int(std::ceil(0.5f * extreme * o.aspect));
+        // Half the largest kernel: how far bokeh spread past the data window; a layer in a
+        // buffer reduced by s reaches up to 1.5 s px farther (its box and the bilinear
+        // enlargement).
+        int spill = 0;
+        if (o.method == DefocusMethod::Auto || o.method == DefocusMethod::Layers) {
+            const int s = reduction_for(extreme, min_reduced_coc_px(o), o.max_reduction);
+            spill       = s > 1 ? (3 * s + 1) / 2 : 0;
+        }
+        const int gx = int(std::ceil(0.5f * extreme)) + spill;
+        const int gy = int(std::ceil(0.5f * extreme * o.aspect)) + spill;
         f.out = OIIO::roi_intersection(grown(f.data, gx, gy), limit);
     }
     f.out.chbegin = 0;
@@ -869,7 +1035,10 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
     Plane out(f.out.width(), f.out.height(), 4);
     std::fill_n(out.px.get(), out.size(), 0.0f);
     switch (rep.method) {
-    case DefocusMethod::Gather: gather(out, f, opts, rep.min_coc_px, rep.max_coc_px, nthreads); break;
+    case DefocusMethod::Gather:
+        gather(out, f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
+        from_iris_space(out, f.iris);  // the blend of levels, averaged in iris space
+        break;
     case DefocusMethod::Reference: {
         if ((rep.max_coc_px - rep.min_coc_px) / opts.reference_step_px > 65535.0f) {
             dst.errorfmt("defocus: CoC range {} .. {} px holds too many {} px steps; raise the "

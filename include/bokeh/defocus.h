@@ -46,6 +46,11 @@ struct DefocusOptions {
     /// multiplied by `bloom_gain` before the blur (ZDefocus's bloom). Gain 1 = off.
     float bloom_threshold = 1.0f;
     float bloom_gain      = 1.0f;
+    /// Iris mode (SEEDS.md section 3, as blur's `iris`): each layer averages
+    /// exp(iris * colour) weighted by coverage and returns log(mean) / iris, so bright
+    /// values dominate the bokeh as in a real lens. 0 = off; |iris| times each colour
+    /// channel's range must stay within 80.
+    float iris = 0.0f;
     /// Edge-halo remedy for anti-aliased (filtered) depth: each pixel takes the CoC of the
     /// nearest depth within this many pixels, so edge pixels whose depth was averaged
     /// between a foreground and a background go with the foreground. 0 = off.

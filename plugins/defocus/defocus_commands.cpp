@@ -110,6 +110,7 @@ bool read_options(CommandContext& c, const OIIO::ImageSpec& spec, bokeh::Defocus
     o.budget_db       = float(budget_db);
     o.bloom_threshold = float(v.get_float("bloom"));
     o.bloom_gain      = float(v.get_float("bloomgain"));
+    o.iris            = float(v.get_float("iris"));
     o.depth_dilate_px = v.get_int("zdilate");
     const std::string& border = v.get_string("border");
     o.border = border == "black"    ? bokeh::Border::Black
@@ -209,6 +210,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::String("budget", "40dB", "accuracy budget, PSNR against the reference"),
         OptionSpec::Float("bloom", 1.0, -1e30, 1e30, "bloom threshold (unpremultiplied colour)"),
         OptionSpec::Float("bloomgain", 1.0, 0.0, 1e4, "gain above the bloom threshold (1: off)"),
+        OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
+                          "iris mode: average exp(iris * colour), return log / iris (0: off)"),
         OptionSpec::Int("zdilate", 0, 0, 64,
                         "px: each pixel takes the nearest depth around it (remedy for "
                         "anti-aliased depth halos)"),

@@ -11,7 +11,7 @@ struct BenchArgs {
     int width = 1920, height = 1080;  ///< size of the built-in scenes
     std::string data_dir;             ///< ../shared/data, or empty to skip the real files
     std::string images_dir;           ///< where to write the picture sheet's JPEGs (or none)
-    int lrlv_focus_x = 300, lrlv_focus_y = 300;
+    std::vector<std::string> only;    ///< the defocus shots to run (empty: all)
 };
 
 /// Run the task, print a table, append CSV rows (blur task's columns; size_px = the

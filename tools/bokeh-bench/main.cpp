@@ -9,7 +9,7 @@
 // --task defocus runs the depth-defocus task instead (defocus_task.cpp).
 //
 //   bokeh-bench [--task blur|defocus] [--threads N] [--reps N] [--csv FILE] [--quick]
-//               [--size WxH] [--data DIR] [--images DIR]
+//               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b]
 
 #include "defocus_task.h"
 #include "gegl_peer.h"
@@ -105,6 +105,8 @@ int main(int argc, char* argv[])
             args.data_dir = argv[++i];
         else if (a == "--images" && i + 1 < argc)
             args.images_dir = argv[++i];
+        else if (a == "--scenes" && i + 1 < argc)
+            args.only = OIIO::Strutil::splits(argv[++i], ",");
         else if (a == "--reps" && i + 1 < argc)
             reps = std::max(1, std::atoi(argv[++i]));
         else if (a == "--csv" && i + 1 < argc)
@@ -114,7 +116,8 @@ int main(int argc, char* argv[])
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
                                  "usage: bokeh-bench [--task blur|defocus] [--threads N] [--reps N] "
-                                 "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR]\n",
+                                 "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
+                                 "[--scenes a,b]\n",
                          a.c_str());
             return 1;
         }
