@@ -1,0 +1,209 @@
+// resample_commands.cpp — reduced buffers from the command line: `--resize:filter=NAME WxH`
+// (also N% and Wx0, as oiiotool spells it), `--resample WxH` (oiiotool's, bilinear or
+// nearest, unfiltered), `--reduce:z=min|max|nearest|mean N` and
+// `--enlarge:filter=NAME N`. The work is bokeh::resize, resample, reduce and enlarge
+// (core/resample.cpp).
+
+#include <bokeh/plugin.h>
+#include <bokeh/resample.h>
+
+#include <cctype>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+
+#include <OpenImageIO/strutil.h>
+
+namespace {
+
+using bokeh::CommandContext;
+using bokeh::OptionSpec;
+using OIIO::Strutil::fmt::format;
+
+// A finite number that is all of `text`.
+bool parse_number(std::string_view text, double& v)
+{
+    const std::string s(text);
+    if (s.empty() || std::isspace(static_cast<unsigned char>(s[0])))
+        return false;
+    char* end = nullptr;
+    errno     = 0;
+    v         = std::strtod(s.c_str(), &end);
+    return errno == 0 && end == s.c_str() + s.size() && std::isfinite(v);
+}
+
+// oiiotool's size argument: "WxH", "N%" (both axes), or "Wx0" / "0xH" (the other from the
+// aspect ratio of the display window).
+bool parse_new_size(const std::string& arg, const OIIO::ImageSpec& spec, int& width, int& height,
+                    std::string& err)
+{
+    err = format("'{}' is not a size (WxH, N% or Wx0)", arg);
+    const int fw = spec.full_width, fh = spec.full_height;
+    if (!arg.empty() && arg.back() == '%') {
+        double percent = 0.0;
+        if (!parse_number(std::string_view(arg).substr(0, arg.size() - 1), percent) || percent <= 0.0)
+            return false;
+        width  = std::max(1, int(std::lround(fw * percent / 100.0)));
+        height = std::max(1, int(std::lround(fh * percent / 100.0)));
+    } else {
+        const size_t x = arg.find('x');
+        double w = 0.0, h = 0.0;
+        if (x == std::string::npos || !parse_number(std::string_view(arg).substr(0, x), w)
+            || !parse_number(std::string_view(arg).substr(x + 1), h) || w < 0.0 || h < 0.0
+            || w != std::floor(w) || h != std::floor(h) || (w == 0.0 && h == 0.0))
+            return false;
+        width  = w > 0.0 ? int(w) : std::max(1, int(std::lround(h * fw / fh)));
+        height = h > 0.0 ? int(h) : std::max(1, int(std::lround(w * fh / fw)));
+    }
+    if (width > (1 << 20) || height > (1 << 20)) {
+        err = format("size {}x{} is larger than 1048576", width, height);
+        return false;
+    }
+    return true;
+}
+
+bokeh::ResampleOptions resample_options(const CommandContext& c)
+{
+    bokeh::ResampleOptions o;
+    bokeh::parse_filter(c.options.get_string("filter"), o.filter);  // a Choice: always known
+    const std::string& border = c.options.get_string("border");
+    o.border = border == "black"    ? bokeh::Border::Black
+               : border == "mirror" ? bokeh::Border::Mirror
+                                    : bokeh::Border::Clamp;
+    o.gaussian_sigma = float(c.options.get_float("sigma"));
+    o.blur_sigma     = float(c.options.get_float("blur"));
+    o.fused_offset   = float(c.options.get_float("offset"));
+    o.clamp_negative = c.options.get_bool("clamp");
+    return o;
+}
+
+bool push(CommandContext& c, const std::shared_ptr<OIIO::ImageBuf>& buf)
+{
+    bokeh::StackImage out = c.inputs[0];
+    out.buf               = buf;
+    c.outputs.push_back(std::move(out));
+    return true;
+}
+
+bool resize_command(CommandContext& c)
+{
+    const OIIO::ImageBuf& src = *c.inputs[0].buf;
+    int w = 0, h = 0;
+    std::string err;
+    if (!parse_new_size(c.args[0], src.spec(), w, h, err))
+        return c.fail(err);
+    auto out = std::make_shared<OIIO::ImageBuf>();
+    if (!bokeh::resize(*out, src, w, h, resample_options(c), c.nthreads))
+        return c.fail(out->geterror());
+    return push(c, out);
+}
+
+bool resample_command(CommandContext& c)
+{
+    const OIIO::ImageBuf& src = *c.inputs[0].buf;
+    int w = 0, h = 0;
+    std::string err;
+    if (!parse_new_size(c.args[0], src.spec(), w, h, err))
+        return c.fail(err);
+    auto out = std::make_shared<OIIO::ImageBuf>();
+    if (!bokeh::resample(*out, src, w, h, c.options.get_int("interp") != 0, c.nthreads))
+        return c.fail(out->geterror());
+    return push(c, out);
+}
+
+bool reduce_command(CommandContext& c)
+{
+    double n = 0.0;
+    if (!parse_number(c.args[0], n) || n < 1.0 || n > 4096.0 || n != std::floor(n))
+        return c.fail(format("'{}' is not a reduction factor (a whole number 1..4096)", c.args[0]));
+    const std::string& z = c.options.get_string("z");
+    bokeh::ReduceOptions o;
+    o.depth = z == "max"       ? bokeh::Reducer::Max
+              : z == "nearest" ? bokeh::Reducer::NearestDepth
+              : z == "mean"    ? bokeh::Reducer::Mean
+                               : bokeh::Reducer::Min;
+    o.outside_is_black = c.options.get_bool("black");
+    auto out = std::make_shared<OIIO::ImageBuf>();
+    if (!bokeh::reduce(*out, *c.inputs[0].buf, int(n), o, c.nthreads))
+        return c.fail(out->geterror());
+    return push(c, out);
+}
+
+bool enlarge_command(CommandContext& c)
+{
+    double k = 0.0;
+    if (!parse_number(c.args[0], k))
+        return c.fail(format("'{}' is not a factor (a number >= 1)", c.args[0]));
+    auto out = std::make_shared<OIIO::ImageBuf>();
+    if (!bokeh::enlarge(*out, *c.inputs[0].buf, k, resample_options(c), c.nthreads))
+        return c.fail(out->geterror());
+    return push(c, out);
+}
+
+std::vector<OptionSpec> filter_options(const std::string& first)
+{
+    // The chosen default first (a Choice's default is its first word), then the rest.
+    std::vector<std::string> names = { first };
+    for (const std::string& n : bokeh::filter_names())
+        if (n != first)
+            names.push_back(n);
+    return {
+        OptionSpec::Choice("filter", names,
+                           "bilinear (= triangle), catmull-rom, bspline, lanczos2, lanczos3, "
+                           "gaussian, box (area-exact), nearest; enlarging only: reduced-blur, "
+                           "upscale-blur, upscale-blur-fused, upscale-blur-2stage"),
+        OptionSpec::Choice("border", { "clamp", "black", "mirror" }, "pixels outside the image"),
+        OptionSpec::Float("sigma", 0.0, 0.0, 64.0,
+                          "gaussian: sigma in source pixels (0: 0.65, the sharpest without Mach bands)"),
+        OptionSpec::Float("blur", 0.0, 0.0, 64.0, "reduced-blur: sigma at low resolution (0: 0.5)"),
+        OptionSpec::Float("offset", 0.0, 0.0, 64.0,
+                          "upscale-blur-fused: tap offset in source pixels (0: 0.354)"),
+        OptionSpec::Bool("clamp", false,
+                         "set negative results to 0 (catmull-rom, lanczos ring below 0 near bright edges)"),
+    };
+}
+
+}  // namespace
+
+BOKEH_PLUGIN_EXPORT int bokeh_plugin_abi_version() { return BOKEH_PLUGIN_ABI_VERSION; }
+
+BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
+{
+    bokeh::Command resize = bokeh::make_command(
+        "--resize", "WxH", 1,
+        "Resize to WxH (N%: both axes; Wx0: keep the aspect ratio), display windows mapped onto "
+        "each other as oiiotool's --resize; reducing stretches the filter to the new pixel",
+        resize_command, filter_options("lanczos3"));
+    resize.needs_scene_linear = true;
+    r.add(resize);
+
+    bokeh::Command resample = bokeh::make_command(
+        "--resample", "WxH", 1,
+        "Resample to WxH without filtering (oiiotool's --resample): bilinear, or the nearest "
+        "pixel with :interp=0",
+        resample_command,
+        { OptionSpec::Int("interp", 1, 0, 1, "1: bilinear; 0: nearest pixel") });
+    resample.needs_scene_linear = true;
+    r.add(resample);
+
+    bokeh::Command reduce = bokeh::make_command(
+        "--reduce", "N", 1,
+        "Reduce by a whole factor N with the area-exact box: each N x N block becomes one pixel "
+        "(colour: mean; depth: :z=)",
+        reduce_command,
+        { OptionSpec::Choice("z", { "min", "max", "nearest", "mean" },
+                             "depth channels (Z, ZBack): min (the nearest surface), max, nearest "
+                             "(the value of the pixel of least Z), mean"),
+          OptionSpec::Bool("black", false,
+                           "count block pixels outside the data window as 0 (keeps the energy)") });
+    reduce.needs_scene_linear = true;
+    r.add(reduce);
+
+    bokeh::Command enlarge = bokeh::make_command(
+        "--enlarge", "N", 1,
+        "Enlarge by the factor N (>= 1, fractions allowed; pixel centres as --resize, anchored at "
+        "0 so that --reduce N --enlarge N puts pixels back)",
+        enlarge_command, filter_options("bilinear"));
+    enlarge.needs_scene_linear = true;
+    r.add(enlarge);
+}

@@ -1,0 +1,168 @@
+// bokehtool --resize, --resample, --reduce and --enlarge as a user runs them: the same
+// pixels as the library functions, the sizes oiiotool's spellings give, and bad input.
+#include <bokeh/resample.h>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <OpenImageIO/deepdata.h>
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/strutil.h>
+
+#include "test_util.h"
+
+using namespace bokeh_test;
+using OIIO::Strutil::fmt::format;
+
+namespace {
+
+// A float RGBA + Z image of 40 x 30 with a light, written to `dir`/in.exr.
+std::string make_input(const std::string& dir, OIIO::ImageBuf& img)
+{
+    img = rgbaz_image(40, 30, [](int x, int y) {
+        const float light = x == 13 && y == 11 ? 50.0f : 0.0f;
+        return std::array<float, 5>{ 0.5f + 0.4f * std::sin(0.3f * x) + light, 0.02f * y, 0.3f, 1.0f,
+                                     1.0f + float((x * 7 + y * 3) % 13) };
+    });
+    const std::string path = dir + "/in.exr";
+    EXPECT_TRUE(img.write(path));
+    return path;
+}
+
+OIIO::ImageBuf read(const std::string& path)
+{
+    OIIO::ImageBuf img(path);
+    EXPECT_TRUE(img.read(0, 0, true, OIIO::TypeFloat)) << path << ": " << img.geterror();
+    return img;
+}
+
+// One error line "bokehtool ERROR: <what>", exit 1, nothing at `output`.
+void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output)
+{
+    EXPECT_EQ(r.status, 1) << r.err;
+    EXPECT_TRUE(OIIO::Strutil::starts_with(r.err, "bokehtool ERROR: ")) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
+    EXPECT_NE(r.err.find(what), std::string::npos) << "expected '" << what << "' in: " << r.err;
+    EXPECT_FALSE(exists(output)) << output << " was written";
+}
+
+}  // namespace
+
+TEST(CliResample, ResizeResampleReduceEnlargeGiveTheLibrarysPixels)
+{
+    const std::string dir = fresh_dir("cli_resample");
+    OIIO::ImageBuf src;
+    const std::string in = make_input(dir, src);
+    const RunResult r = bokehtool(format(
+        "{0} --resize:filter=catmull-rom 100x70 -o {1}/resize.exr "
+        "{0} --resize 50% -o {1}/half.exr "
+        "{0} --resize 80x0 -o {1}/aspect.exr "
+        "{0} --resample 17x13 -o {1}/resample.exr "
+        "{0} --resample:interp=0 17x13 -o {1}/nearest.exr "
+        "{0} --reduce 4 -o {1}/reduce.exr "
+        "{0} --reduce:z=nearest 4 -o {1}/reduce_nearest.exr "
+        "{0} --enlarge:filter=upscale-blur 4 -o {1}/enlarge.exr "
+        "{0} --enlarge:filter=lanczos3:clamp=1 2.5 -o {1}/clamped.exr "
+        "{0} --reduce 8 --enlarge:filter=gaussian 8 -o {1}/roundtrip.exr",
+        in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+
+    auto expect_same = [&](const std::string& name, const OIIO::ImageBuf& want) {
+        SCOPED_TRACE(name);
+        const OIIO::ImageBuf got = read(dir + "/" + name);
+        EXPECT_EQ(got.roi(), want.roi());
+        EXPECT_EQ(got.roi_full(), want.roi_full());
+        EXPECT_EQ(max_difference(got, want), 0.0);
+    };
+    bokeh::ResampleOptions cr;
+    cr.filter = bokeh::ResampleFilter::CatmullRom;
+    OIIO::ImageBuf want;
+    ASSERT_TRUE(bokeh::resize(want, src, 100, 70, cr));
+    expect_same("resize.exr", want);
+    bokeh::ResampleOptions l3;
+    l3.filter = bokeh::ResampleFilter::Lanczos3;  // --resize's default, as oiiotool reducing
+    ASSERT_TRUE(bokeh::resize(want, src, 20, 15, l3));
+    expect_same("half.exr", want);
+    ASSERT_TRUE(bokeh::resize(want, src, 80, 60, l3));
+    expect_same("aspect.exr", want);
+    ASSERT_TRUE(bokeh::resample(want, src, 17, 13, true));
+    expect_same("resample.exr", want);
+    ASSERT_TRUE(bokeh::resample(want, src, 17, 13, false));
+    expect_same("nearest.exr", want);
+    ASSERT_TRUE(bokeh::reduce(want, src, 4));
+    expect_same("reduce.exr", want);
+    bokeh::ReduceOptions nearest;
+    nearest.depth = bokeh::Reducer::NearestDepth;
+    ASSERT_TRUE(bokeh::reduce(want, src, 4, nearest));
+    expect_same("reduce_nearest.exr", want);
+    bokeh::ResampleOptions ub;
+    ub.filter = bokeh::ResampleFilter::UpscaleBlur;
+    ASSERT_TRUE(bokeh::enlarge(want, src, 4, ub));
+    expect_same("enlarge.exr", want);
+    l3.clamp_negative = true;
+    ASSERT_TRUE(bokeh::enlarge(want, src, 2.5, l3));
+    expect_same("clamped.exr", want);
+    EXPECT_GE(OIIO::ImageBufAlgo::computePixelStats(want).min[0], 0.0f) << "the light would ring below 0";
+
+    // Sizes: 30 rows reduced by 8 are 4 blocks, enlarged back 32 rows (crop to return to 30).
+    const OIIO::ImageBuf round = read(dir + "/roundtrip.exr");
+    EXPECT_EQ(round.roi(), OIIO::ROI(0, 40, 0, 32, 0, 1, 0, 5));
+    // Depth by min by default: the reduced Z is the smallest of each block.
+    const OIIO::ImageBuf reduced = read(dir + "/reduce.exr");
+    EXPECT_EQ(reduced.spec().channelnames, src.spec().channelnames);
+    float lowest = 1e9f;
+    for (int y = 0; y < 4; ++y)
+        for (int x = 0; x < 4; ++x)
+            lowest = std::min(lowest, src.getchannel(x, y, 0, 4));
+    EXPECT_EQ(reduced.getchannel(0, 0, 0, 4), lowest);
+}
+
+TEST(CliResample, HelpNamesTheFilters)
+{
+    const RunResult r = bokehtool("--help --enlarge");
+    ASSERT_EQ(r.status, 0) << r.err;
+    for (const char* s : { "upscale-blur-fused", "lanczos2", "bspline", ":clamp=", "bokeh_resample.so" })
+        EXPECT_NE(r.out.find(s), std::string::npos) << s << " in:\n" << r.out;
+    const RunResult z = bokehtool("--help --reduce");
+    EXPECT_NE(z.out.find(":z="), std::string::npos) << z.out;
+}
+
+TEST(CliResample, BadInputFailsCleanly)
+{
+    const std::string dir = fresh_dir("cli_resample_bad");
+    OIIO::ImageBuf src;
+    const std::string in  = make_input(dir, src);
+    const std::string out = dir + "/out.exr";
+    struct Case {
+        std::string args, expected;
+    };
+    const Case cases[] = {
+        { "--resize 12x", "--resize: '12x' is not a size (WxH, N% or Wx0)" },
+        { "--resize 0x0", "'0x0' is not a size" },
+        { "--resize -5%", "'-5%' is not a size" },
+        { "--resize 10.5x4", "'10.5x4' is not a size" },
+        { "--resize:filter=sinc 10x10", "--resize: option 'filter' = 'sinc' is not one of" },
+        { "--resize:filter=upscale-blur 10x10", "--resize: resize: filter upscale-blur only enlarges" },
+        { "--resample 5", "--resample: '5' is not a size" },
+        { "--resample:interp=2 5x5", "option 'interp' = 2 is out of range [0, 1]" },
+        { "--reduce 0", "--reduce: '0' is not a reduction factor (a whole number 1..4096)" },
+        { "--reduce 2.5", "'2.5' is not a reduction factor" },
+        { "--reduce:z=median 2", "--reduce: option 'z' = 'median' is not one of: min, max, nearest, mean" },
+        { "--enlarge abc", "--enlarge: 'abc' is not a factor (a number >= 1)" },
+        { "--enlarge 0.5", "--enlarge: enlarge: factor 0.5 is outside 1..256 (to reduce, use reduce or resize)" },
+        { "--enlarge:sigma=-1 2", "option 'sigma' = -1 is out of range" },
+        { "--enlarge", "--enlarge" },
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.args);
+        expect_clean_failure(bokehtool(in + " " + c.args + " -o " + out), c.expected, out);
+    }
+    const std::string deep = shared_data("openexr-images/LowResLeftView_Balls.exr");
+    if (!deep.empty()) {
+        expect_clean_failure(bokehtool(deep + " --enlarge 2 -o " + out),
+                             "deep images cannot be resampled; flatten them first", out);
+    }
+}
