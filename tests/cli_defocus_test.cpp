@@ -103,6 +103,10 @@ TEST(CliDefocus, VerboseNamesTheLayers)
     for (const std::string& l : lines)
         found = found || (l.find("layers") != std::string::npos && l.find("CoC") != std::string::npos);
     EXPECT_TRUE(found) << "no line with 'layers' and 'CoC' in:\n" << r.out;
+    // quality= is method= under the spelling.
+    const RunResult g = bokehtool(format("-v {} --defocus:focus=6:fstop=2:quality=gather -o {}/g.exr", kScene, dir));
+    ASSERT_EQ(g.status, 0) << g.err;
+    EXPECT_NE(g.out.find("gather"), std::string::npos) << g.out;
     // Without -v it says nothing.
     const RunResult q = bokehtool(format("{} --defocus:focus=6:fstop=2 -o {}/q.exr", kScene, dir));
     ASSERT_EQ(q.status, 0) << q.err;
@@ -122,6 +126,9 @@ TEST(CliDefocus, BadInputFailsCleanly)
         { format("{} --defocus:unit=furlong -o {}", kScene, out), "furlong" },
         { format("{} --ch R,G,B --defocus:focus=6 -o {}", kScene, out), "no depth channel" },
         { format("{} --defocus:focus=0.01 -o {}", kScene, out), "focal length" },
+        { format("{} --defocus:quality=gather:method=layers -o {}", kScene, out), "disagree" },
+        { format("{} --defocus:iris=5000 -o {}", kScene, out), "iris" },
+        { format("{} --defocus:fstop=2:iris=100 -o {}", kScene, out), "exceeds 80" },
     };
     for (const Case& k : cases) {
         SCOPED_TRACE(k.args);

@@ -93,7 +93,11 @@ bool read_options(CommandContext& c, const OIIO::ImageSpec& spec, bokeh::Defocus
     o.aperture.hole         = float(v.get_float("hole"));
     o.aspect                = float(v.get_float("aspect"));
 
-    const std::string& method = v.get_string("method");
+    // quality= is the spelling, method= the name the docs and -v use; one option.
+    if (v.given("quality") && v.given("method") && v.get_string("quality") != v.get_string("method"))
+        return c.fail(format("quality={} and method={} disagree; give one", v.get_string("quality"),
+                             v.get_string("method")));
+    const std::string& method = v.given("quality") ? v.get_string("quality") : v.get_string("method");
     o.method = method == "layers"      ? bokeh::DefocusMethod::Layers
                : method == "gather"    ? bokeh::DefocusMethod::Gather
                : method == "reference" ? bokeh::DefocusMethod::Reference
@@ -180,6 +184,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Choice("method", { "auto", "layers", "gather", "reference" },
                            "auto: layers set by the budget; gather: the seed's method; "
                            "reference: exact, slow"),
+        OptionSpec::Choice("quality", { "auto", "layers", "gather", "reference" },
+                           "the same as method"),
         OptionSpec::Choice("output", { "image", "coc", "focalplane", "layers" },
                            "image, or a diagnostic: signed CoC map, focal-plane view (near red, "
                            "focus green, far blue), layer map"),
