@@ -174,7 +174,7 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
                                      o.method    = bokeh::DefocusMethod::Auto;
                                      o.budget_db = db;
                                  } });
-        variants.push_back({ "layers 40 dB, full resolution", [](bokeh::DefocusOptions& o) {
+        variants.push_back({ "layers 40 dB at full resolution", [](bokeh::DefocusOptions& o) {
                                 o.method        = bokeh::DefocusMethod::Layers;
                                 o.max_reduction = 1;
                             } });
