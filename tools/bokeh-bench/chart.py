@@ -18,7 +18,10 @@ It also prints, per task, a Markdown table of the Pareto-front points for the do
 Methods are compared at equal kernel size: a small kernel is no substitute for a large
 one, so a front across sizes would mostly list the smallest size of the fastest method.
 
-    python3 tools/bokeh-bench/chart.py CSV OUTDIR [--title-suffix TEXT]
+    python3 tools/bokeh-bench/chart.py CSV OUTDIR [--title-suffix TEXT] [--size-label TEXT]
+
+--size-label names what size_px holds where it is not a kernel size (the resample task
+writes the reduction factor there: --size-label "reduction factor").
 
 Columns are read by header name; columns it does not know are ignored. Needs only the
 standard library and matplotlib (Debian: python3-matplotlib).
@@ -34,6 +37,7 @@ import sys
 REQUIRED = ("task", "method", "peer", "size_px", "median_ms", "psnr_db_tonemapped")
 EXACT_PSNR = 999.0   # what bokeh-bench writes when the result is identical to the reference
 BUDGET_DB = 40.0
+SIZE_LABEL = "kernel size, px"   # what size_px holds, for the labels
 PROG = "chart.py"
 
 
@@ -159,10 +163,12 @@ def ms_text(ms):
     return f"{ms:.0f}" if ms >= 100 else f"{ms:.1f}" if ms >= 10 else f"{ms:.2f}"
 
 
-def markdown_front(task, front, labels):
+def markdown_front(task, front, labels, size_label=SIZE_LABEL):
     if not front:
-        return f"### {task}\n\nNo Pareto front: one result per kernel size, nothing to compare."
-    lines = [f"### {task}", "", "| method | size px | median ms | PSNR dB |",
+        name = size_label.split(",")[0]   # "kernel size, px" -> "kernel size"
+        return f"### {task}\n\nNo Pareto front: one result per {name}, nothing to compare."
+    size_head = "size px" if size_label == SIZE_LABEL else size_label
+    lines = [f"### {task}", "", f"| method | {size_head} | median ms | PSNR dB |",
              "|---|---:|---:|---:|"]
     for p in front:
         db = "exact" if p["exact"] else f"{p['psnr']:.1f}"
@@ -236,7 +242,7 @@ SIZE_LABEL_OFFSETS = [(5, 3), (5, -11), (-5, 3), (-5, -11), (5, 11), (5, -19), (
                       (-5, -19), (9, -4), (-9, -4)]
 
 
-def draw_task(plt, ticker, task, rows, base, suffix):
+def draw_task(plt, ticker, task, rows, base, suffix, size_label=SIZE_LABEL):
     """Write base.png and base.svg for one task; return its Markdown front table."""
     series = series_of(rows)
     # tab10 without its grey, which the grid and budget line use; peers are hollow, so
@@ -338,7 +344,7 @@ def draw_task(plt, ticker, task, rows, base, suffix):
     ax.yaxis.set_minor_locator(ticker.NullLocator())
     ax.set_ylim(low, high)
     ax.grid(True, which="major", color="0.9", linewidth=0.6)
-    ax.set_title("error vs time (labels: kernel size, px)", fontsize=10)
+    ax.set_title(f"error vs time (labels: {size_label})", fontsize=10)
 
     # Right panel: cost vs kernel size. Sizes usually double from case to case, so a log x
     # axis spaces them evenly, and on log-log a slope of 1 or 2 reads as O(size), O(size^2).
@@ -365,10 +371,13 @@ def draw_task(plt, ticker, task, rows, base, suffix):
         lo, hi = mid / math.sqrt(10), mid * math.sqrt(10)
     ax_size.set_ylim(lo / 1.25, hi * 1.25)
     log_ticks(ax_size.yaxis, ticker, [lo, hi])
-    ax_size.set_xlabel("kernel size, px (log)")
+    ax_size.set_xlabel(f"{size_label} (log)")
     ax_size.set_ylabel("median time, ms (log)")
     ax_size.grid(True, which="major", color="0.9", linewidth=0.6)
-    ax_size.set_title("time vs kernel size (flat = cost independent of size)", fontsize=10)
+    size_name = size_label.split(",")[0]   # "kernel size, px" -> "kernel size"
+    ax_size.set_title(f"time vs {size_name}"
+                      + (" (flat = cost independent of size)" if size_label == SIZE_LABEL else ""),
+                      fontsize=10)
 
     fig.suptitle(f"{task}: speed vs accuracy" + (f" {suffix}" if suffix else ""),
                  fontsize=13)
@@ -398,7 +407,7 @@ def draw_task(plt, ticker, task, rows, base, suffix):
     fig.savefig(base + ".png", dpi=100, metadata={"Software": None})
     fig.savefig(base + ".svg", metadata={"Date": None})
     plt.close(fig)
-    return markdown_front(task, front, labels)
+    return markdown_front(task, front, labels, size_label)
 
 
 def main():
@@ -406,6 +415,8 @@ def main():
     ap.add_argument("csv", help="CSV written by bokeh-bench --csv")
     ap.add_argument("outdir", help="directory for <task>.png and <task>.svg")
     ap.add_argument("--title-suffix", default="", help="text appended to every chart title")
+    ap.add_argument("--size-label", default=SIZE_LABEL,
+                    help=f"what size_px holds (default: {SIZE_LABEL!r})")
     args = ap.parse_args()
 
     task_names, rows = read_rows(args.csv)
@@ -444,7 +455,8 @@ def main():
         base += "" if n == 1 else f"_{n}"
         bases.add(base)
         try:
-            tables.append(draw_task(plt, ticker, task, task_rows, base, args.title_suffix))
+            tables.append(draw_task(plt, ticker, task, task_rows, base, args.title_suffix,
+                                    args.size_label))
         except OSError as e:
             fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
     print("\n\n".join(tables))

@@ -6,13 +6,16 @@
 // on the whole frame would take minutes for large kernels). Error: RMSE in linear light
 // and PSNR after the fixed tone map x / (1 + x) per channel (peak 1), stated in the CSV.
 //
-// --task defocus runs the depth-defocus task instead (defocus_task.cpp).
+// --task defocus runs the depth-defocus task instead (defocus_task.cpp); --task resample
+// the reduced-buffer and enlargement study (resample_task.cpp), which writes two more
+// tables beside --csv FILE: <FILE stem>_artifacts.csv and <FILE stem>_figures.csv.
 //
-//   bokeh-bench [--task blur|defocus] [--threads N] [--reps N] [--csv FILE] [--quick]
+//   bokeh-bench [--task blur|defocus|resample] [--threads N] [--reps N] [--csv FILE] [--quick]
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b]
 
 #include "defocus_task.h"
 #include "gegl_peer.h"
+#include "resample_task.h"
 
 #include <bokeh/blur.h>
 #include <bokeh/metrics.h>
@@ -22,6 +25,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <string>
@@ -95,7 +99,8 @@ int main(int argc, char* argv[])
         if (a == "--threads" && i + 1 < argc)
             threads = std::atoi(argv[++i]);
         else if (a == "--task" && i + 1 < argc && (std::string(argv[i + 1]) == "blur"
-                                                   || std::string(argv[i + 1]) == "defocus"))
+                                                   || std::string(argv[i + 1]) == "defocus"
+                                                   || std::string(argv[i + 1]) == "resample"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -115,7 +120,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b]\n",
                          a.c_str());
@@ -131,6 +136,23 @@ int main(int argc, char* argv[])
         if (!bokeh_bench::run_defocus_task(args, rows))
             return 1;
         return write_csv(csv, rows);
+    }
+    if (task == "resample") {
+        args.threads = threads;
+        args.reps    = reps;
+        std::vector<std::string> artifacts, figures;
+        if (!bokeh_bench::run_resample_task(args, rows, artifacts, figures))
+            return 1;
+        // The extra tables beside FILE: <stem>_artifacts.csv, <stem>_figures.csv.
+        auto beside = [&](const char* suffix) {
+            if (csv.empty())
+                return std::string();
+            std::filesystem::path p(csv);
+            return (p.parent_path() / (p.stem().string() + suffix)).string();
+        };
+        const int status = write_csv(csv, rows);
+        return std::max({ status, write_csv(beside("_artifacts.csv"), artifacts),
+                          write_csv(beside("_figures.csv"), figures) });
     }
 
     bokeh::SceneOptions so;
