@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <exception>
 #include <iostream>
+#include <string_view>
 
 #include <OpenImageIO/argparse.h>
 #include <OpenImageIO/filesystem.h>
@@ -281,9 +282,17 @@ void Host::print_plugins() const
 
 bool Host::fail(const std::string& command, const std::string& why)
 {
+    // Library errors name their function ("resize: ..."); after "--resize: " that is the
+    // same word twice.
+    std::string_view reason = why;
+    const std::string_view bare = std::string_view(command).substr(
+        std::min(command.find_first_not_of('-'), command.size()));
+    if (!bare.empty() && reason.size() > bare.size() + 2 && reason.substr(0, bare.size()) == bare
+        && reason.substr(bare.size(), 2) == ": ")
+        reason.remove_prefix(bare.size() + 2);
     if (!m_failed)
         std::cerr << format("{} ERROR: {}{}{}{}\n", kProgram, command,
-                            command.empty() ? "" : ": ", why, m_where);
+                            command.empty() ? "" : ": ", reason, m_where);
     m_failed = true;
     return false;
 }
