@@ -46,10 +46,18 @@ double median_ms(const std::function<void()>& fn, int reps)
     return t[t.size() / 2];
 }
 
+// Whether --scenes asks for the shot `name` (all when it is empty).
+bool wanted(const BenchArgs& a, const std::string& name)
+{
+    return a.only.empty() || std::find(a.only.begin(), a.only.end(), name) != a.only.end();
+}
+
 std::vector<Shot> shots(const BenchArgs& a)
 {
     std::vector<Shot> out;
     for (const std::string& name : bokeh::scene_names()) {
+        if (!wanted(a, name))
+            continue;
         Shot s;
         s.name = name;
         bokeh::SceneOptions so;
@@ -67,7 +75,7 @@ std::vector<Shot> shots(const BenchArgs& a)
     // Beachball frame 1: Z = 0 outside the ball (no depth, far); Z is 7..11 on the ball,
     // read as metres. Focus on the window centre (Z = 9.0), 100 mm f/1.4 on full frame:
     // the ball's edges reach ~6 px, its silhouette against "no depth" 45 px.
-    {
+    if (wanted(a, "beachball")) {
         Shot s;
         s.name = "beachball";
         if (s.image.init_spec(a.data_dir + "/openexr-images/Beachball_singlepart.0001.exr", 0, 0)
@@ -85,7 +93,7 @@ std::vector<Shot> shots(const BenchArgs& a)
     // nearest sample's depth. Z is 72..300 on the objects; read as centimetres it is a
     // 0.7..3 m model forest. Focus on the large red ball (pixel 780,390, Z = 197), 50 mm
     // f/2: the nearest cone gets -32 px, the empty background +18 px.
-    {
+    if (wanted(a, "lowresleftview")) {
         OIIO::ImageBuf merged;
         bool ok = true;
         for (const char* part : { "Balls", "Leaves", "Trunks" }) {
@@ -131,11 +139,17 @@ void write_preview(const OIIO::ImageBuf& img, const std::string& path, int threa
 
 bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
 {
+    std::vector<Shot> all = shots(a);
+    for (const std::string& name : a.only)
+        if (std::none_of(all.begin(), all.end(), [&](const Shot& s) { return s.name == name; })) {
+            std::fprintf(stderr, "bokeh-bench: --scenes: '%s' is not a shot here (the built-in scenes, "
+                                 "or beachball / lowresleftview with --data)\n",
+                         name.c_str());
+            return false;
+        }
     std::printf("\n%-16s %-34s %8s %10s %10s %8s\n", "scene", "method", "max CoC", "median ms",
                 "RMSE", "PSNR dB");
-    for (Shot& shot : shots(a)) {
-        if (!a.only.empty() && std::find(a.only.begin(), a.only.end(), shot.name) == a.only.end())
-            continue;
+    for (Shot& shot : all) {
         bokeh::DefocusOptions ref_opts = shot.base;
         ref_opts.method                = bokeh::DefocusMethod::Reference;
         OIIO::ImageBuf ref;
