@@ -1,9 +1,29 @@
 // blur.cpp — uniform blurs: box by running sums, Gaussian by separable convolution or
 // three boxes, disk and polygon by row spans, and the brute-force reference.
 //
-// Every method is a "valid" convolution of a padded plane: the source region the output
-// needs, grown by the kernel radius and filled past the data window by the border rule,
-// is copied once into a contiguous float plane; the methods read only inside it.
+// The exact box and row-span methods (and the bands of blur_approx.cpp) read the source
+// ImageBuf and write the destination directly, tile by tile ("direct" paths below); the
+// others, and every method in iris mode, work as a "valid" convolution of a padded plane:
+// the source region the output needs, grown by the kernel radius and filled past the data
+// window by the border rule, copied once into a contiguous float plane.
+//
+// What changed and why (speed, issue 3): the plane path cost a padded copy and a copy out
+// (~14 ms at 1080p) and, for spans and bands, a whole-frame double prefix plane of 68-77 MB
+// (~60 ms); every pass was memory-bound. The direct paths keep their double sums per tile
+// or column strip, in L2 (the sums also restart per tile, so they stay small: no drift
+// from a 1e6 pixel), fuse the border rule into reading, and write the result once.
+// * Box: per column strip (256 px; 512 for wide boxes), a horizontal running sum per
+//   source row into a ring of the last 2 ry + 2 rows, and the vertical running sum over
+//   the ring straight into `dst`.
+// * Spans: per 256 x (>= 64)-pixel tile, the rows' prefix sums, then 64 x 8 sub-tiles
+//   whose double accumulators stay in L1, each prefix row visited once per sub-tile and
+//   up to four spans added per pass (add_spans); with 4 channels each prefix row is kept
+//   twice, the copy one pixel on, so every span's vector loads start on a 64-byte boundary.
+// * Bands: the same code on a per-tile summed-area table while the kernel reaches at most
+//   64 px (beyond, recomputing the tiles' margins costs more than the whole-frame table).
+// Known limits: the span cost still grows linearly with the diameter (about 2.6 spans per
+// kernel row: 161 at 63 px); a tile recomputes the prefix sums of its kernel-high margin,
+// a share that grows with the kernel (tile height >= kernel height).
 //
 // Row spans (disk, polygon): each kernel row's weight profile is cut into horizontal
 // bars ("skyline" decomposition: one bar per rise of the profile), so a kernel becomes a
@@ -14,7 +34,8 @@
 // output rows are computed in column strips so the rows of prefix sums in use stay in L2.
 //
 // Running sums (box): one add and one subtract per pixel per pass whatever the width,
-// in double; a fractional width adds its two partial end pixels explicitly.
+// in double; a fractional width adds its two partial end pixels explicitly. Channel counts
+// 1, 3 and 4 slide a running sum along the row; other counts take a row's prefix sums.
 //
 // Fast Gaussian: three equal boxes whose variance adds up to sigma^2 (central limit;
 // Wells 1986, "Efficient synthesis of Gaussian filters by cascaded uniform filters"). The
@@ -199,6 +220,160 @@ Plane box_blur(const Plane& in, const std::vector<double>& wx, const std::vector
     return box_vertical(box_horizontal(in, BoxPass(wx), nthreads), BoxPass(wy), nthreads);
 }
 
+// The first 64-byte boundary at or after p (p from an allocation of 8 doubles more).
+double* aligned64(double* p)
+{
+    return p + (8 - (reinterpret_cast<uintptr_t>(p) / sizeof(double)) % 8) % 8;
+}
+
+// p[(x + 1) nc + c] = sum of v[0 .. x] in channel c, p[c] = 0, for x < npx. Four channels
+// keep their running sums in registers (one vector add per pixel); others go through
+// memory.
+void row_prefix(double* p, const float* v, size_t npx, int nc)
+{
+    if (nc == 4) {
+        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+        p[0] = p[1] = p[2] = p[3] = 0.0;
+        for (size_t x = 0; x < npx; ++x) {
+            a0 += double(v[4 * x]);
+            a1 += double(v[4 * x + 1]);
+            a2 += double(v[4 * x + 2]);
+            a3 += double(v[4 * x + 3]);
+            double* o = p + 4 * (x + 1);
+            o[0] = a0, o[1] = a1, o[2] = a2, o[3] = a3;
+        }
+        return;
+    }
+    const size_t ncs = size_t(nc);
+    std::fill_n(p, ncs, 0.0);
+    for (size_t i = 0, e = npx * ncs; i < e; ++i)
+        p[i + ncs] = p[i] + double(v[i]);
+}
+
+// The box straight from the source ImageBuf into `dst` (no padded plane, no middle plane,
+// no copy out). Each task owns a strip of kBoxStrip output columns (twice that for wide
+// boxes) and walks down it: the horizontal pass reads one source row of the strip plus
+// the box's reach (in place, or by the border rule into a small buffer), slides a double
+// running sum along it and keeps the result in a ring of the last 2 ry + 2 rows (1 MiB at
+// 256 columns and ry = 127: in L2; the ring is read twice per row, as it is written); the vertical
+// running sum (double) over that ring is written straight into `dst`. The source and
+// `dst` are each touched once, so the cost is one read and one write of the frame plus
+// the arithmetic, whatever the size. Prefix sums start afresh at every strip, so they
+// never grow beyond the sum of one strip's row (a 1e6 pixel leaves no drift); the strips
+// are fixed, so the result does not depend on the thread count.
+constexpr int kBoxStrip = 256;
+// The largest kernel reach (px) for which bands use per-tile tables (see blur()).
+constexpr int kBandsDirectReach = 64;
+
+// One row of a horizontal box, for NC channels: out(x) = inner * (sum of the full pixels
+// v[x + radius - full .. x + radius + full]) + end * (v[x] + v[x + 2 radius]). A running
+// sum in double slides along the row: cost per output independent of the width, and no
+// prefix array, so a strip reads its reach but does not add it up twice. The first window
+// is summed in four interleaved partial sums (shorter dependency chains); any order is
+// deterministic since it does not depend on the thread count.
+template<int NC>
+void box_row_running(float* out, const float* v, int npx, const BoxPass& b)
+{
+    double s[NC], part[4][NC] = {};
+    const int a = b.radius - b.full, e = b.radius + b.full + 1;
+    for (int i = a; i < e; ++i)
+        for (int c = 0; c < NC; ++c)
+            part[(i - a) & 3][c] += double(v[size_t(i) * NC + c]);
+    for (int c = 0; c < NC; ++c)
+        s[c] = (part[0][c] + part[1][c]) + (part[2][c] + part[3][c]);
+    const float* add = v + size_t(e) * NC;
+    const float* sub = v + size_t(a) * NC;
+    if (b.end != 0.0) {
+        const float* hi = v + size_t(2 * b.radius) * NC;
+        for (int x = 0; x < npx; ++x)
+            for (int c = 0; c < NC; ++c) {
+                const size_t i = size_t(x) * NC + size_t(c);
+                out[i] = float(b.inner * s[c] + b.end * (double(v[i]) + double(hi[i])));
+                s[c] += double(add[i]) - double(sub[i]);
+            }
+    } else {
+        for (int x = 0; x < npx; ++x)
+            for (int c = 0; c < NC; ++c) {
+                const size_t i = size_t(x) * NC + size_t(c);
+                out[i] = float(b.inner * s[c]);
+                s[c] += double(add[i]) - double(sub[i]);
+            }
+    }
+}
+
+bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                const BoxPass& bx, const BoxPass& by, Border border, int nthreads)
+{
+    prepare_destination(dst, in, roi);
+    const int nc = in.nchannels();
+    const size_t ncs = size_t(nc);
+    const OIIO::ROI data = in.roi();
+    const int w = roi.width(), h = roi.height(), ry = by.radius;
+    const int ring = 2 * ry + 2;  // rows y .. y + 2 ry are in use, and row y - 1 by the slide
+    // Wide boxes take wider strips, so the reach each strip reads on both sides stays
+    // a small share of it (fixed by the kernel, never by the thread count).
+    const int strip   = bx.radius >= 48 ? 2 * kBoxStrip : kBoxStrip;
+    const int nstrips = (w + strip - 1) / strip;
+    parallel_for_chunks(0, nstrips, 1, nthreads, [&](int64_t s, int64_t) {
+        const int xs = int(s) * strip, xe = std::min(w, xs + strip);
+        const size_t n = size_t(xe - xs) * ncs;
+        const size_t nrow = size_t(xe - xs + 2 * bx.radius) * ncs;
+        std::vector<float> row(nrow), rows(size_t(ring) * n);
+        std::vector<double> prefix(nrow + ncs), sum(n, 0.0);
+        // Horizontal box of padded row j (source row roi.ybegin - ry + j) into its ring slot.
+        auto horizontal = [&](int j) {
+            float* o     = rows.data() + size_t(j % ring) * n;
+            const int sy = border_index(roi.ybegin - ry + j, data.ybegin, data.yend, border);
+            if (sy == kOutside) {
+                std::fill_n(o, n, 0.0f);
+                return;
+            }
+            // Inside the data window the source row is read in place; elsewhere it is copied
+            // with the border rule.
+            const int x0 = roi.xbegin + xs - bx.radius, x1 = roi.xbegin + xe + bx.radius;
+            const float* v = row.data();
+            if (x0 >= data.xbegin && x1 <= data.xend)
+                v = static_cast<const float*>(in.pixeladdr(x0, sy, data.zbegin));
+            else
+                source_row(in, sy, x0, x1, border, row.data());
+            // The common channel counts slide a running sum; others take prefix sums.
+            switch (nc) {
+            case 1: box_row_running<1>(o, v, xe - xs, bx); return;
+            case 3: box_row_running<3>(o, v, xe - xs, bx); return;
+            case 4: box_row_running<4>(o, v, xe - xs, bx); return;
+            default: break;
+            }
+            std::fill_n(prefix.begin(), ncs, 0.0);
+            for (size_t i = 0; i < nrow; ++i)
+                prefix[i + ncs] = prefix[i] + double(v[i]);
+            // Output x sums padded [x + radius - full, x + radius + full].
+            const double* hi = prefix.data() + size_t(bx.radius + bx.full + 1) * ncs;
+            const double* lo = prefix.data() + size_t(bx.radius - bx.full) * ncs;
+            const bool ends  = bx.end != 0.0;
+            box_row(o, hi, lo, bx.inner, ends ? v : nullptr,
+                    ends ? v + size_t(2 * bx.radius) * ncs : nullptr, bx.end, n);
+        };
+        auto ring_row = [&](int j) { return rows.data() + size_t(j % ring) * n; };
+        for (int j = 0; j < 2 * ry; ++j)
+            horizontal(j);
+        const bool ends = by.end != 0.0;
+        for (int y = 0; y < h; ++y) {
+            horizontal(y + 2 * ry);
+            const int centre = y + ry;
+            if (y == 0) {
+                for (int j = -by.full; j <= by.full; ++j)
+                    add_scaled(sum.data(), ring_row(centre + j), 1.0, n);
+            } else {
+                slide(sum.data(), ring_row(centre + by.full), ring_row(centre - 1 - by.full), n);
+            }
+            float* out = static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + y));
+            box_out(out, sum.data(), by.inner, ends ? ring_row(centre - by.full - 1) : nullptr,
+                    ends ? ring_row(centre + by.full + 1) : nullptr, by.end, n);
+        }
+    });
+    return true;
+}
+
 // Box width whose variance is `variance` (bisection: variance grows with width).
 double box_width_for_variance(double variance)
 {
@@ -301,6 +476,131 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
         }
     });
     return out;
+}
+
+// Exact convolution by row spans straight from the source ImageBuf into `dst`: no padded
+// copy, no whole-frame prefix plane, no copy out. The output is cut into tiles of
+// kSpanTileW columns x th rows; a tile takes the row prefix sums (double) of the source
+// rows it reads, from its own first column on (border rule applied while reading), into a
+// buffer of its own that stays in L2. It then works in sub-tiles of kSubW x kSubH outputs
+// whose double accumulators stay in L1, and walks the prefix rows once per sub-tile, each
+// row adding its spans into every output row that reads it: each prefix row is fetched
+// from L2 once per sub-tile instead of once per span and output row. Prefix sums start
+// afresh at every tile, so they stay small (a 1e6 pixel leaves no drift, and digits are
+// not lost to a long row's sum); tiles are fixed, so results do not depend on the thread
+// count.
+bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                           int rx, int ry, std::vector<Span> spans, bool summed_area, Border border,
+                           int nthreads)
+{
+    constexpr int kSpanTileW = 256, kSubW = 64, kSubH = 8;
+    prepare_destination(dst, in, roi);
+    const int nc = in.nchannels();
+    const size_t ncs = size_t(nc);
+    const OIIO::ROI data = in.roi();
+    // Output row y reads table rows y + d, d = dy + ry in [0, nd): the padded rows
+    // y .. y + 2 ry, and for a summed-area table one more (its row m sums rows < m).
+    const int nd = 2 * ry + 1 + (summed_area ? 1 : 0);
+    std::stable_sort(spans.begin(), spans.end(),
+                     [](const Span& a, const Span& b) { return a.dy < b.dy; });
+    // first[d] .. first[d + 1]: the spans of table row d, as offsets into a table row
+    // (hi, lo) and weights.
+    std::vector<size_t> first(size_t(nd) + 1, spans.size());
+    for (size_t i = spans.size(); i-- > 0;)
+        first[size_t(spans[i].dy + ry)] = i;
+    for (size_t d = first.size() - 1; d-- > 0;)
+        first[d] = std::min(first[d], first[d + 1]);
+    // A table row holds at most pmax values; rows are `rs` apart, on 64-byte boundaries.
+    // With 4 channels a pixel is half a 64-byte vector, so half the spans would start
+    // mid-vector and every load of theirs would split a cache line; each row is then
+    // stored twice, the second copy one pixel on (twin), and a span starting at an odd
+    // pixel reads the twin, from a vector boundary.
+    const bool twin   = nc == 4;
+    const size_t pmax = size_t(kSpanTileW + 2 * rx + 1) * ncs;
+    const size_t pal  = (pmax + 7) / 8 * 8;
+    const size_t rs   = twin ? 2 * pal : pal;
+    auto offset = [&](int px) {
+        return twin && px % 2 == 1 ? pal + size_t(px - 1) * ncs : size_t(px) * ncs;
+    };
+    std::vector<size_t> hi_off, lo_off;
+    std::vector<double> span_w;
+    for (const Span& s : spans) {
+        hi_off.push_back(offset(rx + s.x1 + 1));
+        lo_off.push_back(offset(rx + s.x0));
+        span_w.push_back(s.weight);
+    }
+
+    const int w = roi.width(), h = roi.height();
+    // Tile height: at least the kernel's, so the prefix rows computed per output row stay
+    // under three (fixed by the kernel alone, never by the thread count).
+    const int th = std::max(64, (nd + kSubH - 1) / kSubH * kSubH);
+    const int ntx = (w + kSpanTileW - 1) / kSpanTileW, nty = (h + th - 1) / th;
+    parallel_for_chunks(0, int64_t(ntx) * nty, 1, nthreads, [&](int64_t t, int64_t) {
+        const int xs = int(t % ntx) * kSpanTileW, xe = std::min(w, xs + kSpanTileW);
+        const int ys = int(t / ntx) * th, ye = std::min(h, ys + th);
+        const int tw = xe - xs, nrows = ye - ys + nd - 1;
+        const size_t pw = size_t(tw + 2 * rx + 1) * ncs;  // one prefix row
+        // Uninitialised: every value read is written below (zeroing megabytes per tile
+        // cost a tenth of the time).
+        std::unique_ptr<double[]> table_store(new double[size_t(nrows) * rs + 8]);
+        double* const table = aligned64(table_store.get());
+        std::vector<float> row(pw);
+        for (int r = 0; r < nrows; ++r) {
+            double* p = table + size_t(r) * rs;
+            // Padded row q = the table row (a summed-area table's row r adds row r - 1).
+            const int q  = summed_area ? r - 1 : r;
+            const int sy = summed_area && r == 0
+                               ? kOutside
+                               : border_index(roi.ybegin + ys - ry + q, data.ybegin,
+                                              data.yend, border);
+            if (sy == kOutside) {
+                if (summed_area && r > 0)
+                    std::copy_n(p - rs, pw, p);
+                else
+                    std::fill_n(p, pw, 0.0);
+            } else {
+                const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
+                const float* v = row.data();
+                if (x0 >= data.xbegin && x1 <= data.xend)
+                    v = static_cast<const float*>(in.pixeladdr(x0, sy, data.zbegin));
+                else
+                    source_row(in, sy, x0, x1, border, row.data());
+                row_prefix(p, v, pw / ncs - 1, nc);
+                if (summed_area)
+                    add_rows(p, p - rs, pw);
+            }
+            if (twin)
+                std::copy(p + ncs, p + pw, p + pal);
+        }
+        // Accumulators on a 64-byte boundary: rows of kSubW pixels then start on one too,
+        // and no vector store splits a cache line.
+        std::vector<double> acc_store(size_t(kSubH) * size_t(kSubW) * ncs + 8);
+        double* const acc_base = aligned64(acc_store.data());
+        const size_t acc_len = size_t(kSubH) * size_t(kSubW) * ncs;
+        for (int sy0 = ys; sy0 < ye; sy0 += kSubH)
+            for (int sx0 = xs; sx0 < xe; sx0 += kSubW) {
+                const int sh = std::min(kSubH, ye - sy0);
+                const size_t n = size_t(std::min(kSubW, xe - sx0)) * ncs;
+                std::fill_n(acc_base, acc_len, 0.0);
+                // Output row y (tile-local yl) reads prefix rows yl .. yl + 2 ry.
+                const int yl0 = sy0 - ys;
+                for (int r = yl0; r < yl0 + sh + nd - 1; ++r) {
+                    const double* p = table + size_t(r) * rs + size_t(sx0 - xs) * ncs;
+                    const int j0 = std::max(0, r - yl0 - nd + 1), j1 = std::min(sh, r - yl0 + 1);
+                    for (int j = j0; j < j1; ++j) {
+                        const size_t d = size_t(r - yl0 - j);
+                        add_spans(acc_base + size_t(j) * n, p, hi_off.data() + first[d],
+                                  lo_off.data() + first[d], span_w.data() + first[d],
+                                  first[d + 1] - first[d], n);
+                    }
+                }
+                for (int j = 0; j < sh; ++j)
+                    to_float(static_cast<float*>(
+                                 dst.pixeladdr(roi.xbegin + sx0, roi.ybegin + sy0 + j)),
+                             acc_base + size_t(j) * n, n);
+            }
+    });
+    return true;
 }
 
 }  // namespace detail
@@ -414,6 +714,26 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     }
     if (!roi.defined())
         roi = opts.grow ? grown(in.roi(), rx, ry) : in.roi();
+    // The exact box and shapes go straight from the source to `dst` (no padded plane);
+    // iris mode transforms a padded plane, so it keeps the plane path.
+    if (method == BlurMethod::Exact && opts.iris == 0.0f && !weights.is_identity()) {
+        if (k.shape == KernelShape::Box)
+            return box_direct(dst, in, roi, BoxPass(box_weights_1d(k.width_px)),
+                              BoxPass(box_weights_1d(k.height_px)), opts.border, nthreads);
+        if (k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon)
+            return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
+                                         kernel_spans(reflected(weights)), false, opts.border,
+                                         nthreads);
+    }
+    // Bands: the per-tile summed-area table pays off while the kernel's reach is small
+    // beside the tile; above ~100 px the whole-frame table recomputes less.
+    if (method == BlurMethod::Bands && opts.iris == 0.0f && !weights.is_identity()
+        && std::max(weights.rx, weights.ry) <= kBandsDirectReach)
+        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
+                                     banded_table_spans(weights), true, opts.border, nthreads);
+    if (method == BlurMethod::BilinearTaps && opts.iris == 0.0f && !weights.is_identity())
+        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
+                                     kernel_spans(reflected(weights)), false, opts.border, nthreads);
     Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads);
     if (weights.is_identity())
         return finish(dst, in, roi, p);  // bit-exact copy

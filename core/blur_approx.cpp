@@ -20,6 +20,12 @@
 // replaced by one interval of the same mean area and centre, anti-aliased at its ends;
 // the bands are rectangles, each summed from a summed-area table (Crow 1984) with four
 // reads a corner pair, so the cost depends on the band count, not the kernel size.
+// Changed for speed (issue 3): outside iris mode the table is no longer one whole-frame
+// double plane (68-77 MB at 1080p, ~60 ms per call) but built per output tile by
+// convolve_spans_direct (blur.cpp) straight from the source, each rectangle becoming two
+// signed spans of the tile's table (banded_table_spans); convolve_banded keeps the plane
+// path for iris mode and for kernels reaching over 64 px: the tile's table covers the
+// tile plus the kernel's reach, so its building cost grows with the kernel.
 //
 // Bilinear taps (SEEDS.md section 5): the seed's 9x9 disk from 25 bilinear fetches and
 // a 17x17 one from 81. The taps are grouped 2 (or 1, the centre) per axis; a fetch sits
@@ -272,6 +278,18 @@ std::vector<Rect> kernel_rects(const KernelWeights& k)
 }  // namespace
 
 namespace detail {
+
+std::vector<Span> banded_table_spans(const KernelWeights& kernel)
+{
+    // Rectangle rows y0 .. y1 of the reflected kernel: + the table row below it (y1 + 1),
+    // - the row on top (y0), as in convolve_banded.
+    std::vector<Span> spans;
+    for (const Rect& r : kernel_rects(reflected(kernel))) {
+        spans.push_back({ r.y1 + 1, r.x0, r.x1, r.weight });
+        spans.push_back({ r.y0, r.x0, r.x1, -r.weight });
+    }
+    return spans;
+}
 
 Plane convolve_banded(const Plane& in, const KernelWeights& kernel, int nthreads)
 {

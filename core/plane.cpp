@@ -1,4 +1,7 @@
-// plane.cpp — padded float planes for the blur methods (see plane.h).
+// plane.cpp — padded float planes for the blur methods (see plane.h), the border rule
+// per source row (source_row: shared by pad() and the direct paths of blur.cpp), and the
+// vectorised inner loops of the prefix-sum methods (add_span, add_spans: up to four spans
+// per pass over the accumulator, so it is loaded and stored once per four spans).
 
 #include "plane.h"
 
@@ -85,44 +88,51 @@ void Iris::inverse(Plane& p, int nthreads) const
                  [&](float v, int c) { return float(shift[size_t(c)] + std::log(double(v)) / k); });
 }
 
+void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border, float* out)
+{
+    const int nc        = src.nchannels();
+    const OIIO::ROI data = src.roi();
+    // The part of the row inside the data window in one copy, the rest by the rule.
+    const int in0 = std::max(x0, data.xbegin);
+    const int in1 = std::min(x1, data.xend);
+    if (in1 > in0)
+        std::copy_n(static_cast<const float*>(src.pixeladdr(in0, sy, data.zbegin)),
+                    size_t(in1 - in0) * size_t(nc), out + size_t(in0 - x0) * size_t(nc));
+    auto outside = [&](int xa, int xb) {
+        for (int x = xa; x < xb; ++x) {
+            const int sx = border_index(x, data.xbegin, data.xend, border);
+            float* o     = out + size_t(x - x0) * size_t(nc);
+            if (sx != kOutside)
+                std::copy_n(static_cast<const float*>(src.pixeladdr(sx, sy, data.zbegin)), nc, o);
+            else
+                std::fill_n(o, nc, 0.0f);
+        }
+    };
+    if (in1 > in0) {
+        outside(x0, in0);
+        outside(in1, x1);
+    } else {
+        outside(x0, x1);  // the whole row lies outside the data window
+    }
+}
+
 Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads)
 {
-    const int nc = src.nchannels();
-    Plane p(region.width(), region.height(), nc);
+    Plane p(region.width(), region.height(), src.nchannels());
     const OIIO::ROI data = src.roi();
     parallel_for_chunks(0, p.h, 8, nthreads, [&](int64_t j0, int64_t j1) {
         for (int j = int(j0); j < int(j1); ++j) {
             const int sy = border_index(region.ybegin + j, data.ybegin, data.yend, border);
-            float* out   = p.row(j);
-            if (sy == kOutside) {
-                std::fill_n(out, p.stride(), 0.0f);
-                continue;
-            }
-            // The part of the row inside the data window in one copy, the rest by the rule.
-            const int in0 = std::max(region.xbegin, data.xbegin);
-            const int in1 = std::min(region.xend, data.xend);
-            if (in1 > in0)
-                std::copy_n(static_cast<const float*>(src.pixeladdr(in0, sy, data.zbegin)),
-                            size_t(in1 - in0) * size_t(nc),
-                            out + size_t(in0 - region.xbegin) * size_t(nc));
-            for (int i = 0; i < p.w; ++i) {
-                const int x = region.xbegin + i;
-                if (x >= in0 && x < in1)
-                    continue;
-                const int sx = border_index(x, data.xbegin, data.xend, border);
-                if (sx != kOutside)
-                    std::copy_n(static_cast<const float*>(src.pixeladdr(sx, sy, data.zbegin)), nc,
-                                out + size_t(i) * size_t(nc));
-                else
-                    std::fill_n(out + size_t(i) * size_t(nc), nc, 0.0f);
-            }
+            if (sy == kOutside)
+                std::fill_n(p.row(j), p.stride(), 0.0f);
+            else
+                source_row(src, sy, region.xbegin, region.xend, border, p.row(j));
         }
     });
     return p;
 }
 
-bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi, const Plane& p,
-            int ox, int oy)
+void prepare_destination(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi)
 {
     OIIO::ImageSpec spec = src.spec();
     spec.set_format(OIIO::TypeFloat);
@@ -132,6 +142,12 @@ bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi
     spec.width  = roi.width();
     spec.height = roi.height();
     dst.reset(spec, OIIO::InitializePixels::No);
+}
+
+bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi, const Plane& p,
+            int ox, int oy)
+{
+    prepare_destination(dst, src, roi);
     const size_t n = size_t(roi.width()) * size_t(p.nc);
     for (int y = 0; y < roi.height(); ++y)
         std::copy_n(p.row(y + oy) + size_t(ox) * size_t(p.nc), n,
@@ -197,6 +213,47 @@ BOKEH_HOT void add_span(double* acc, const double* hi, const double* lo, double 
 {
     for (size_t i = 0; i < n; ++i)
         acc[i] += w * (hi[i] - lo[i]);
+}
+
+// acc[i] += sum over spans s of w[s] * (p[hi[s] + i] - p[lo[s] + i]), up to four spans per
+// pass over acc (the one to three left over in one pass): a span then costs its two loads
+// and a multiply-add, and the accumulator is loaded and stored once per pass instead of
+// once per span.
+BOKEH_HOT void add_spans(double* acc, const double* p, const size_t* hi, const size_t* lo,
+                         const double* w, size_t count, size_t n)
+{
+    size_t s = 0;
+    for (; s + 4 <= count; s += 4) {
+        const double *h0 = p + hi[s], *h1 = p + hi[s + 1], *h2 = p + hi[s + 2], *h3 = p + hi[s + 3];
+        const double *l0 = p + lo[s], *l1 = p + lo[s + 1], *l2 = p + lo[s + 2], *l3 = p + lo[s + 3];
+        const double w0 = w[s], w1 = w[s + 1], w2 = w[s + 2], w3 = w[s + 3];
+        for (size_t i = 0; i < n; ++i)
+            acc[i] += (w0 * (h0[i] - l0[i]) + w1 * (h1[i] - l1[i]))
+                      + (w2 * (h2[i] - l2[i]) + w3 * (h3[i] - l3[i]));
+    }
+    // The last one to three spans in one pass.
+    if (count - s == 3) {
+        const double *h0 = p + hi[s], *h1 = p + hi[s + 1], *h2 = p + hi[s + 2];
+        const double *l0 = p + lo[s], *l1 = p + lo[s + 1], *l2 = p + lo[s + 2];
+        const double w0 = w[s], w1 = w[s + 1], w2 = w[s + 2];
+        for (size_t i = 0; i < n; ++i)
+            acc[i] += (w0 * (h0[i] - l0[i]) + w1 * (h1[i] - l1[i])) + w2 * (h2[i] - l2[i]);
+    } else if (count - s == 2) {
+        const double *h0 = p + hi[s], *h1 = p + hi[s + 1];
+        const double *l0 = p + lo[s], *l1 = p + lo[s + 1];
+        const double w0 = w[s], w1 = w[s + 1];
+        for (size_t i = 0; i < n; ++i)
+            acc[i] += w0 * (h0[i] - l0[i]) + w1 * (h1[i] - l1[i]);
+    } else if (count - s == 1) {
+        add_span(acc, p + hi[s], p + lo[s], w[s], n);
+    }
+}
+
+// p[i] += q[i] (a summed-area table's row from the one above).
+BOKEH_HOT void add_rows(double* p, const double* q, size_t n)
+{
+    for (size_t i = 0; i < n; ++i)
+        p[i] += q[i];
 }
 
 // acc[i] += w * src[i].
