@@ -281,26 +281,35 @@ TileContent tile_content(const Frame& f, const Membership& m, int k, const OIIO:
 {
     TileContent t;
     t.held = OIIO::ROI(low.xend, low.xbegin, low.yend, low.ybegin);  // empty; grows below
+    // Source column of every full-resolution column of the region (kOutside: empty).
+    const int x_first = gx + low.xbegin * s;
+    std::vector<int> sx(size_t(low.width()) * size_t(s));
+    for (size_t i = 0; i < sx.size(); ++i)
+        sx[i] = border_index(x_first + int(i), f.data.xbegin, f.data.xend, f.border);
     for (int j = low.ybegin; j < low.yend; ++j)
         for (int y = gy + j * s; y < gy + (j + 1) * s; ++y) {
             const int sy = border_index(y, f.data.ybegin, f.data.yend, f.border);
             if (sy == kOutside)
                 continue;
-            for (int i = low.xbegin; i < low.xend; ++i)
-                for (int x = gx + i * s; x < gx + (i + 1) * s; ++x) {
-                    const int sx = border_index(x, f.data.xbegin, f.data.xend, f.border);
-                    if (sx == kOutside)
-                        continue;
-                    const size_t at       = f.img.index(sx, sy);
-                    const LayerPixel p    = layer_pixel(m, k, at);
-                    t.hidden = t.hidden || p.nearer * f.img.rgba[at * 4 + 3] > 0.0f;
-                    if (p.share > 0.0f) {
-                        t.held.xbegin = std::min(t.held.xbegin, i);
-                        t.held.xend   = std::max(t.held.xend, i + 1);
-                        t.held.ybegin = std::min(t.held.ybegin, j);
-                        t.held.yend   = std::max(t.held.yend, j + 1);
-                    }
+            const size_t row = f.img.index(f.data.xbegin, sy) - size_t(f.data.xbegin);
+            int first = -1, last = -1;  // columns (into sx) holding a share
+            for (size_t i = 0; i < sx.size(); ++i) {
+                if (sx[i] == kOutside)
+                    continue;
+                const size_t at    = row + size_t(sx[i]);
+                const LayerPixel p = layer_pixel(m, k, at);
+                t.hidden           = t.hidden || p.nearer * f.img.rgba[at * 4 + 3] > 0.0f;
+                if (p.share > 0.0f) {
+                    first = first < 0 ? int(i) : first;
+                    last  = int(i);
                 }
+            }
+            if (first >= 0) {
+                t.held.xbegin = std::min(t.held.xbegin, low.xbegin + first / s);
+                t.held.xend   = std::max(t.held.xend, low.xbegin + last / s + 1);
+                t.held.ybegin = std::min(t.held.ybegin, j);
+                t.held.yend   = std::max(t.held.yend, j + 1);
+            }
         }
     return t;
 }
