@@ -41,18 +41,6 @@ std::string make_input(const std::string& dir, const std::string& name = "in.exr
     return path;
 }
 
-// One error line "bokehtool ERROR: <what>", exit 1, nothing at `output`.
-void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output)
-{
-    EXPECT_EQ(r.status, 1) << r.err;
-    EXPECT_TRUE(OIIO::Strutil::starts_with(r.err, "bokehtool ERROR: ")) << r.err;
-    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
-    EXPECT_NE(r.err.find(what), std::string::npos) << "expected '" << what << "' in: " << r.err;
-    if (!output.empty()) {
-        EXPECT_FALSE(exists(output)) << output << " was written";
-    }
-}
-
 }  // namespace
 
 TEST(Cli, VersionHelpPlugins)

@@ -3,6 +3,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -10,6 +11,9 @@
 #include <sstream>
 
 #include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/strutil.h>
+
+#include <gtest/gtest.h>
 #include <OpenImageIO/imagebufalgo.h>
 
 namespace bokeh_test {
@@ -86,6 +90,17 @@ OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5
         for (int x = x0; x < x0 + w; ++x)
             img.setpixel(x, y, fn(x, y).data());
     return img;
+}
+
+void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output)
+{
+    EXPECT_EQ(r.status, 1) << r.err;
+    EXPECT_TRUE(OIIO::Strutil::starts_with(r.err, "bokehtool ERROR: ")) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << "one line: " << r.err;
+    EXPECT_NE(r.err.find(what), std::string::npos) << "expected '" << what << "' in: " << r.err;
+    if (!output.empty()) {
+        EXPECT_FALSE(exists(output)) << output << " was written";
+    }
 }
 
 }  // namespace bokeh_test

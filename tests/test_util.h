@@ -29,6 +29,10 @@ struct RunResult {
 /// RunResult bokehtool with `args` (shell words), with `env` ("NAME=value ...") before it.
 RunResult bokehtool(const std::string& args, const std::string& env = "");
 
+/// Expect a clean failure: exit 1, one line "bokehtool ERROR: ..." holding `what`, and
+/// nothing written at `output` (unless it is "").
+void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output);
+
 /// A float R, G, B, A, Z image (alpha_channel 3, z_channel 4) over a w x h data window at
 /// (x0, y0), display window `full` (default: the data window); `fn(x, y)` gives the pixel.
 OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5>(int, int)>& fn,

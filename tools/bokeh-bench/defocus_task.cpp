@@ -7,6 +7,7 @@
 // bokeh::compare's (RMSE linear, PSNR after x/(1+x)).
 
 #include "defocus_task.h"
+#include "timing.h"
 
 #include <bokeh/defocus.h>
 #include <bokeh/metrics.h>
@@ -32,19 +33,6 @@ struct Shot {
     OIIO::ImageBuf image;
     bokeh::DefocusOptions base;
 };
-
-double median_ms(const std::function<void()>& fn, int reps)
-{
-    fn();  // warm-up
-    std::vector<double> t;
-    for (int i = 0; i < reps; ++i) {
-        OIIO::Timer timer;
-        fn();
-        t.push_back(timer() * 1e3);
-    }
-    std::sort(t.begin(), t.end());
-    return t[t.size() / 2];
-}
 
 // Whether --scenes asks for the shot `name` (all when it is empty).
 bool wanted(const BenchArgs& a, const std::string& name)

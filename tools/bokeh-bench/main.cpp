@@ -16,6 +16,7 @@
 #include "defocus_task.h"
 #include "gegl_peer.h"
 #include "resample_task.h"
+#include "timing.h"
 
 #include <bokeh/blur.h>
 #include <bokeh/metrics.h>
@@ -37,6 +38,7 @@
 
 using OIIO::Strutil::fmt::format;
 namespace IBA = OIIO::ImageBufAlgo;
+using bokeh_bench::median_ms;
 
 namespace {
 
@@ -47,19 +49,6 @@ struct Case {
     bokeh::BlurOptions options;
     int reps = -1;                    // -1: the default
 };
-
-double median_seconds(const std::function<void()>& fn, int reps)
-{
-    fn();  // warm-up
-    std::vector<double> t;
-    for (int i = 0; i < reps; ++i) {
-        OIIO::Timer timer;
-        fn();
-        t.push_back(timer());
-    }
-    std::sort(t.begin(), t.end());
-    return t[t.size() / 2];
-}
 
 bokeh::Kernel kernel(bokeh::KernelShape s, double size, int blades = 6)
 {
@@ -230,13 +219,13 @@ int main(int argc, char* argv[])
                 }
             };
             OIIO::ImageBuf out;
-            ms = 1e3 * median_seconds([&] { run(frame, out); }, n);
+            ms = median_ms([&] { run(frame, out); }, n);
             run(small, result_small);
             result_small.set_origin(small.spec().x, small.spec().y);
         } else if (c.peer == "oiio") {
             const OIIO::ImageBuf k = IBA::make_kernel("disk", float(c.size), float(c.size));
             OIIO::ImageBuf out;
-            ms = 1e3 * median_seconds([&] { IBA::convolve(out, frame, k, true, {}, threads); }, n);
+            ms = median_ms([&] { IBA::convolve(out, frame, k, true, {}, threads); }, n);
             IBA::convolve(result_small, small, k, true, {}, threads);
         } else if (c.method.rfind("FFT", 0) == 0) {
             // The exact kernel handed over as an image, as a user's aperture image would be.
@@ -251,11 +240,11 @@ int main(int argc, char* argv[])
                     kimg.setpixel(dx, dy, &v, 1);
                 }
             OIIO::ImageBuf out;
-            ms = 1e3 * median_seconds([&] { bokeh::convolve_image(out, frame, kimg, c.options, {}, threads); }, n);
+            ms = median_ms([&] { bokeh::convolve_image(out, frame, kimg, c.options, {}, threads); }, n);
             bokeh::convolve_image(result_small, small, kimg, c.options, {}, threads);
         } else {
             OIIO::ImageBuf out;
-            ms = 1e3 * median_seconds([&] { bokeh::blur(out, frame, c.kernel, c.options, {}, threads); }, n);
+            ms = median_ms([&] { bokeh::blur(out, frame, c.kernel, c.options, {}, threads); }, n);
             bokeh::blur(result_small, small, c.kernel, c.options, {}, threads);
         }
         OIIO::ImageBuf ref;

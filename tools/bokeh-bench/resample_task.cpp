@@ -24,6 +24,7 @@
 // two pipelines, so that the machine's slow phases hit both alike.
 
 #include "resample_task.h"
+#include "timing.h"
 
 #include <bokeh/blur.h>
 #include <bokeh/metrics.h>
@@ -67,19 +68,6 @@ constexpr int kPeerFactor = 4;  // 480x270 -> 1920x1080, the issue's figures
 constexpr int kSheetFactor = 8;
 constexpr int kMargin      = 32;  // 2 x the largest factor
 constexpr int kPairedReps  = 6;   // the cost claim's runs per pipeline, times --reps
-
-double median_ms(const std::function<void()>& fn, int reps)
-{
-    fn();  // warm-up
-    std::vector<double> t;
-    for (int i = 0; i < reps; ++i) {
-        OIIO::Timer timer;
-        fn();
-        t.push_back(timer() * 1e3);
-    }
-    std::sort(t.begin(), t.end());
-    return t[t.size() / 2];
-}
 
 // Medians of `a` and `b` run in turn `reps` times each (after a warm-up of both).
 std::pair<double, double> paired_median_ms(const std::function<void()>& a,
