@@ -269,6 +269,17 @@ inline LayerPixel layer_pixel(const Membership& m, int k, size_t at)
              lo + 1 < k ? 1.0f : lo + 1 == k ? 1.0f - up : 0.0f };
 }
 
+// The data-window column that stands for each full-resolution column under the reduced
+// pixels `low` (grid origin gx, reduction s), by the border rule (kOutside: empty).
+std::vector<int> source_columns(const Frame& f, const OIIO::ROI& low, int gx, int s)
+{
+    const int x_first = gx + low.xbegin * s;
+    std::vector<int> sx(size_t(low.width()) * size_t(s));
+    for (size_t i = 0; i < sx.size(); ++i)
+        sx[i] = border_index(x_first + int(i), f.data.xbegin, f.data.xend, f.border);
+    return sx;
+}
+
 // What a tile of layer k holds over reduced pixels `low` (grid origin gx, gy; reduction
 // s): the reduced pixels with a share of the layer (empty when none), and whether a
 // nearer layer hides any of it.
@@ -281,11 +292,7 @@ TileContent tile_content(const Frame& f, const Membership& m, int k, const OIIO:
 {
     TileContent t;
     t.held = OIIO::ROI(low.xend, low.xbegin, low.yend, low.ybegin);  // empty; grows below
-    // Source column of every full-resolution column of the region (kOutside: empty).
-    const int x_first = gx + low.xbegin * s;
-    std::vector<int> sx(size_t(low.width()) * size_t(s));
-    for (size_t i = 0; i < sx.size(); ++i)
-        sx[i] = border_index(x_first + int(i), f.data.xbegin, f.data.xend, f.border);
+    const std::vector<int> sx = source_columns(f, low, gx, s);
     for (int j = low.ybegin; j < low.yend; ++j)
         for (int y = gy + j * s; y < gy + (j + 1) * s; ++y) {
             const int sy = border_index(y, f.data.ybegin, f.data.yend, f.border);
@@ -323,11 +330,7 @@ Plane layer_input(const Frame& f, const Membership& m, int k, const OIIO::ROI& l
     const int nc = with_visibility ? 5 : 4;
     Plane p(low.width(), low.height(), nc);
     std::fill_n(p.px.get(), p.size(), 0.0f);
-    // Source column of every full-resolution column the block reads (kOutside: empty).
-    const int x_first = gx + low.xbegin * s;
-    std::vector<int> sx(size_t(low.width()) * size_t(s));
-    for (size_t i = 0; i < sx.size(); ++i)
-        sx[i] = border_index(x_first + int(i), f.data.xbegin, f.data.xend, f.border);
+    const std::vector<int> sx = source_columns(f, low, gx, s);
     const float inv = 1.0f / float(s * s);
     for (int j = 0; j < p.h; ++j) {
         float* row = p.row(j);
