@@ -616,7 +616,7 @@ bool convolve_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
     if (!roi.defined())
         roi = opts.grow ? grown(in.roi(), weights.rx, weights.ry) : in.roi();
     const Plane p = pad(in, grown(roi, weights.rx, weights.ry), opts.border, nthreads);
-    return finish(dst, in, roi, convolve_brute(p, weights, nthreads));
+    return finish(dst, in, roi, convolve_brute(p, weights, nthreads), 0, 0, false, nthreads);
 }
 
 namespace {
@@ -696,7 +696,12 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
 
     // The weights the method computes with (the effective ones for the approximations
     // that have them) and how far the method reads around an output pixel.
-    const KernelWeights weights = method == BlurMethod::Bands        ? banded_weights(k, opts.bands)
+    // The parallelograms read no weights, only whether the kernel is a point (the
+    // identity); the exact weights of a large polygon (supersampled) cost tens of ms.
+    const bool no_weights = method == BlurMethod::Parallelograms
+                            && std::min(k.width_px, k.height_px) >= 2.0f;
+    const KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
+                                  : method == BlurMethod::Bands        ? banded_weights(k, opts.bands)
                                   : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
                                                                        : kernel_weights(k);
     int rx = weights.rx, ry = weights.ry;
@@ -734,9 +739,13 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (method == BlurMethod::BilinearTaps && opts.iris == 0.0f && !weights.is_identity())
         return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
                                      kernel_spans(reflected(weights)), false, opts.border, nthreads);
-    Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads);
+    // The parallelograms of an upright hexagon run on the transposed plane (blur_approx.cpp);
+    // it is padded and finished transposed rather than transposed twice more.
+    const bool transpose = method == BlurMethod::Parallelograms && !weights.is_identity()
+                           && hexagon_transposed(k);
+    Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads, transpose);
     if (weights.is_identity())
-        return finish(dst, in, roi, p);  // bit-exact copy
+        return finish(dst, in, roi, p, 0, 0, false, nthreads);  // bit-exact copy
 
     Iris iris;
     if (opts.iris != 0.0f) {
@@ -757,7 +766,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
             out = box_blur(out, box3x, box3y, nthreads);
         break;
     case BlurMethod::Parallelograms:
-        out = hexagon_parallelograms(p, k, nthreads);
+        out = hexagon_parallelograms(std::move(p), k, nthreads);
         ox  = rx;
         oy  = ry;
         break;
@@ -779,7 +788,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     }
     if (opts.iris != 0.0f)
         iris.inverse(out, nthreads);
-    return finish(dst, in, roi, out, ox, oy);
+    return finish(dst, in, roi, out, ox, oy, transpose, nthreads);
 }
 
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts,

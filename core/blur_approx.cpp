@@ -7,13 +7,22 @@
 // vertices P0..P5 is the union of the rhombi {a P(2j) + b P(2j+2) : a, b in [0, 1]},
 // j = 0, 1, 2 (P1 = P0 + P2 for any affine image of a regular hexagon), so the uniform
 // hexagon is the mean of three parallelogram kernels, and a parallelogram is the
-// convolution of two uniform segments. Four segment passes make it: A = seg(P0) in,
-// B = seg(P2) in, then (seg(P2) A + seg(P4) (A + B)) / 3. Each segment pass costs the
-// same whatever its length: along its major axis it is a running sum (prefix
-// differences, fractional ends weighted by overlap); across, the plane is sheared by
-// linear interpolation so the segment runs along a row, and sheared back. Both
-// interpolations keep energy and the centroid exactly and soften the kernel's slanted
-// edges by under a pixel; that is the method's error against the exact hexagon.
+// convolution of two uniform segments. With a, b, c the three segment directions, four
+// segment passes make it: B = seg_b in, S = seg_a in + B, then (seg_c S + seg_a B) / 3.
+// Each segment pass costs the same whatever its length: along its major axis it is a
+// running sum (in double; fractional ends weighted by overlap); across, the plane is
+// sheared so the segment runs down a column, and sheared back, each time with the
+// three-tap quadratic B-spline. The interpolations keep energy and the centroid exactly
+// and soften the kernel's slanted edges by under a pixel; that is the method's error
+// against the exact hexagon.
+// Changed for speed (issue 3): a steep segment's shear moves whole rows, so its pass is
+// one sweep down the rows per strip of columns, two rows entering and leaving the window
+// recomputed from the source (not stored), nothing transposed; the passes run in the
+// frame (as given, or transposed when the plane is padded, see blur.cpp) where two of the
+// three directions are steep, and the third is a plain row pass for the upright and the
+// flat-topped hexagon (other rotations transpose around it). Planes are reused once
+// their values are used up, and allocated on huge pages (plane.h): the page faults of a
+// fresh 1080p plane cost more than a pass.
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
 // (boundaries by dynamic programming, least squares on the row areas), each band's rows
@@ -44,6 +53,9 @@
 #include "plane.h"
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -100,128 +112,247 @@ struct Taps {
     }
 };
 
-// out(p) = mean over t in [0, 1] of in(p - t (ex, ey)), for |ey| <= |ex|: the uniform
-// segment from 0 to e, run along x. Same-size planes; `in` is zero outside itself.
-// Shear: G(x, v) = in(x, v + m x), m = ey / ex, so the segment lies along G's row
-// v = y - m x; H = the running sum along G's rows; out(x, y) = H(x, y - m x).
-Plane segment_pass_x(const Plane& in, double ex, double ey, int nthreads)
+// g[i] = w0 p[i] + w1 p[i + stride] + w2 p[i + 2 stride]: a row read through three taps.
+BOKEH_HOT void three_taps(float* g, const float* p, float w0, float w1, float w2, size_t stride,
+                          size_t n)
+{
+    for (size_t i = 0; i < n; ++i)
+        g[i] = w0 * p[i] + w1 * p[i + stride] + w2 * p[i + 2 * stride];
+}
+
+// Columns u in [u0, u1) of `row` (w pixels, zero outside) read at u + shift: the taps
+// `t` of the shift (Taps(shift): reads from column u + t.first). `identity`: no shift.
+void shifted_row(float* g, const float* row, int w, int nc, int u0, int u1, const Taps& t,
+                 bool identity)
+{
+    const size_t ncs = size_t(nc);
+    const int reach  = identity ? 0 : 2;  // taps past the first
+    const int first  = identity ? t.first + 1 : t.first;
+    // [z0, z1): columns with a tap inside the row (u + first + reach >= 0, u + first < w);
+    // [a, b): those with all taps inside (u + first >= 0, u + first + reach < w).
+    const int z0 = std::clamp(-first - reach, u0, u1), z1 = std::clamp(w - first, z0, u1);
+    const int a = std::clamp(-first, z0, z1), b = std::clamp(w - reach - first, a, z1);
+    std::fill(g, g + size_t(z0 - u0) * ncs, 0.0f);
+    std::fill(g + size_t(z1 - u0) * ncs, g + size_t(u1 - u0) * ncs, 0.0f);
+    auto edge = [&](int u) {
+        float* o = g + size_t(u - u0) * ncs;
+        std::fill_n(o, nc, 0.0f);
+        for (int j = 0; j <= reach; ++j) {
+            const int x = u + first + j;
+            if (x < 0 || x >= w)
+                continue;
+            const float wj = identity ? 1.0f : t.w[j];
+            for (int c = 0; c < nc; ++c)
+                o[c] += wj * row[size_t(x) * ncs + size_t(c)];
+        }
+    };
+    for (int u = z0; u < a; ++u)
+        edge(u);
+    if (b > a) {
+        float* o = g + size_t(a - u0) * ncs;
+        const float* p = row + size_t(a + first) * ncs;
+        if (identity)
+            std::copy_n(p, size_t(b - a) * ncs, o);
+        else
+            three_taps(o, p, t.w[0], t.w[1], t.w[2], ncs, size_t(b - a) * ncs);
+    }
+    for (int u = b; u < z1; ++u)
+        edge(u);
+}
+
+// The window moved by one row: s (the inner rows' sum) += enter - leave, then
+// h = wf newest + inner s + wl oldest (the fractional ends), in double.
+BOKEH_HOT void slide_window(double* s, float* h, const float* newest, const float* enter,
+                            const float* leave, const float* oldest, double wf, double inner,
+                            double wl, size_t n)
+{
+    for (size_t i = 0; i < n; ++i) {
+        s[i] += double(enter[i]) - double(leave[i]);
+        h[i] = float(wf * newest[i] + inner * s[i] + wl * oldest[i]);
+    }
+}
+
+// o[i] = (h[i] + add[i]) * scale; add may be null.
+BOKEH_HOT void scaled_row(float* o, const float* h, const float* add, float scale, size_t n)
+{
+    if (add)
+        for (size_t i = 0; i < n; ++i)
+            o[i] = (h[i] + add[i]) * scale;
+    else
+        for (size_t i = 0; i < n; ++i)
+            o[i] = h[i] * scale;
+}
+
+// o[i] = (three taps of h + add[i]) * scale; add may be null.
+BOKEH_HOT void unshear_row(float* o, const float* h, const float* add, float w0, float w1,
+                           float w2, float scale, size_t stride, size_t n)
+{
+    if (add)
+        for (size_t i = 0; i < n; ++i)
+            o[i] = (w0 * h[i] + w1 * h[i + stride] + w2 * h[i + 2 * stride] + add[i]) * scale;
+    else
+        for (size_t i = 0; i < n; ++i)
+            o[i] = (w0 * h[i] + w1 * h[i + stride] + w2 * h[i + 2 * stride]) * scale;
+}
+
+// out = (seg(in) + add) * scale, where seg(in)(p) = mean over t in [0, 1] of in(p - t e),
+// e = (ex, ey) with |ex| <= |ey|; same-size planes, `in` zero outside itself, `add`
+// optional. Shear: G(u, r) = in(u + m r, r), m = ex / ey, moves each row as a whole, so
+// the segment runs down G's columns; H = the running sum down the columns (interval
+// weights: fractional ends by overlap); out(x, y) = H(x - m y, y). Every step is along a
+// row with one set of taps per row, so one sweep down the rows does it: a task owns a
+// strip of G's columns and keeps, per row, the two G rows entering and leaving the
+// window (recomputed from `in`, not stored), so the cost does not depend on the length.
+void segment_sweep(const Plane& in, Plane& out, double ex, double ey, const Plane* add,
+                   float scale, int nthreads)
 {
     const int w = in.w, h = in.h, nc = in.nc;
     const size_t ncs = size_t(nc);
     // A slope under 1e-9 moves a segment of any allowed length by under a micro-pixel.
-    const double m = std::abs(ey) < 1e-9 * std::abs(ex) ? 0.0 : ey / ex;
-    const IntervalWeights iw = interval_weights(std::min(0.0, ex), std::max(0.0, ex));
+    const bool shear = std::abs(ex) >= 1e-9 * std::abs(ey);
+    const double m   = shear ? ex / ey : 0.0;
+    const IntervalWeights iw = interval_weights(std::min(0.0, ey), std::max(0.0, ey));
     const int first = iw.first, last = iw.last();
+    const double wf = iw.w.front(), wl = last != first ? iw.w.back() : 0.0;
     const double inner = iw.w.size() > 2 ? iw.w[1] : 0.0;
 
-    // Rows v of G that any output reads (with the +1 of the interpolation).
-    const int vlo = int(std::floor(std::min(0.0, -m * (w - 1)))) - 2;
-    const int vhi = int(std::ceil(h - 1 + std::max(0.0, -m * (w - 1)))) + 2;
-    const int nv  = vhi - vlo + 1;
-    Plane hsum(w, nv, nc);
-    std::vector<int> hx0(static_cast<size_t>(nv)), hx1(static_cast<size_t>(nv));  // the columns of each row written
-
-    parallel_for_chunks(0, nv, 8, nthreads, [&](int64_t r0, int64_t r1) {
-        std::vector<float> g;
-        std::vector<double> prefix;
-        for (int r = int(r0); r < int(r1); ++r) {
-            const int v = vlo + r;
-            // Columns where row v of G touches the plane: -1.5 < v + m x < h + 0.5.
-            int gx0 = 0, gx1 = w;
-            if (m != 0.0) {
-                const double a = (-1.5 - v) / m, b = (h + 0.5 - v) / m;
-                gx0 = int(std::clamp(std::floor(std::min(a, b)), 0.0, double(w)));
-                gx1 = int(std::clamp(std::ceil(std::max(a, b)) + 1.0, 0.0, double(w)));
-            } else if (v < 0 || v >= h) {
-                gx1 = 0;
-            }
-            if (gx1 <= gx0) {
-                hx0[size_t(r)] = hx1[size_t(r)] = 0;
+    // Output (x, y) reads H at columns x + back(y).first + j; the columns of G any reads.
+    auto back = [&](int y) { return Taps(-m * y, !shear); };
+    const int f0 = back(0).first, f1 = back(h - 1).first;
+    const int g0 = std::min(f0, f1), g1 = std::max(f0, f1) + w + 2;
+    // Strips of ~256 columns, at least two per thread so the sweeps balance.
+    const int nstrips = std::max(2 * std::max(1, nthreads), (g1 - g0 + 255) / 256);
+    const int width   = (g1 - g0 + nstrips - 1) / nstrips;
+    parallel_for_chunks(0, nstrips, 1, nthreads, [&](int64_t s0, int64_t s1) {
+        for (int64_t strip = s0; strip < s1; ++strip) {
+            // Outputs whose first tap is in [c0, c1) are this task's; H over [c0, c1 + 2).
+            const int c0 = g0 + int(strip) * width, c1 = std::min(g1, c0 + width);
+            if (c1 <= c0)
                 continue;
-            }
-            // G's row, with (last - first + 1) zeros each side so every read below is inside.
-            const int margin = last - first + 1;
-            const int base   = gx0 - margin;  // G column of g[0]
-            const size_t len = size_t(gx1 - gx0 + 2 * margin);
-            g.assign(len * ncs, 0.0f);
-            for (int x = gx0; x < gx1; ++x) {
-                const Taps t(v + m * x, m == 0.0);
-                float* out = g.data() + size_t(x - base) * ncs;
-                for (int j = 0; j < 3; ++j) {
-                    const int y = t.first + j;
-                    if (y < 0 || y >= h)
-                        continue;
-                    const float* p = in.row(y) + size_t(x) * ncs;
-                    for (int c = 0; c < nc; ++c)
-                        out[c] += t.w[j] * p[c];
+            const int he  = c1 + 2;
+            const size_t n = size_t(he - c0) * ncs;
+            std::vector<float> buf(4 * n, 0.0f);  // zero row, newest, previous newest, oldest
+            float *zero = buf.data(), *newest = zero + n, *older = newest + n, *oldest = older + n;
+            std::vector<float> hrow(n);
+            std::vector<double> sum(n, 0.0);
+            auto g_row = [&](int r, float* dst) -> const float* {
+                if (r < 0 || r >= h)
+                    return zero;
+                shifted_row(dst, in.row(r), w, nc, c0, he, Taps(m * r, !shear), !shear);
+                return dst;
+            };
+            // G's rows [ra, rb) are the ones that reach into the strip (the shear moves a
+            // row by under a pixel per row, so they are consecutive); H is zero outside
+            // [ra + first, rb + last), and the sweep runs only there.
+            const int reach = shear ? 2 : 0;
+            auto touches    = [&](int r) {
+                const int f = Taps(m * r, !shear).first + (shear ? 0 : 1);
+                return f + he - 1 + reach >= 0 && f + c0 < w;
+            };
+            int ra = 0;
+            while (ra < h && !touches(ra))
+                ++ra;
+            int rb = ra;
+            while (rb < h && touches(rb))
+                ++rb;
+            const int ys = ra + first, ye = ra < rb ? rb + last : ys;
+            std::fill(hrow.begin(), hrow.end(), 0.0f);
+            const float* prev = zero;  // G(y - first - 1)
+            for (int y = std::min(0, ys); y < h; ++y) {
+                if (y >= ys && y < ye) {
+                    const float* gn = g_row(y - first, newest);
+                    const float* go = last != first ? g_row(y - last, oldest) : zero;
+                    const bool inner_rows = last - first >= 2;
+                    slide_window(sum.data(), hrow.data(), gn, inner_rows ? prev : zero,
+                                 inner_rows ? go : zero, go, wf, inner, wl, n);
+                    if (gn == newest) {  // G(y - first) becomes G(y + 1 - first - 1)
+                        std::swap(newest, older);
+                        prev = older;
+                    } else {
+                        prev = zero;
+                    }
+                } else if (y == ye) {
+                    std::fill(hrow.begin(), hrow.end(), 0.0f);  // the window has drained
                 }
-            }
-            prefix.assign((len + 1) * ncs, 0.0);
-            for (size_t i = 0; i < len * ncs; ++i)
-                prefix[i + ncs] = prefix[i] + double(g[i]);
-            // H(x) = sum_i w_i G(x - i), i in [first, last]; outputs where that touches G.
-            const int x0 = std::max(0, gx0 + first), x1 = std::min(w, gx1 + last);
-            hx0[size_t(r)] = x0;
-            hx1[size_t(r)] = std::max(x0, x1);
-            float* out     = hsum.row(r);
-            for (int x = x0; x < x1; ++x) {
-                const size_t k = size_t(x - base);  // g index of G(x)
-                const float* g_first = g.data() + (k - size_t(first)) * ncs;
-                const float* g_last  = g.data() + (k - size_t(last)) * ncs;
-                for (int c = 0; c < nc; ++c) {
-                    double s = iw.w.front() * g_first[c];
-                    if (last != first)
-                        s += iw.w.back() * g_last[c];
-                    if (last - first > 1)  // G(x - last + 1) .. G(x - first - 1)
-                        s += inner * (prefix[(k - size_t(first)) * ncs + size_t(c)]
-                                      - prefix[(k - size_t(last) + 1) * ncs + size_t(c)]);
-                    out[size_t(x) * ncs + size_t(c)] = float(s);
+                if (y >= 0) {
+                    const Taps t = back(y);
+                    const int x0 = std::max(0, c0 - t.first), x1 = std::min(w, c1 - t.first);
+                    if (x1 > x0) {
+                        const size_t k = size_t(x0 + t.first - c0) * ncs;
+                        const float* a = add ? add->row(y) + size_t(x0) * ncs : nullptr;
+                        float* o = out.row(y) + size_t(x0) * ncs;
+                        if (shear)
+                            unshear_row(o, hrow.data() + k, a, t.w[0], t.w[1], t.w[2], scale, ncs,
+                                        size_t(x1 - x0) * ncs);
+                        else  // the identity: the middle tap alone
+                            scaled_row(o, hrow.data() + k + ncs, a, scale, size_t(x1 - x0) * ncs);
+                    }
                 }
             }
         }
     });
-
-    Plane out(w, h, nc);
-    parallel_for_chunks(0, h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y) {
-            float* o = out.row(y);
-            for (int x = 0; x < w; ++x) {
-                const Taps t(y - m * x, m == 0.0);
-                float* px = o + size_t(x) * ncs;
-                std::fill_n(px, nc, 0.0f);
-                for (int j = 0; j < 3; ++j) {
-                    const int r = t.first + j - vlo;
-                    if (x < hx0[size_t(r)] || x >= hx1[size_t(r)])
-                        continue;
-                    const float* p = hsum.row(r) + size_t(x) * ncs;
-                    for (int c = 0; c < nc; ++c)
-                        px[c] += t.w[j] * p[c];
-                }
-            }
-        }
-    });
-    return out;
 }
 
-// The uniform segment from 0 to e along whichever axis is its major one.
-Plane segment_pass(const Plane& in, double ex, double ey, int nthreads)
+// o[i] = (wf newest[i] + wl oldest[i] + inner (p1[i] - p0[i]) + add[i]) * scale: a
+// segment along a row from its two end pixels and the prefix sums of the ones between.
+BOKEH_HOT void band_row(float* o, const float* newest, const float* oldest, const double* p1,
+                        const double* p0, const float* add, double wf, double inner, double wl,
+                        float scale, size_t n)
 {
-    if (std::abs(ex) >= std::abs(ey))
-        return segment_pass_x(in, ex, ey, nthreads);
-    return transposed(segment_pass_x(transposed(in, nthreads), ey, ex, nthreads), nthreads);
+    for (size_t i = 0; i < n; ++i) {
+        const double v = wf * newest[i] + wl * oldest[i] + inner * (p1[i] - p0[i]);
+        o[i] = (float(v) + (add ? add[i] : 0.0f)) * scale;
+    }
 }
 
-// a = (a + b) * scale.
-void add_into(Plane& a, const Plane& b, float scale, int nthreads)
+// out = (seg(in) + add) * scale for a segment along x, e = (ex, 0): per row, prefix sums
+// in double and the interval weights (fractional ends by overlap).
+void segment_rows(const Plane& in, Plane& out, double ex, const Plane* add, float scale,
+                  int nthreads)
 {
-    parallel_for_chunks(0, a.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+    const int w = in.w, nc = in.nc;
+    const size_t ncs = size_t(nc);
+    const IntervalWeights iw = interval_weights(std::min(0.0, ex), std::max(0.0, ex));
+    const int first = iw.first, last = iw.last();
+    const double wf = iw.w.front(), wl = last != first ? iw.w.back() : 0.0;
+    const double inner = iw.w.size() > 2 ? iw.w[1] : 0.0;
+    // out(x) reads in(x - i), i in [first, last]: the row zero-padded over [lo, hi).
+    const int lo = std::min(0, -last), hi = std::max(w, w - first);
+    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        std::vector<float> row(size_t(hi - lo) * ncs, 0.0f);
+        std::vector<double> prefix(size_t(hi - lo + 1) * ncs, 0.0);
         for (int y = int(y0); y < int(y1); ++y) {
-            float* p       = a.row(y);
-            const float* q = b.row(y);
-            for (size_t i = 0; i < a.stride(); ++i)
-                p[i] = (p[i] + q[i]) * scale;
+            std::copy_n(in.row(y), size_t(w) * ncs, row.data() + size_t(-lo) * ncs);
+            for (size_t i = 0; i < row.size(); ++i)
+                prefix[i + ncs] = prefix[i] + double(row[i]);
+            band_row(out.row(y), row.data() + size_t(-first - lo) * ncs,
+                     row.data() + size_t(-last - lo) * ncs, prefix.data() + size_t(-first - lo) * ncs,
+                     prefix.data() + size_t(-last + 1 - lo) * ncs, add ? add->row(y) : nullptr, wf,
+                     last - first >= 2 ? inner : 0.0, wl, scale, size_t(w) * ncs);
         }
     });
+}
+
+// out = (seg(in) + add) * scale for any segment e: a sweep down the rows when e is
+// steep, a pass along the rows when it is horizontal, else a sweep of the transposed
+// planes.
+void segment_pass(const Plane& in, Plane& out, double ex, double ey, const Plane* add,
+                  float scale, int nthreads)
+{
+    if (std::abs(ey) >= std::abs(ex)) {
+        segment_sweep(in, out, ex, ey, add, scale, nthreads);
+    } else if (std::abs(ey) < 1e-9 * std::abs(ex)) {
+        segment_rows(in, out, ex, add, scale, nthreads);
+    } else {
+        const Plane t = transposed(in, nthreads);
+        Plane r(t.w, t.h, t.nc);
+        segment_sweep(t, r, ey, ex, nullptr, 1.0f, nthreads);
+        const Plane back = transposed(r, nthreads);
+        parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int y = int(y0); y < int(y1); ++y)
+                scaled_row(out.row(y), back.row(y), add ? add->row(y) : nullptr, scale, out.stride());
+        });
+    }
 }
 
 // Vertex i of the kernel's hexagon in pixel offsets (y down), as kernel.cpp places them.
@@ -467,19 +598,58 @@ KernelWeights bilinear_tap_weights(const Kernel& k, int* fetches)
 
 namespace detail {
 
-Plane hexagon_parallelograms(const Plane& in, const Kernel& k, int nthreads)
+namespace {
+
+// The three segment directions P0, P2, P4 of the hexagon. Steep segments sweep down the
+// rows, the cheapest pass, so the passes run in the frame (as given or transposed) where
+// two of them are steep: three directions 60 degrees apart always leave two within 45
+// degrees of one axis. For the upright hexagon (rotation 0) that is the transposed frame,
+// where the third segment runs along the rows and needs no shear.
+struct Dir {
+    double x, y;
+    bool steep() const { return std::abs(y) >= std::abs(x); }
+    double slope() const { return steep() ? std::abs(x / y) : 2.0; }
+};
+
+std::array<Dir, 3> hexagon_dirs(const Kernel& k)
 {
-    const auto [p0x, p0y] = hexagon_vertex(k, 0);
-    const auto [p2x, p2y] = hexagon_vertex(k, 2);
-    const auto [p4x, p4y] = hexagon_vertex(k, 4);
-    Plane a = segment_pass(in, p0x, p0y, nthreads);
-    Plane b = segment_pass(in, p2x, p2y, nthreads);
-    Plane r0 = segment_pass(a, p2x, p2y, nthreads);
-    add_into(a, b, 1.0f, nthreads);
-    b        = Plane();
-    Plane r12 = segment_pass(a, p4x, p4y, nthreads);
-    add_into(r12, r0, float(1.0 / 3.0), nthreads);
-    return r12;
+    std::array<Dir, 3> d;
+    for (int i = 0; i < 3; ++i) {
+        const auto [x, y] = hexagon_vertex(k, 2 * i);
+        d[size_t(i)]      = { x, y };
+    }
+    return d;
+}
+
+}  // namespace
+
+bool hexagon_transposed(const Kernel& k)
+{
+    const std::array<Dir, 3> d = hexagon_dirs(k);
+    return std::count_if(d.begin(), d.end(), [](Dir v) { return v.steep(); }) < 2;
+}
+
+Plane hexagon_parallelograms(Plane in, const Kernel& k, int nthreads)
+{
+    std::array<Dir, 3> d = hexagon_dirs(k);
+    if (hexagon_transposed(k))
+        for (Dir& v : d)
+            std::swap(v.x, v.y);
+    // a and b steep (a the less sheared: it runs twice), c the third.
+    std::sort(d.begin(), d.end(), [](Dir p, Dir q) { return p.slope() < q.slope(); });
+    const Dir a = d[0], b = d[1], c = d[2];
+
+    // hexagon = (rhombus(a, b) + rhombus(b, c) + rhombus(c, a)) / 3
+    //         = (seg_c (seg_a + seg_b) + seg_a seg_b) / 3; two planes besides `in`, each
+    // reused once its values are used up (a fresh 1080p plane costs its page faults).
+    Plane segb(in.w, in.h, in.nc), sum_ab(in.w, in.h, in.nc);
+    segment_pass(in, segb, b.x, b.y, nullptr, 1.0f, nthreads);
+    segment_pass(in, sum_ab, a.x, a.y, &segb, 1.0f, nthreads);
+    Plane& ab = in;
+    segment_pass(segb, ab, a.x, a.y, nullptr, 1.0f, nthreads);
+    Plane& out = segb;
+    segment_pass(sum_ab, out, c.x, c.y, &ab, float(1.0 / 3.0), nthreads);
+    return std::move(out);
 }
 
 int hexagon_reach(const Kernel& k, bool along_x)

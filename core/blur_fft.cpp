@@ -194,7 +194,7 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
     });
     if (opts.iris != 0.0f)
         iris.inverse(out, nthreads);
-    return finish(dst, in, roi, out);
+    return finish(dst, in, roi, out, 0, 0, false, nthreads);
 }
 
 }  // namespace bokeh

@@ -1084,10 +1084,9 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
                                                : std::string());
 
     const int nc = f.img.has_alpha ? 4 : 3;
-    dst.reset(derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
+    reset_uninitialised(dst, derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
                                                : std::vector<std::string>{ "R", "G", "B" },
-                           f.out),
-              OIIO::InitializePixels::No);
+                           f.out));
     parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
         for (int y = int(y0); y < int(y1); ++y) {
             float* d       = static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y));
@@ -1112,7 +1111,7 @@ bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOpti
         return false;
     }
     const Membership m = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
-    dst.reset(derived_spec(src.spec(), { "layer" }), OIIO::InitializePixels::No);
+    reset_uninitialised(dst, derived_spec(src.spec(), { "layer" }));
     for (int y = f.data.ybegin; y < f.data.yend; ++y) {
         float* d = static_cast<float*>(dst.pixeladdr(f.data.xbegin, y));
         for (int x = f.data.xbegin; x < f.data.xend; ++x) {

@@ -202,7 +202,7 @@ bool coc_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocOptions& o
         dst.errorfmt("coc: {}", err);
         return false;
     }
-    dst.reset(derived_spec(src.spec(), { "coc" }), OIIO::InitializePixels::No);
+    detail::reset_uninitialised(dst, derived_spec(src.spec(), { "coc" }));
     const OIIO::ROI d = src.roi();
     for (int y = d.ybegin; y < d.yend; ++y)
         std::copy_n(coc.data() + size_t(y - d.ybegin) * size_t(d.width()), d.width(),
@@ -222,7 +222,7 @@ bool focal_plane_view(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocO
         dst.errorfmt("focal plane: {}", err);
         return false;
     }
-    dst.reset(derived_spec(src.spec(), { "R", "G", "B" }), OIIO::InitializePixels::No);
+    detail::reset_uninitialised(dst, derived_spec(src.spec(), { "R", "G", "B" }));
     const float full = std::max(full_tint_px, 1.0f);
     parallel_rows(w.roi, nthreads, [&](int y0, int y1) {
         for (int y = y0; y < y1; ++y)

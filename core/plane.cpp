@@ -9,7 +9,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
+
+#if defined(__linux__)
+#    include <sys/mman.h>
+#endif
 
 #include <OpenImageIO/strutil.h>
 
@@ -116,20 +122,88 @@ void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border
     }
 }
 
-Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads)
+namespace {
+
+// Copies `count` pixels of NC channels from a run with `src_step` floats between pixels
+// to one with `dst_step`: the transposing copies, with a fixed pixel size where it is
+// one of the common ones so each pixel is one vector move, not a call.
+template<int NC>
+void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count)
 {
-    Plane p(region.width(), region.height(), src.nchannels());
+    for (int i = 0; i < count; ++i)
+        std::memcpy(dst + size_t(i) * dst_step, src + size_t(i) * src_step, NC * sizeof(float));
+}
+
+void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count, int nc)
+{
+    switch (nc) {
+    case 1: copy_pixels<1>(dst, dst_step, src, src_step, count); return;
+    case 3: copy_pixels<3>(dst, dst_step, src, src_step, count); return;
+    case 4: copy_pixels<4>(dst, dst_step, src, src_step, count); return;
+    default:
+        for (int i = 0; i < count; ++i)
+            std::copy_n(src + size_t(i) * src_step, nc, dst + size_t(i) * dst_step);
+    }
+}
+
+}  // namespace
+
+Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads,
+          bool transpose)
+{
+    const int w = region.width(), h = region.height(), nc = src.nchannels();
+    const size_t ncs = size_t(nc);
+    Plane p = transpose ? Plane(h, w, nc) : Plane(w, h, nc);
     const OIIO::ROI data = src.roi();
-    parallel_for_chunks(0, p.h, 8, nthreads, [&](int64_t j0, int64_t j1) {
-        for (int j = int(j0); j < int(j1); ++j) {
-            const int sy = border_index(region.ybegin + j, data.ybegin, data.yend, border);
-            if (sy == kOutside)
-                std::fill_n(p.row(j), p.stride(), 0.0f);
-            else
-                source_row(src, sy, region.xbegin, region.xend, border, p.row(j));
+    auto fill_row = [&](int j, float* out) {
+        const int sy = border_index(region.ybegin + j, data.ybegin, data.yend, border);
+        if (sy == kOutside)
+            std::fill_n(out, size_t(w) * ncs, 0.0f);
+        else
+            source_row(src, sy, region.xbegin, region.xend, border, out);
+    };
+    if (!transpose) {
+        parallel_for_chunks(0, h, 8, nthreads, [&](int64_t j0, int64_t j1) {
+            for (int j = int(j0); j < int(j1); ++j)
+                fill_row(j, p.row(j));
+        });
+        return p;
+    }
+    // Transposed: a block of source rows at a time, each column of it written as one
+    // contiguous run of the plane's row.
+    constexpr int kBlock = 32;
+    parallel_for_chunks(0, (h + kBlock - 1) / kBlock, 1, nthreads, [&](int64_t b0, int64_t b1) {
+        std::vector<float> rows(size_t(kBlock) * size_t(w) * ncs);
+        for (int64_t b = b0; b < b1; ++b) {
+            const int j0 = int(b) * kBlock, j1 = std::min(h, j0 + kBlock);
+            for (int j = j0; j < j1; ++j)
+                fill_row(j, rows.data() + size_t(j - j0) * size_t(w) * ncs);
+            for (int i = 0; i < w; ++i)
+                copy_pixels(p.row(i) + size_t(j0) * ncs, ncs, rows.data() + size_t(i) * ncs,
+                            size_t(w) * ncs, j1 - j0, nc);
         }
     });
     return p;
+}
+
+void prefer_huge_pages(void* p, size_t bytes)
+{
+#if defined(__linux__) && defined(MADV_HUGEPAGE)
+    constexpr uintptr_t kHuge = uintptr_t(2) << 20;
+    const uintptr_t b = (reinterpret_cast<uintptr_t>(p) + kHuge - 1) & ~(kHuge - 1);
+    const uintptr_t e = (reinterpret_cast<uintptr_t>(p) + bytes) & ~(kHuge - 1);
+    if (e > b)
+        madvise(reinterpret_cast<void*>(b), e - b, MADV_HUGEPAGE);  // advice: failure is harmless
+#else
+    (void)p, (void)bytes;
+#endif
+}
+
+void reset_uninitialised(OIIO::ImageBuf& dst, const OIIO::ImageSpec& spec)
+{
+    dst.reset(spec, OIIO::InitializePixels::No);
+    if (dst.localpixels())
+        prefer_huge_pages(dst.localpixels(), size_t(dst.spec().image_bytes()));
 }
 
 void prepare_destination(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi)
@@ -141,17 +215,35 @@ void prepare_destination(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const O
     spec.y      = roi.ybegin;
     spec.width  = roi.width();
     spec.height = roi.height();
-    dst.reset(spec, OIIO::InitializePixels::No);
+    reset_uninitialised(dst, spec);
 }
 
 bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi, const Plane& p,
-            int ox, int oy)
+            int ox, int oy, bool transposed, int nthreads)
 {
     prepare_destination(dst, src, roi);
-    const size_t n = size_t(roi.width()) * size_t(p.nc);
-    for (int y = 0; y < roi.height(); ++y)
-        std::copy_n(p.row(y + oy) + size_t(ox) * size_t(p.nc), n,
-                    static_cast<float*>(dst.pixeladdr(roi.xbegin, roi.ybegin + y)));
+    const size_t nc = size_t(p.nc), n = size_t(roi.width()) * nc;
+    float* const first_row = static_cast<float*>(dst.pixeladdr(roi.xbegin, roi.ybegin));
+    const size_t row_step  = size_t(dst.spec().width) * nc;  // prepare_destination: roi-sized
+    auto out_row           = [&](int y) { return first_row + size_t(y) * row_step; };
+    if (!transposed) {
+        parallel_for_chunks(0, roi.height(), 16, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int y = int(y0); y < int(y1); ++y)
+                std::copy_n(p.row(y + oy) + size_t(ox) * nc, n, out_row(y));
+        });
+        return true;
+    }
+    // Output (x, y) is p(y + oy, x + ox): per block of output rows, each plane row gives
+    // one contiguous run, spread over the block's rows.
+    constexpr int kBlock = 32;
+    parallel_for_chunks(0, (roi.height() + kBlock - 1) / kBlock, 1, nthreads, [&](int64_t b0, int64_t b1) {
+        for (int64_t b = b0; b < b1; ++b) {
+            const int y0 = int(b) * kBlock, y1 = std::min(roi.height(), y0 + kBlock);
+            for (int x = 0; x < roi.width(); ++x)
+                copy_pixels(out_row(y0) + size_t(x) * nc, row_step, p.row(x + ox) + size_t(y0 + oy) * nc,
+                            nc, y1 - y0, p.nc);
+        }
+    });
     return true;
 }
 
@@ -201,8 +293,8 @@ Plane transposed(const Plane& in, int nthreads)
             const int x0 = int(t % tx) * kTile, y0 = int(t / tx) * kTile;
             const int x1 = std::min(in.w, x0 + kTile), y1 = std::min(in.h, y0 + kTile);
             for (int y = y0; y < y1; ++y)
-                for (int x = x0; x < x1; ++x)
-                    std::copy_n(in.row(y) + size_t(x) * nc, nc, out.row(x) + size_t(y) * nc);
+                copy_pixels(out.row(x0) + size_t(y) * nc, out.stride(), in.row(y) + size_t(x0) * nc,
+                            nc, x1 - x0, in.nc);
         }
     });
     return out;

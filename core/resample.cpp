@@ -923,7 +923,7 @@ PlaneView make_output(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const OI
     spec.full_width = full.width(), spec.full_height = full.height();
     // A tiled source's tile size may not suit the new size; the writer picks its own.
     spec.tile_width = spec.tile_height = 0;
-    dst.reset(spec, OIIO::InitializePixels::No);
+    detail::reset_uninitialised(dst, spec);
     PlaneView p;
     p.data       = static_cast<float*>(dst.pixeladdr(data.xbegin, data.ybegin));
     p.width      = data.width();
