@@ -226,30 +226,6 @@ double* aligned64(double* p)
     return p + (8 - (reinterpret_cast<uintptr_t>(p) / sizeof(double)) % 8) % 8;
 }
 
-// p[(x + 1) nc + c] = sum of v[0 .. x] in channel c, p[c] = 0, for x < npx. Four channels
-// keep their running sums in registers (one vector add per pixel); others go through
-// memory.
-void row_prefix(double* p, const float* v, size_t npx, int nc)
-{
-    if (nc == 4) {
-        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
-        p[0] = p[1] = p[2] = p[3] = 0.0;
-        for (size_t x = 0; x < npx; ++x) {
-            a0 += double(v[4 * x]);
-            a1 += double(v[4 * x + 1]);
-            a2 += double(v[4 * x + 2]);
-            a3 += double(v[4 * x + 3]);
-            double* o = p + 4 * (x + 1);
-            o[0] = a0, o[1] = a1, o[2] = a2, o[3] = a3;
-        }
-        return;
-    }
-    const size_t ncs = size_t(nc);
-    std::fill_n(p, ncs, 0.0);
-    for (size_t i = 0, e = npx * ncs; i < e; ++i)
-        p[i + ncs] = p[i] + double(v[i]);
-}
-
 // The box straight from the source ImageBuf into `dst` (no padded plane, no middle plane,
 // no copy out). Each task owns a strip of kBoxStrip output columns (twice that for wide
 // boxes) and walks down it: the horizontal pass reads one source row of the strip plus
@@ -262,8 +238,6 @@ void row_prefix(double* p, const float* v, size_t npx, int nc)
 // never grow beyond the sum of one strip's row (a 1e6 pixel leaves no drift); the strips
 // are fixed, so the result does not depend on the thread count.
 constexpr int kBoxStrip = 256;
-// The largest kernel reach (px) for which bands use per-tile tables (see blur()).
-constexpr int kBandsDirectReach = 64;
 
 // One row of a horizontal box, for NC channels: out(x) = inner * (sum of the full pixels
 // v[x + radius - full .. x + radius + full]) + end * (v[x] + v[x + 2 radius]). A running
@@ -490,8 +464,7 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 // not lost to a long row's sum); tiles are fixed, so results do not depend on the thread
 // count.
 bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
-                           int rx, int ry, std::vector<Span> spans, bool summed_area, Border border,
-                           int nthreads)
+                           int rx, int ry, std::vector<Span> spans, Border border, int nthreads)
 {
     constexpr int kSpanTileW = 256, kSubW = 64, kSubH = 8;
     prepare_destination(dst, in, roi);
@@ -499,8 +472,8 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     const size_t ncs = size_t(nc);
     const OIIO::ROI data = in.roi();
     // Output row y reads table rows y + d, d = dy + ry in [0, nd): the padded rows
-    // y .. y + 2 ry, and for a summed-area table one more (its row m sums rows < m).
-    const int nd = 2 * ry + 1 + (summed_area ? 1 : 0);
+    // y .. y + 2 ry.
+    const int nd = 2 * ry + 1;
     std::stable_sort(spans.begin(), spans.end(),
                      [](const Span& a, const Span& b) { return a.dy < b.dy; });
     // first[d] .. first[d + 1]: the spans of table row d, as offsets into a table row
@@ -547,17 +520,9 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
         std::vector<float> row(pw);
         for (int r = 0; r < nrows; ++r) {
             double* p = table + size_t(r) * rs;
-            // Padded row q = the table row (a summed-area table's row r adds row r - 1).
-            const int q  = summed_area ? r - 1 : r;
-            const int sy = summed_area && r == 0
-                               ? kOutside
-                               : border_index(roi.ybegin + ys - ry + q, data.ybegin,
-                                              data.yend, border);
+            const int sy = border_index(roi.ybegin + ys - ry + r, data.ybegin, data.yend, border);
             if (sy == kOutside) {
-                if (summed_area && r > 0)
-                    std::copy_n(p - rs, pw, p);
-                else
-                    std::fill_n(p, pw, 0.0);
+                std::fill_n(p, pw, 0.0);
             } else {
                 const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
                 const float* v = row.data();
@@ -566,8 +531,6 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
                 else
                     source_row(in, sy, x0, x1, border, row.data());
                 row_prefix(p, v, pw / ncs - 1, nc);
-                if (summed_area)
-                    add_rows(p, p - rs, pw);
             }
             if (twin)
                 std::copy(p + ncs, p + pw, p + pal);
@@ -727,18 +690,14 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
                               BoxPass(box_weights_1d(k.height_px)), opts.border, nthreads);
         if (k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon)
             return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
-                                         kernel_spans(reflected(weights)), false, opts.border,
+                                         kernel_spans(reflected(weights)), opts.border,
                                          nthreads);
     }
-    // Bands: the per-tile summed-area table pays off while the kernel's reach is small
-    // beside the tile; above ~100 px the whole-frame table recomputes less.
-    if (method == BlurMethod::Bands && opts.iris == 0.0f && !weights.is_identity()
-        && std::max(weights.rx, weights.ry) <= kBandsDirectReach)
-        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
-                                     banded_table_spans(weights), true, opts.border, nthreads);
+    if (method == BlurMethod::Bands && opts.iris == 0.0f && !weights.is_identity())
+        return convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
     if (method == BlurMethod::BilinearTaps && opts.iris == 0.0f && !weights.is_identity())
         return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
-                                     kernel_spans(reflected(weights)), false, opts.border, nthreads);
+                                     kernel_spans(reflected(weights)), opts.border, nthreads);
     // The parallelograms of an upright hexagon run on the transposed plane (blur_approx.cpp);
     // it is padded and finished transposed rather than transposed twice more.
     const bool transpose = method == BlurMethod::Parallelograms && !weights.is_identity()

@@ -27,14 +27,15 @@
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
 // (boundaries by dynamic programming, least squares on the row areas), each band's rows
 // replaced by one interval of the same mean area and centre, anti-aliased at its ends;
-// the bands are rectangles, each summed from a summed-area table (Crow 1984) with four
-// reads a corner pair, so the cost depends on the band count, not the kernel size.
-// Changed for speed (issue 3): outside iris mode the table is no longer one whole-frame
-// double plane (68-77 MB at 1080p, ~60 ms per call) but built per output tile by
-// convolve_spans_direct (blur.cpp) straight from the source, each rectangle becoming two
-// signed spans of the tile's table (banded_table_spans); convolve_banded keeps the plane
-// path for iris mode and for kernels reaching over 64 px: the tile's table covers the
-// tile plus the kernel's reach, so its building cost grows with the kernel.
+// the bands are rectangles, so the cost depends on the band count, not the kernel size.
+// Changed for speed (issue 3): outside iris mode (convolve_bands_direct) each task walks
+// down a strip of output columns reading the source once: a row's double prefix sums give
+// every band profile's horizontal sum (a band and its mirror image share one), kept in a
+// ring of the last 2 ry + 2 rows, and one double running total slides down the rows, each
+// band window adding the row entering it and taking away the row leaving it. Before,
+// a summed-area table (Crow 1984) was built per output tile (its building grew with the
+// kernel's reach) or for the whole frame (68-77 MB at 1080p); convolve_banded keeps that
+// plane path for iris mode.
 //
 // Bilinear taps (SEEDS.md section 5): the seed's 9x9 disk from 25 bilinear fetches and
 // a 17x17 one from 81. The taps are grouped 2 (or 1, the centre) per axis; a fetch sits
@@ -58,6 +59,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <map>
 
 namespace bokeh {
 
@@ -406,20 +408,172 @@ std::vector<Rect> kernel_rects(const KernelWeights& k)
     return rects;
 }
 
+// --- bands by running sums down the rows ---------------------------------------------------
+
+// One bar of a band's rows in the reflected kernel: weight on offsets x0 .. x1.
+struct Bar {
+    int x0, x1;
+    double weight;
+    bool operator==(const Bar& o) const { return x0 == o.x0 && x1 == o.x1 && weight == o.weight; }
+};
+
+// The rows of one horizontal profile (a band and its mirror image share one): the bars
+// along x, and the runs of kernel rows [y0, y1] (offsets) it covers.
+struct Profile {
+    std::vector<Bar> bars;
+    std::vector<std::pair<int, int>> windows;
+};
+
+std::vector<Profile> band_profiles(const KernelWeights& banded)
+{
+    std::map<std::pair<int, int>, std::vector<Bar>> by_rows;
+    for (const Rect& r : kernel_rects(reflected(banded)))
+        by_rows[{ r.y0, r.y1 }].push_back({ r.x0, r.x1, r.weight });
+    std::vector<Profile> profiles;
+    for (const auto& [rows, bars] : by_rows) {
+        auto same = std::find_if(profiles.begin(), profiles.end(),
+                                 [&](const Profile& p) { return p.bars == bars; });
+        if (same == profiles.end())
+            profiles.push_back({ bars, { rows } });
+        else
+            same->windows.push_back(rows);
+    }
+    return profiles;
+}
+
+// h[i] = sum over the bars of w (p[i + hi] - p[i + lo]): one profile of a prefix row.
+BOKEH_HOT void profile_row(float* h, const double* p, const size_t* hi, const size_t* lo,
+                           const double* w, size_t nbars, size_t n)
+{
+    if (nbars == 1) {
+        for (size_t i = 0; i < n; ++i)
+            h[i] = float(w[0] * (p[i + hi[0]] - p[i + lo[0]]));
+        return;
+    }
+    if (nbars == 2) {
+        for (size_t i = 0; i < n; ++i)
+            h[i] = float(w[0] * (p[i + hi[0]] - p[i + lo[0]]) + w[1] * (p[i + hi[1]] - p[i + lo[1]]));
+        return;
+    }
+    if (nbars == 3) {
+        for (size_t i = 0; i < n; ++i)
+            h[i] = float(w[0] * (p[i + hi[0]] - p[i + lo[0]]) + w[1] * (p[i + hi[1]] - p[i + lo[1]])
+                         + w[2] * (p[i + hi[2]] - p[i + lo[2]]));
+        return;
+    }
+    for (size_t i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (size_t b = 0; b < nbars; ++b)
+            s += w[b] * (p[i + hi[b]] - p[i + lo[b]]);
+        h[i] = float(s);
+    }
+}
+
+// t[i] += sum over k < count of (add[k][i] - sub[k][i]), the differences in double.
+BOKEH_HOT void slide_rows(double* t, const float* const* add, const float* const* sub,
+                          size_t count, size_t n)
+{
+    size_t k = 0;
+    for (; k + 4 <= count; k += 4) {
+        const float *a0 = add[k], *a1 = add[k + 1], *a2 = add[k + 2], *a3 = add[k + 3];
+        const float *s0 = sub[k], *s1 = sub[k + 1], *s2 = sub[k + 2], *s3 = sub[k + 3];
+        for (size_t i = 0; i < n; ++i)
+            t[i] += ((double(a0[i]) - double(s0[i])) + (double(a1[i]) - double(s1[i])))
+                    + ((double(a2[i]) - double(s2[i])) + (double(a3[i]) - double(s3[i])));
+    }
+    for (; k < count; ++k)
+        for (size_t i = 0; i < n; ++i)
+            t[i] += double(add[k][i]) - double(sub[k][i]);
+}
+
 }  // namespace
 
 namespace detail {
 
-std::vector<Span> banded_table_spans(const KernelWeights& kernel)
+bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                           const KernelWeights& banded, Border border, int nthreads)
 {
-    // Rectangle rows y0 .. y1 of the reflected kernel: + the table row below it (y1 + 1),
-    // - the row on top (y0), as in convolve_banded.
-    std::vector<Span> spans;
-    for (const Rect& r : kernel_rects(reflected(kernel))) {
-        spans.push_back({ r.y1 + 1, r.x0, r.x1, r.weight });
-        spans.push_back({ r.y0, r.x0, r.x1, -r.weight });
+    constexpr int kStrip = 256;
+    prepare_destination(dst, in, roi);
+    const int nc = in.nchannels();
+    const size_t ncs = size_t(nc);
+    const OIIO::ROI data = in.roi();
+    const int w = roi.width(), h = roi.height(), rx = banded.rx, ry = banded.ry;
+    const std::vector<Profile> profiles = band_profiles(banded);
+    // Per profile, its bars as offsets into a prefix row that starts rx columns left of
+    // the strip: output x sums row pixels x + x0 .. x + x1 = prefix[x + rx + x1 + 1] -
+    // prefix[x + rx + x0].
+    std::vector<size_t> hi, lo, first_bar;
+    std::vector<double> weight;
+    for (const Profile& p : profiles) {
+        first_bar.push_back(hi.size());
+        for (const Bar& b : p.bars) {
+            hi.push_back(size_t(rx + b.x1 + 1) * ncs);
+            lo.push_back(size_t(rx + b.x0) * ncs);
+            weight.push_back(b.weight);
+        }
     }
-    return spans;
+    first_bar.push_back(hi.size());
+    size_t nwindows = 0;
+    for (const Profile& p : profiles)
+        nwindows += p.windows.size();
+    const int ring = 2 * ry + 2;  // padded rows y - 1 .. y + 2 ry are in use at output row y
+    const size_t np = profiles.size();
+    const int nstrips = (w + kStrip - 1) / kStrip;
+    parallel_for_chunks(0, nstrips, 1, nthreads, [&](int64_t s, int64_t) {
+        const int xs = int(s) * kStrip, xe = std::min(w, xs + kStrip);
+        const size_t n = size_t(xe - xs) * ncs;
+        const size_t npx = size_t(xe - xs + 2 * rx);
+        std::vector<float> row(npx * ncs), rows(np * size_t(ring) * n);
+        std::vector<double> prefix((npx + 1) * ncs), total(n);
+        std::vector<const float*> add(nwindows), sub(nwindows);
+        auto ring_row = [&](size_t p, int j) { return rows.data() + (p * size_t(ring) + size_t(j % ring)) * n; };
+        // Padded row j (source row roi.ybegin - ry + j) through every profile.
+        auto horizontal = [&](int j) {
+            const int sy = border_index(roi.ybegin - ry + j, data.ybegin, data.yend, border);
+            if (sy == kOutside) {
+                for (size_t p = 0; p < np; ++p)
+                    std::fill_n(ring_row(p, j), n, 0.0f);
+                return;
+            }
+            const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
+            const float* v = row.data();
+            if (x0 >= data.xbegin && x1 <= data.xend)
+                v = static_cast<const float*>(in.pixeladdr(x0, sy, data.zbegin));
+            else
+                source_row(in, sy, x0, x1, border, row.data());
+            row_prefix(prefix.data(), v, npx, nc);
+            for (size_t p = 0; p < np; ++p)
+                profile_row(ring_row(p, j), prefix.data(), hi.data() + first_bar[p],
+                            lo.data() + first_bar[p], weight.data() + first_bar[p],
+                            first_bar[p + 1] - first_bar[p], n);
+        };
+        for (int j = 0; j < 2 * ry; ++j)
+            horizontal(j);
+        for (int y = 0; y < h; ++y) {
+            horizontal(y + 2 * ry);
+            // Kernel row dy of output row y is padded row y + ry + dy; each window slides
+            // down by one row: its row y1 enters, the row above y0 leaves.
+            if (y == 0) {
+                std::fill(total.begin(), total.end(), 0.0);
+                for (size_t p = 0; p < np; ++p)
+                    for (const auto& [y0, y1] : profiles[p].windows)
+                        for (int dy = y0; dy <= y1; ++dy)
+                            add_scaled(total.data(), ring_row(p, ry + dy), 1.0, n);
+            } else {
+                size_t k = 0;
+                for (size_t p = 0; p < np; ++p)
+                    for (const auto& [y0, y1] : profiles[p].windows) {
+                        add[k]   = ring_row(p, y + ry + y1);
+                        sub[k++] = ring_row(p, y - 1 + ry + y0);
+                    }
+                slide_rows(total.data(), add.data(), sub.data(), nwindows, n);
+            }
+            to_float(static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + y)),
+                     total.data(), n);
+        }
+    });
+    return true;
 }
 
 Plane convolve_banded(const Plane& in, const KernelWeights& kernel, int nthreads)

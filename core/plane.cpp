@@ -300,6 +300,29 @@ Plane transposed(const Plane& in, int nthreads)
     return out;
 }
 
+// Four channels keep their running sums in registers (one vector add per pixel); others
+// go through memory.
+void row_prefix(double* p, const float* v, size_t npx, int nc)
+{
+    if (nc == 4) {
+        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+        p[0] = p[1] = p[2] = p[3] = 0.0;
+        for (size_t x = 0; x < npx; ++x) {
+            a0 += double(v[4 * x]);
+            a1 += double(v[4 * x + 1]);
+            a2 += double(v[4 * x + 2]);
+            a3 += double(v[4 * x + 3]);
+            double* o = p + 4 * (x + 1);
+            o[0] = a0, o[1] = a1, o[2] = a2, o[3] = a3;
+        }
+        return;
+    }
+    const size_t ncs = size_t(nc);
+    std::fill_n(p, ncs, 0.0);
+    for (size_t i = 0, e = npx * ncs; i < e; ++i)
+        p[i + ncs] = p[i] + double(v[i]);
+}
+
 // acc[i] += w * (hi[i] - lo[i]): one span of prefix sums.
 BOKEH_HOT void add_span(double* acc, const double* hi, const double* lo, double w, size_t n)
 {
@@ -339,13 +362,6 @@ BOKEH_HOT void add_spans(double* acc, const double* p, const size_t* hi, const s
     } else if (count - s == 1) {
         add_span(acc, p + hi[s], p + lo[s], w[s], n);
     }
-}
-
-// p[i] += q[i] (a summed-area table's row from the one above).
-BOKEH_HOT void add_rows(double* p, const double* q, size_t n)
-{
-    for (size_t i = 0; i < n; ++i)
-        p[i] += q[i];
 }
 
 // acc[i] += w * src[i].

@@ -97,12 +97,13 @@ void add_span(double* acc, const double* hi, const double* lo, double w, size_t 
 /// one prefix row at once.
 void add_spans(double* acc, const double* p, const size_t* hi, const size_t* lo, const double* w,
                size_t count, size_t n);
-/// p[i] += q[i].
-void add_rows(double* p, const double* q, size_t n);
 /// acc[i] += w * src[i].
 void add_scaled(double* acc, const float* src, double w, size_t n);
 /// out[i] = float(acc[i]).
 void to_float(float* out, const double* acc, size_t n);
+
+/// p[(x + 1) nc + c] = sum of v[0 .. x] in channel c, p[c] = 0, for x < npx.
+void row_prefix(double* p, const float* v, size_t npx, int nc);
 
 /// Row prefix sums in double: prefix[y][(x + 1) nc + c] = sum of in[y][0..x] in channel c,
 /// and prefix[y][c] = 0; rows of (in.w + 1) * nc values (blur.cpp).
@@ -124,15 +125,14 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 /// The convolution with a list of spans straight from the source into `dst` over `roi`
 /// (blur.cpp), by the border rule, for a kernel reaching rx, ry. A span (dy, x0, x1, w)
 /// adds w * (T[y + dy][x + x1 + 1] - T[y + dy][x + x0]) where T is the row prefix sums of
-/// the padded source (dy in [-ry, ry]), or with `summed_area` its summed-area table (row
-/// dy sums the rows above dy; dy in [-ry, ry + 1]). Tables are built per output tile.
+/// the padded source (dy in [-ry, ry]), built per output tile.
 bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
-                           int rx, int ry, std::vector<Span> spans, bool summed_area, Border border,
-                           int nthreads);
+                           int rx, int ry, std::vector<Span> spans, Border border, int nthreads);
 
-/// A banded kernel's rectangles as signed spans of a summed-area table, for
-/// convolve_spans_direct (blur_approx.cpp).
-std::vector<Span> banded_table_spans(const KernelWeights& banded);
+/// A banded kernel (rows in runs of equal rows) straight from the source into `dst` over
+/// `roi` by running sums down the rows (blur_approx.cpp): cost independent of its size.
+bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                           const KernelWeights& banded, Border border, int nthreads);
 
 /// Approximations (blur_approx.cpp). Planes are the padded input's size.
 /// Whether the parallelograms of `k` run on the transposed plane (see blur_approx.cpp).
@@ -141,7 +141,7 @@ bool hexagon_transposed(const Kernel& k);
 Plane hexagon_parallelograms(Plane in, const Kernel& k, int nthreads);
 /// How far the parallelogram passes read along x (or y), interpolation included.
 int hexagon_reach(const Kernel& k, bool along_x);
-/// Convolution with a kernel of repeated rows (bands) via a summed-area table.
+/// Convolution with a kernel of repeated rows (bands) via a summed-area table (iris mode).
 Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads);
 
 /// Iris mode (SEEDS.md section 3): values go to exp(k (x - shift)) before the blur and
