@@ -578,6 +578,31 @@ TEST(BlurApprox, ParallelogramCostDoesNotDependOnTheSizeButItsReachDoes)
     EXPECT_EQ(std::memcmp(ra.localpixels(), rb.localpixels(), bytes), 0);
 }
 
+TEST(BlurApprox, ParallelogramsAreEquivariantUnderTransposition)
+{
+    // Mirroring the image in its diagonal mirrors the hexagon: rotation r becomes
+    // -r - 30 (mod 60). Rotation 0 runs on the transposed plane and 30 on the plane as
+    // given (blur_approx.cpp); 7 / -37 and 20 / -50 take the sheared row pass in one
+    // frame or the other. Each pair checks one path against another: equal to float
+    // rounding. (A segment at exactly 45 degrees is steep in both frames, and its shear
+    // smooths across the axis the frame gives it, so rotation 15 is left out.)
+    const OIIO::ImageBuf src = test_image(53, 41, 3, -2);
+    OIIO::ImageBuf src_t;
+    ASSERT_TRUE(OIIO::ImageBufAlgo::transpose(src_t, src));
+    BlurOptions o;
+    o.method = BlurMethod::Parallelograms;
+    o.grow   = true;
+    for (float r : { 0.0f, 7.0f, 20.0f }) {
+        SCOPED_TRACE(r);
+        OIIO::ImageBuf a, b, a_t;
+        ASSERT_TRUE(blur(a, src, hexagon(19, 19, r), o));
+        ASSERT_TRUE(blur(b, src_t, hexagon(19, 19, -r - 30.0f), o));
+        ASSERT_TRUE(OIIO::ImageBufAlgo::transpose(a_t, a));
+        ASSERT_EQ(a_t.roi(), b.roi());
+        EXPECT_LE(bokeh_test::max_difference(a_t, b), 2e-6 * peak(a));
+    }
+}
+
 TEST(BlurApprox, BandsComputeTheirBandedKernelExactly)
 {
     const OIIO::ImageBuf src = test_image(90, 70);
