@@ -693,6 +693,15 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
                                          kernel_spans(reflected(weights)), opts.border,
                                          nthreads);
     }
+    if (method == BlurMethod::ThreeBoxes && opts.iris == 0.0f && !weights.is_identity()) {
+        // Three direct boxes, each writing the region the next one reads (the border rule
+        // acts in the first alone): three reads and writes of the frame, no padded plane.
+        const BoxPass bx(box3x), by(box3y);
+        OIIO::ImageBuf once, twice;
+        return box_direct(once, in, grown(roi, 2 * bx.radius, 2 * by.radius), bx, by, opts.border, nthreads)
+               && box_direct(twice, once, grown(roi, bx.radius, by.radius), bx, by, opts.border, nthreads)
+               && box_direct(dst, twice, roi, bx, by, opts.border, nthreads);
+    }
     if (method == BlurMethod::Bands && opts.iris == 0.0f && !weights.is_identity())
         return convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
     if (method == BlurMethod::BilinearTaps && opts.iris == 0.0f && !weights.is_identity())
