@@ -165,8 +165,8 @@ int main(int argc, char* argv[])
     for (double d : sizes) {
         ours("box", "running sums", d, kernel(S::Box, d));
         ours("disk", "row spans (exact)", d, kernel(S::Disk, d));
-        for (int bands : { 4, 8, 16 }) {
-            ours("disk", format("{} bands (summed-area table)", bands), d, kernel(S::Disk, d), M::Bands);
+        for (int bands : { 4, 6, 8, 16 }) {
+            ours("disk", format("{} bands (running sums)", bands), d, kernel(S::Disk, d), M::Bands);
             cases.back().options.bands = bands;
         }
         ours("disk", "FFT (image kernel)", d, kernel(S::Disk, d));
@@ -192,7 +192,7 @@ int main(int argc, char* argv[])
         bokeh::Kernel hard = kernel(S::Disk, 61);
         hard.edge          = bokeh::KernelEdge::Hard;
         ours("disk hard", "row spans (exact)", 61, hard);
-        ours("disk hard", "8 bands (summed-area table)", 61, hard, M::Bands);
+        ours("disk hard", "8 bands (running sums)", 61, hard, M::Bands);
         Case c{ "disk hard", "GEGL gegl:lens-blur radius 30", "gegl", 61, hard, {} };
         c.reps = std::min(reps, 3);
         cases.push_back(c);
