@@ -734,7 +734,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
             out = box_blur(out, box3x, box3y, nthreads);
         break;
     case BlurMethod::Parallelograms:
-        out = hexagon_parallelograms(std::move(p), k, nthreads);
+        out = hexagon_parallelograms(std::move(p), k, transpose ? ry : rx, transpose ? rx : ry, nthreads);
         ox  = rx;
         oy  = ry;
         break;

@@ -122,18 +122,19 @@ BOKEH_HOT void three_taps(float* g, const float* p, float w0, float w1, float w2
         g[i] = w0 * p[i] + w1 * p[i + stride] + w2 * p[i + 2 * stride];
 }
 
-// Columns u in [u0, u1) of `row` (w pixels, zero outside) read at u + shift: the taps
-// `t` of the shift (Taps(shift): reads from column u + t.first). `identity`: no shift.
-void shifted_row(float* g, const float* row, int w, int nc, int u0, int u1, const Taps& t,
+// Columns u in [u0, u1) of `row` (zero outside its columns [lo, hi)) read at u + shift:
+// the taps `t` of the shift (Taps(shift): reads from column u + t.first). `identity`: no
+// shift.
+void shifted_row(float* g, const float* row, int lo, int hi, int nc, int u0, int u1, const Taps& t,
                  bool identity)
 {
     const size_t ncs = size_t(nc);
     const int reach  = identity ? 0 : 2;  // taps past the first
     const int first  = identity ? t.first + 1 : t.first;
-    // [z0, z1): columns with a tap inside the row (u + first + reach >= 0, u + first < w);
-    // [a, b): those with all taps inside (u + first >= 0, u + first + reach < w).
-    const int z0 = std::clamp(-first - reach, u0, u1), z1 = std::clamp(w - first, z0, u1);
-    const int a = std::clamp(-first, z0, z1), b = std::clamp(w - reach - first, a, z1);
+    // [z0, z1): columns with a tap inside [lo, hi) (u + first + reach >= lo, u + first < hi);
+    // [a, b): those with all taps inside (u + first >= lo, u + first + reach < hi).
+    const int z0 = std::clamp(lo - first - reach, u0, u1), z1 = std::clamp(hi - first, z0, u1);
+    const int a = std::clamp(lo - first, z0, z1), b = std::clamp(hi - reach - first, a, z1);
     std::fill(g, g + size_t(z0 - u0) * ncs, 0.0f);
     std::fill(g + size_t(z1 - u0) * ncs, g + size_t(u1 - u0) * ncs, 0.0f);
     auto edge = [&](int u) {
@@ -141,7 +142,7 @@ void shifted_row(float* g, const float* row, int w, int nc, int u0, int u1, cons
         std::fill_n(o, nc, 0.0f);
         for (int j = 0; j <= reach; ++j) {
             const int x = u + first + j;
-            if (x < 0 || x >= w)
+            if (x < lo || x >= hi)
                 continue;
             const float wj = identity ? 1.0f : t.w[j];
             for (int c = 0; c < nc; ++c)
@@ -197,18 +198,23 @@ BOKEH_HOT void unshear_row(float* o, const float* h, const float* add, float w0,
             o[i] = (w0 * h[i] + w1 * h[i + stride] + w2 * h[i + 2 * stride]) * scale;
 }
 
+// A rectangle of plane pixels, [x0, x1) x [y0, y1).
+struct Region {
+    int x0, y0, x1, y1;
+};
+
 // out = (seg(in) + add) * scale, where seg(in)(p) = mean over t in [0, 1] of in(p - t e),
-// e = (ex, ey) with |ex| <= |ey|; same-size planes, `in` zero outside itself, `add`
-// optional. Shear: G(u, r) = in(u + m r, r), m = ex / ey, moves each row as a whole, so
+// e = (ex, ey) with |ex| <= |ey|; same-size planes, `in` read as zero outside `valid`,
+// `out` written over `region` alone, `add` optional. Shear: G(u, r) = in(u + m r, r), m = ex / ey, moves each row as a whole, so
 // the segment runs down G's columns; H = the running sum down the columns (interval
 // weights: fractional ends by overlap); out(x, y) = H(x - m y, y). Every step is along a
 // row with one set of taps per row, so one sweep down the rows does it: a task owns a
 // strip of G's columns and keeps, per row, the two G rows entering and leaving the
 // window (recomputed from `in`, not stored), so the cost does not depend on the length.
-void segment_sweep(const Plane& in, Plane& out, double ex, double ey, const Plane* add,
-                   float scale, int nthreads)
+void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Region& region,
+                   double ex, double ey, const Plane* add, float scale, int nthreads)
 {
-    const int w = in.w, h = in.h, nc = in.nc;
+    const int nc = in.nc;
     const size_t ncs = size_t(nc);
     // A slope under 1e-9 moves a segment of any allowed length by under a micro-pixel.
     const bool shear = std::abs(ex) >= 1e-9 * std::abs(ey);
@@ -220,8 +226,8 @@ void segment_sweep(const Plane& in, Plane& out, double ex, double ey, const Plan
 
     // Output (x, y) reads H at columns x + back(y).first + j; the columns of G any reads.
     auto back = [&](int y) { return Taps(-m * y, !shear); };
-    const int f0 = back(0).first, f1 = back(h - 1).first;
-    const int g0 = std::min(f0, f1), g1 = std::max(f0, f1) + w + 2;
+    const int f0 = back(region.y0).first, f1 = back(region.y1 - 1).first;
+    const int g0 = std::min(f0, f1) + region.x0, g1 = std::max(f0, f1) + region.x1 + 2;
     // Strips of ~256 columns, at least two per thread so the sweeps balance.
     const int nstrips = std::max(2 * std::max(1, nthreads), (g1 - g0 + 255) / 256);
     const int width   = (g1 - g0 + nstrips - 1) / nstrips;
@@ -238,9 +244,9 @@ void segment_sweep(const Plane& in, Plane& out, double ex, double ey, const Plan
             std::vector<float> hrow(n);
             std::vector<double> sum(n, 0.0);
             auto g_row = [&](int r, float* dst) -> const float* {
-                if (r < 0 || r >= h)
+                if (r < valid.y0 || r >= valid.y1)
                     return zero;
-                shifted_row(dst, in.row(r), w, nc, c0, he, Taps(m * r, !shear), !shear);
+                shifted_row(dst, in.row(r), valid.x0, valid.x1, nc, c0, he, Taps(m * r, !shear), !shear);
                 return dst;
             };
             // G's rows [ra, rb) are the ones that reach into the strip (the shear moves a
@@ -249,18 +255,18 @@ void segment_sweep(const Plane& in, Plane& out, double ex, double ey, const Plan
             const int reach = shear ? 2 : 0;
             auto touches    = [&](int r) {
                 const int f = Taps(m * r, !shear).first + (shear ? 0 : 1);
-                return f + he - 1 + reach >= 0 && f + c0 < w;
+                return f + he - 1 + reach >= valid.x0 && f + c0 < valid.x1;
             };
-            int ra = 0;
-            while (ra < h && !touches(ra))
+            int ra = valid.y0;
+            while (ra < valid.y1 && !touches(ra))
                 ++ra;
             int rb = ra;
-            while (rb < h && touches(rb))
+            while (rb < valid.y1 && touches(rb))
                 ++rb;
             const int ys = ra + first, ye = ra < rb ? rb + last : ys;
             std::fill(hrow.begin(), hrow.end(), 0.0f);
             const float* prev = zero;  // G(y - first - 1)
-            for (int y = std::min(0, ys); y < h; ++y) {
+            for (int y = std::min(region.y0, ys); y < region.y1; ++y) {
                 if (y >= ys && y < ye) {
                     const float* gn = g_row(y - first, newest);
                     const float* go = last != first ? g_row(y - last, oldest) : zero;
@@ -276,9 +282,9 @@ void segment_sweep(const Plane& in, Plane& out, double ex, double ey, const Plan
                 } else if (y == ye) {
                     std::fill(hrow.begin(), hrow.end(), 0.0f);  // the window has drained
                 }
-                if (y >= 0) {
+                if (y >= region.y0) {
                     const Taps t = back(y);
-                    const int x0 = std::max(0, c0 - t.first), x1 = std::min(w, c1 - t.first);
+                    const int x0 = std::max(region.x0, c0 - t.first), x1 = std::min(region.x1, c1 - t.first);
                     if (x1 > x0) {
                         const size_t k = size_t(x0 + t.first - c0) * ncs;
                         const float* a = add ? add->row(y) + size_t(x0) * ncs : nullptr;
@@ -307,10 +313,11 @@ BOKEH_HOT void band_row(float* o, const float* newest, const float* oldest, cons
     }
 }
 
-// out = (seg(in) + add) * scale for a segment along x, e = (ex, 0): per row, prefix sums
-// in double and the interval weights (fractional ends by overlap).
-void segment_rows(const Plane& in, Plane& out, double ex, const Plane* add, float scale,
-                  int nthreads)
+// out = (seg(in) + add) * scale for a segment along x, e = (ex, 0), as segment_sweep
+// (valid, region): per row, prefix sums in double and the interval weights (fractional
+// ends by overlap).
+void segment_rows(const Plane& in, const Region& valid, Plane& out, const Region& region,
+                  double ex, const Plane* add, float scale, int nthreads)
 {
     const int w = in.w, nc = in.nc;
     const size_t ncs = size_t(nc);
@@ -320,41 +327,65 @@ void segment_rows(const Plane& in, Plane& out, double ex, const Plane* add, floa
     const double inner = iw.w.size() > 2 ? iw.w[1] : 0.0;
     // out(x) reads in(x - i), i in [first, last]: the row zero-padded over [lo, hi).
     const int lo = std::min(0, -last), hi = std::max(w, w - first);
-    parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        std::vector<float> row(size_t(hi - lo) * ncs, 0.0f);
+    const size_t vx = size_t(valid.x1 - valid.x0) * ncs, x0 = size_t(region.x0) * ncs;
+    parallel_for_chunks(region.y0, region.y1, 8, nthreads, [&](int64_t y0, int64_t y1) {
+        std::vector<float> row(size_t(hi - lo) * ncs, 0.0f);  // zero outside `valid`
         std::vector<double> prefix(size_t(hi - lo + 1) * ncs, 0.0);
         for (int y = int(y0); y < int(y1); ++y) {
-            std::copy_n(in.row(y), size_t(w) * ncs, row.data() + size_t(-lo) * ncs);
+            float* into = row.data() + size_t(valid.x0 - lo) * ncs;
+            if (y >= valid.y0 && y < valid.y1)
+                std::copy_n(in.row(y) + size_t(valid.x0) * ncs, vx, into);
+            else
+                std::fill_n(into, vx, 0.0f);
             for (size_t i = 0; i < row.size(); ++i)
                 prefix[i + ncs] = prefix[i] + double(row[i]);
-            band_row(out.row(y), row.data() + size_t(-first - lo) * ncs,
-                     row.data() + size_t(-last - lo) * ncs, prefix.data() + size_t(-first - lo) * ncs,
-                     prefix.data() + size_t(-last + 1 - lo) * ncs, add ? add->row(y) : nullptr, wf,
-                     last - first >= 2 ? inner : 0.0, wl, scale, size_t(w) * ncs);
+            band_row(out.row(y) + x0, row.data() + size_t(-first - lo) * ncs + x0,
+                     row.data() + size_t(-last - lo) * ncs + x0,
+                     prefix.data() + size_t(-first - lo) * ncs + x0,
+                     prefix.data() + size_t(-last + 1 - lo) * ncs + x0,
+                     add ? add->row(y) + x0 : nullptr, wf, last - first >= 2 ? inner : 0.0, wl,
+                     scale, size_t(region.x1 - region.x0) * ncs);
         }
     });
 }
 
-// out = (seg(in) + add) * scale for any segment e: a sweep down the rows when e is
-// steep, a pass along the rows when it is horizontal, else a sweep of the transposed
-// planes.
-void segment_pass(const Plane& in, Plane& out, double ex, double ey, const Plane* add,
-                  float scale, int nthreads)
+// out = (seg(in) + add) * scale over `region`, `in` read as zero outside `valid`, for any
+// segment e: a sweep down the rows when e is steep, a pass along the rows when it is
+// horizontal, else a sweep of the transposed planes.
+void segment_pass(const Plane& in, const Region& valid, Plane& out, const Region& region,
+                  double ex, double ey, const Plane* add, float scale, int nthreads)
 {
     if (std::abs(ey) >= std::abs(ex)) {
-        segment_sweep(in, out, ex, ey, add, scale, nthreads);
+        segment_sweep(in, valid, out, region, ex, ey, add, scale, nthreads);
     } else if (std::abs(ey) < 1e-9 * std::abs(ex)) {
-        segment_rows(in, out, ex, add, scale, nthreads);
+        segment_rows(in, valid, out, region, ex, add, scale, nthreads);
     } else {
+        auto flip = [](const Region& r) { return Region{ r.y0, r.x0, r.y1, r.x1 }; };
         const Plane t = transposed(in, nthreads);
         Plane r(t.w, t.h, t.nc);
-        segment_sweep(t, r, ey, ex, nullptr, 1.0f, nthreads);
+        segment_sweep(t, flip(valid), r, flip(region), ey, ex, nullptr, 1.0f, nthreads);
         const Plane back = transposed(r, nthreads);
-        parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        const size_t x0 = size_t(region.x0) * size_t(in.nc), n = size_t(region.x1 - region.x0) * size_t(in.nc);
+        parallel_for_chunks(region.y0, region.y1, 16, nthreads, [&](int64_t y0, int64_t y1) {
             for (int y = int(y0); y < int(y1); ++y)
-                scaled_row(out.row(y), back.row(y), add ? add->row(y) : nullptr, scale, out.stride());
+                scaled_row(out.row(y) + x0, back.row(y) + x0, add ? add->row(y) + x0 : nullptr, scale, n);
         });
     }
+}
+
+// `r` grown by what a segment pass along e reads around an output: out(p) reads in(p - t e),
+// t in [0, 1], through the shear's and the unshear's taps (a pixel each side each, so
+// three with rounding), clipped to the plane.
+Region grown_by(const Region& r, double ex, double ey, int w, int h)
+{
+    const int lx = int(std::ceil(std::max(0.0, ex))) + 3, hx = int(std::ceil(std::max(0.0, -ex))) + 3;
+    const int ly = int(std::ceil(std::max(0.0, ey))) + 3, hy = int(std::ceil(std::max(0.0, -ey))) + 3;
+    return { std::max(0, r.x0 - lx), std::max(0, r.y0 - ly), std::min(w, r.x1 + hx), std::min(h, r.y1 + hy) };
+}
+
+Region hull(const Region& a, const Region& b)
+{
+    return { std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1) };
 }
 
 // Vertex i of the kernel's hexagon in pixel offsets (y down), as kernel.cpp places them.
@@ -783,7 +814,7 @@ bool hexagon_transposed(const Kernel& k)
     return std::count_if(d.begin(), d.end(), [](Dir v) { return v.steep(); }) < 2;
 }
 
-Plane hexagon_parallelograms(Plane in, const Kernel& k, int nthreads)
+Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin_y, int nthreads)
 {
     std::array<Dir, 3> d = hexagon_dirs(k);
     if (hexagon_transposed(k))
@@ -796,13 +827,21 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int nthreads)
     // hexagon = (rhombus(a, b) + rhombus(b, c) + rhombus(c, a)) / 3
     //         = (seg_c (seg_a + seg_b) + seg_a seg_b) / 3; two planes besides `in`, each
     // reused once its values are used up (a fresh 1080p plane costs its page faults).
-    Plane segb(in.w, in.h, in.nc), sum_ab(in.w, in.h, in.nc);
-    segment_pass(in, segb, b.x, b.y, nullptr, 1.0f, nthreads);
-    segment_pass(in, sum_ab, a.x, a.y, &segb, 1.0f, nthreads);
+    // Each pass computes only what the later ones read, back from the output region (the
+    // plane less its margins): without that the passes would cover the whole padded
+    // plane, which grows with the kernel (1.37x the pixels at 255 px).
+    const int w = in.w, h = in.h;
+    const Region all{ 0, 0, w, h };
+    const Region out_region{ margin_x, margin_y, w - margin_x, h - margin_y };
+    const Region s_region = grown_by(out_region, c.x, c.y, w, h);
+    const Region b_region = hull(s_region, grown_by(out_region, a.x, a.y, w, h));
+    Plane segb(w, h, in.nc), sum_ab(w, h, in.nc);
+    segment_pass(in, all, segb, b_region, b.x, b.y, nullptr, 1.0f, nthreads);
+    segment_pass(in, all, sum_ab, s_region, a.x, a.y, &segb, 1.0f, nthreads);
     Plane& ab = in;
-    segment_pass(segb, ab, a.x, a.y, nullptr, 1.0f, nthreads);
+    segment_pass(segb, b_region, ab, out_region, a.x, a.y, nullptr, 1.0f, nthreads);
     Plane& out = segb;
-    segment_pass(sum_ab, out, c.x, c.y, &ab, float(1.0 / 3.0), nthreads);
+    segment_pass(sum_ab, s_region, out, out_region, c.x, c.y, &ab, float(1.0 / 3.0), nthreads);
     return std::move(out);
 }
 
