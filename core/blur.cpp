@@ -302,14 +302,8 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
                 std::fill_n(o, n, 0.0f);
                 return;
             }
-            // Inside the data window the source row is read in place; elsewhere it is copied
-            // with the border rule.
             const int x0 = roi.xbegin + xs - bx.radius, x1 = roi.xbegin + xe + bx.radius;
-            const float* v = row.data();
-            if (x0 >= data.xbegin && x1 <= data.xend)
-                v = static_cast<const float*>(in.pixeladdr(x0, sy, data.zbegin));
-            else
-                source_row(in, sy, x0, x1, border, row.data());
+            const float* v = source_row_view(in, sy, x0, x1, border, row.data());
             // The common channel counts slide a running sum; others take prefix sums.
             switch (nc) {
             case 1: box_row_running<1>(o, v, xe - xs, bx); return;
@@ -525,11 +519,7 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
                 std::fill_n(p, pw, 0.0);
             } else {
                 const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
-                const float* v = row.data();
-                if (x0 >= data.xbegin && x1 <= data.xend)
-                    v = static_cast<const float*>(in.pixeladdr(x0, sy, data.zbegin));
-                else
-                    source_row(in, sy, x0, x1, border, row.data());
+                const float* v = source_row_view(in, sy, x0, x1, border, row.data());
                 row_prefix(p, v, pw / ncs - 1, nc);
             }
             if (twin)

@@ -568,11 +568,7 @@ bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
                 return;
             }
             const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
-            const float* v = row.data();
-            if (x0 >= data.xbegin && x1 <= data.xend)
-                v = static_cast<const float*>(in.pixeladdr(x0, sy, data.zbegin));
-            else
-                source_row(in, sy, x0, x1, border, row.data());
+            const float* v = source_row_view(in, sy, x0, x1, border, row.data());
             row_prefix(prefix.data(), v, npx, nc);
             for (size_t p = 0; p < np; ++p)
                 profile_row(ring_row(p, j), prefix.data(), hi.data() + first_bar[p],

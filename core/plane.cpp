@@ -186,6 +186,16 @@ Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int
     return p;
 }
 
+const float* source_row_view(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border,
+                             float* buf)
+{
+    const OIIO::ROI data = src.roi();
+    if (x0 >= data.xbegin && x1 <= data.xend)
+        return static_cast<const float*>(src.pixeladdr(x0, sy, data.zbegin));
+    source_row(src, sy, x0, x1, border, buf);
+    return buf;
+}
+
 void prefer_huge_pages(void* p, size_t bytes)
 {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)

@@ -74,6 +74,11 @@ Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int
 /// fused methods call it per tile so no padded copy of the whole frame is made.
 void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border, float* out);
 
+/// Source row `sy` over columns [x0, x1): read in place where they lie inside the data
+/// window, else filled into `buf` by source_row().
+const float* source_row_view(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border,
+                             float* buf);
+
 /// `dst` reset to float pixels (uninitialised) over `roi`, with `src`'s metadata.
 void prepare_destination(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi);
 
