@@ -654,9 +654,9 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     const bool no_weights = method == BlurMethod::Parallelograms
                             && std::min(k.width_px, k.height_px) >= 2.0f;
     const KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
-                                  : method == BlurMethod::Bands        ? banded_weights(k, opts.bands)
+                                  : method == BlurMethod::Bands        ? banded_weights(k, opts.bands, nthreads)
                                   : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
-                                                                       : kernel_weights(k);
+                                                                       : kernel_weights(k, nthreads);
     int rx = weights.rx, ry = weights.ry;
     std::vector<double> box3x, box3y;
     if (method == BlurMethod::ThreeBoxes) {

@@ -645,9 +645,9 @@ Plane convolve_banded(const Plane& in, const KernelWeights& kernel, int nthreads
 
 // --- public --------------------------------------------------------------------------
 
-KernelWeights banded_weights(const Kernel& k, int bands)
+KernelWeights banded_weights(const Kernel& k, int bands, int nthreads)
 {
-    const KernelWeights exact = kernel_weights(k);
+    const KernelWeights exact = kernel_weights(k, nthreads);
     if (exact.is_identity() || bands < 1)
         return exact;
     // Row areas and centres, rows 0..ry of the lower half (the kernel is symmetric in y

@@ -155,14 +155,14 @@ inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, 
 // The aperture at diameter |coc_px| / s (and the aspect), as exact weights. In front of
 // focus the rays reach the sensor before they cross, behind it after: the two bokeh are
 // the aperture and its point reflection, which shows with an odd number of blades.
-KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s)
+KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads)
 {
     Kernel k = o.aperture;
     if (coc_px < 0.0f)
         k.rotation_deg += 180.0f;
     k.width_px  = std::abs(coc_px) / float(s);
     k.height_px = std::abs(coc_px) * o.aspect / float(s);
-    return kernel_weights(k);
+    return kernel_weights(k, nthreads);
 }
 
 // Full-resolution reach of a CoC: half the kernel, rounded up, plus one for bilinear reads.
@@ -401,7 +401,7 @@ void composite_layers(Plane& out, const Frame& f, const Membership& m, const Def
     for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
         const float c = m.coc_px[size_t(k)];
         const int s   = m.reduction[size_t(k)], t = kTile * s;
-        const KernelWeights w = aperture_weights(o, c, s);
+        const KernelWeights w = aperture_weights(o, c, s, nthreads);
         std::vector<int> todo;
         for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
             if (tiles[size_t(k)][i])
@@ -667,7 +667,7 @@ Level blurred_level(const Frame& f, const DefocusOptions& o, float c, Mask mask,
     Level l;
     l.coc_px = c;
     l.s      = std::abs(c) >= 32.0f ? 4 : std::abs(c) >= 16.0f ? 2 : 1;  // "1/2 down to 1/4"
-    const KernelWeights w = aperture_weights(o, c, l.s);
+    const KernelWeights w = aperture_weights(o, c, l.s, nthreads);
     const int gx = f.out.xbegin, gy = f.out.ybegin, s = l.s;
     l.low = OIIO::ROI(-1, floor_div(f.out.width() - 1, s) + 2, -1, floor_div(f.out.height() - 1, s) + 2);
     Plane p = reduce_region(grown(l.low, w.rx, w.ry), gx, gy, s, 5, nthreads,

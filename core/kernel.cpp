@@ -11,6 +11,7 @@
 // circle arcs. A catadioptric lens's central obstruction is a hole of `hole * d`.
 
 #include <bokeh/blur.h>
+#include <bokeh/parallel.h>
 
 #include <algorithm>
 #include <cmath>
@@ -153,7 +154,40 @@ struct Shape {
     }
 };
 
-KernelWeights shape_weights(const Kernel& k)
+// How many of the fine x fine samples of pixel (dx, dy) are inside a convex shape. Each
+// sample row's inside samples are one run (convexity), so a row starts from the middle of
+// the run above and walks its ends out or in, instead of testing all its samples; a row
+// with no run after one with a run ends the count (the inside rows are consecutive too).
+// The same samples are tested at the run ends as a full count would, so the count is the
+// same.
+int convex_fine_count(const Shape& shape, int dx, int dy, int fine)
+{
+    int n = 0, lo = -1, hi = -1;  // the previous row's run [lo, hi], or none
+    for (int j = 0; j < fine; ++j) {
+        const double y = dy - 0.5 + (j + 0.5) / fine;
+        auto in = [&](int i) { return shape.inside(dx - 0.5 + (i + 0.5) / fine, y); };
+        int seed = -1;
+        if (lo >= 0 && in((lo + hi) / 2))
+            seed = (lo + hi) / 2;
+        for (int i = 0; seed < 0 && i < fine; ++i)
+            if (in(i))
+                seed = i;
+        if (seed < 0) {
+            if (lo >= 0)
+                break;  // below the last run: nothing more
+            continue;
+        }
+        lo = hi = seed;
+        while (lo > 0 && in(lo - 1))
+            --lo;
+        while (hi + 1 < fine && in(hi + 1))
+            ++hi;
+        n += hi - lo + 1;
+    }
+    return n;
+}
+
+KernelWeights shape_weights(const Kernel& k, int nthreads)
 {
     const Shape shape(k);
     KernelWeights kw;
@@ -162,12 +196,44 @@ KernelWeights shape_weights(const Kernel& k)
     const int nx = 2 * kw.rx + 1, ny = 2 * kw.ry + 1;
     kw.w.assign(size_t(nx) * size_t(ny), 0.0);
     constexpr int coarse = 5, fine = 64;
-    double sum = 0.0;
-    for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+    // Without a hole the aperture is convex (a disk, or a polygon whose sides bulge towards
+    // the circle): a pixel whose four corners are inside is inside, which the 5 x 5 look
+    // below would also find, so the corners (shared by neighbours) are tested once each.
+    const bool convex = k.hole == 0.0f && k.edge != KernelEdge::Hard;
+    std::vector<char> corner;
+    if (convex) {
+        corner.resize(size_t(nx + 1) * size_t(ny + 1));
+        parallel_for_chunks(0, ny + 1, 8, nthreads, [&](int64_t j0, int64_t j1) {
+            for (int j = int(j0); j < int(j1); ++j)
+                for (int i = 0; i <= nx; ++i)
+                    corner[size_t(j) * size_t(nx + 1) + size_t(i)] =
+                        shape.inside(i - kw.rx - 0.5, j - kw.ry - 0.5);
+        });
+    }
+    auto corners_inside = [&](int dx, int dy) {
+        const size_t i = size_t(dx + kw.rx), j = size_t(dy + kw.ry), s = size_t(nx + 1);
+        return corner[j * s + i] && corner[j * s + i + 1] && corner[(j + 1) * s + i]
+               && corner[(j + 1) * s + i + 1];
+    };
+    // Every shape lies inside its ellipse (u^2 + v^2 < 1 in Shape::inside): a pixel whose
+    // nearest point is not inside it has no sample inside the shape.
+    auto outside_ellipse = [&](int dx, int dy) {
+        const double x = std::clamp(0.0, dx - 0.5, dx + 0.5) / shape.ax;
+        const double y = std::clamp(0.0, dy - 0.5, dy + 0.5) / shape.ay;
+        return x * x + y * y >= 1.0;
+    };
+    // Rows in parallel (a polygon's boundary pixels cost thousands of inside tests each);
+    // the sum after them, in one order.
+    parallel_for_chunks(-kw.ry, kw.ry + 1, 4, nthreads, [&](int64_t y0, int64_t y1) {
+    for (int dy = int(y0); dy < int(y1); ++dy)
         for (int dx = -kw.rx; dx <= kw.rx; ++dx) {
             double w;
             if (k.edge == KernelEdge::Hard) {
                 w = shape.inside(dx, dy) ? 1.0 : 0.0;
+            } else if (convex && corners_inside(dx, dy)) {
+                w = 1.0;
+            } else if (outside_ellipse(dx, dy)) {
+                w = 0.0;
             } else {
                 // A coarse look first; only pixels the boundary crosses get the fine grid.
                 int in = 0;
@@ -176,6 +242,8 @@ KernelWeights shape_weights(const Kernel& k)
                         in += shape.inside(dx - 0.5 + (i + 0.5) / coarse, dy - 0.5 + (j + 0.5) / coarse);
                 if (in == 0 || in == coarse * coarse) {
                     w = in ? 1.0 : 0.0;
+                } else if (convex) {
+                    w = double(convex_fine_count(shape, dx, dy, fine)) / (fine * fine);
                 } else {
                     int n = 0;
                     for (int j = 0; j < fine; ++j)
@@ -185,8 +253,11 @@ KernelWeights shape_weights(const Kernel& k)
                 }
             }
             kw.w[size_t((dy + kw.ry) * nx + (dx + kw.rx))] = w;
-            sum += w;
         }
+    });
+    double sum = 0.0;
+    for (double w : kw.w)
+        sum += w;
     if (sum <= 0.0)  // smaller than any pixel centre (hard edge): the identity
         return KernelWeights{ 0, 0, { 1.0 } };
     for (double& v : kw.w)
@@ -196,7 +267,7 @@ KernelWeights shape_weights(const Kernel& k)
 
 }  // namespace
 
-KernelWeights kernel_weights(const Kernel& k)
+KernelWeights kernel_weights(const Kernel& k, int nthreads)
 {
     if (k.width_px <= 0.0f && k.height_px <= 0.0f && k.sigma_px <= 0.0f)
         return KernelWeights{ 0, 0, { 1.0 } };
@@ -210,7 +281,7 @@ KernelWeights kernel_weights(const Kernel& k)
     case KernelShape::Polygon:
         if (k.width_px <= 0.0f || k.height_px <= 0.0f)
             return KernelWeights{ 0, 0, { 1.0 } };
-        return shape_weights(k);
+        return shape_weights(k, nthreads);
     }
     return KernelWeights{ 0, 0, { 1.0 } };
 }

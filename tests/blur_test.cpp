@@ -424,6 +424,7 @@ TEST(Blur, ThreadCountDoesNotChangeResults)
         const size_t bytes = size_t(src.roi().npixels()) * 4 * sizeof(float);
         EXPECT_EQ(std::memcmp(one.localpixels(), two.localpixels(), bytes), 0);
         EXPECT_EQ(std::memcmp(one.localpixels(), eight.localpixels(), bytes), 0);
+        EXPECT_EQ(kernel_weights(n.k, 1).w, kernel_weights(n.k, 8).w) << "the weights, too";
     }
 }
 

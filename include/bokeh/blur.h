@@ -86,7 +86,8 @@ bool validate(const Kernel& k, std::string& err);
 
 /// The exact weights of `k` (what every exact method computes with). Anti-aliased edges
 /// use 64 x 64 stratified samples per boundary pixel (area error below 3e-4 of a pixel).
-KernelWeights kernel_weights(const Kernel& k);
+/// `nthreads` as for the blurs; the weights do not depend on it.
+KernelWeights kernel_weights(const Kernel& k, int nthreads = 0);
 
 /// One-dimensional weights of the separable shapes, centred, sum 1.
 std::vector<double> box_weights_1d(double width_px);
@@ -95,7 +96,7 @@ std::vector<double> gaussian_weights_1d(double sigma_px);
 /// The effective kernel of BlurMethod::Bands: the exact kernel's rows grouped into at
 /// most `bands` bands per half, each band one anti-aliased interval of the band's mean
 /// area and centre. Same energy as the exact kernel.
-KernelWeights banded_weights(const Kernel& k, int bands);
+KernelWeights banded_weights(const Kernel& k, int bands, int nthreads = 0);
 
 /// The effective kernel of BlurMethod::BilinearTaps: what the seed's bilinear fetches
 /// (one per 2 x 2 group of pixels, at the group's centroid, weighted by its area) add up
