@@ -9,6 +9,12 @@
 // cos(pi/N) / cos(phi) (circumradius 1); curved blades blend it toward the circle,
 // d = d_poly + curvature (1 - d_poly), an approximation of real curved blades, which are
 // circle arcs. A catadioptric lens's central obstruction is a hole of `hole * d`.
+// The area: a 5 x 5 look at each pixel, then 64 x 64 stratified samples where it is mixed.
+// Changed for speed (same samples, same bits): without a hole the aperture is convex, so
+// a pixel with four corners inside is inside and a boundary pixel's fine samples are
+// counted by runs per sample row; pixels off the ellipse that bounds every shape are
+// outside. A polygon's inside test (atan2, two fmod, cos) still makes its weights costly:
+// ~60 ms for 255 px on two threads.
 
 #include <bokeh/blur.h>
 #include <bokeh/parallel.h>
