@@ -37,7 +37,9 @@ namespace bokeh::detail {
 /// (Linux transparent huge pages, "madvise" mode); call it before the memory is first
 /// touched. A fresh 36 MB block then costs ~8 ms of page faults on first touch instead
 /// of ~20 ms (measured on the project's machine; rewriting touched memory: ~4 ms), and
-/// every blur allocates a few. Elsewhere, or when refused, nothing changes.
+/// every blur allocates a few. Elsewhere, or when refused, nothing changes. Known limit:
+/// with the kernel's THP defrag at "madvise" (Debian's default) a fault in such a region
+/// may first compact memory, a stall on a fragmented machine that no run here showed.
 void prefer_huge_pages(void* p, size_t bytes);
 
 /// dst.reset(spec) with its pixels uninitialised and on huge pages (prefer_huge_pages).
