@@ -114,12 +114,17 @@ struct Taps {
     }
 };
 
-// g[i] = w0 p[i] + w1 p[i + stride] + w2 p[i + 2 stride]: a row read through three taps.
-BOKEH_HOT void three_taps(float* g, const float* p, float w0, float w1, float w2, size_t stride,
-                          size_t n)
+// o[i] = (w0 p[i] + w1 p[i + stride] + w2 p[i + 2 stride] + add[i]) * scale: a row read
+// through three taps (the shear, and the unshear with its extras); add may be null.
+BOKEH_HOT void taps_row(float* o, const float* p, const float* add, float w0, float w1, float w2,
+                        float scale, size_t stride, size_t n)
 {
-    for (size_t i = 0; i < n; ++i)
-        g[i] = w0 * p[i] + w1 * p[i + stride] + w2 * p[i + 2 * stride];
+    if (add)
+        for (size_t i = 0; i < n; ++i)
+            o[i] = (w0 * p[i] + w1 * p[i + stride] + w2 * p[i + 2 * stride] + add[i]) * scale;
+    else
+        for (size_t i = 0; i < n; ++i)
+            o[i] = (w0 * p[i] + w1 * p[i + stride] + w2 * p[i + 2 * stride]) * scale;
 }
 
 // Columns u in [u0, u1) of `row` (zero outside its columns [lo, hi)) read at u + shift:
@@ -157,7 +162,7 @@ void shifted_row(float* g, const float* row, int lo, int hi, int nc, int u0, int
         if (identity)
             std::copy_n(p, size_t(b - a) * ncs, o);
         else
-            three_taps(o, p, t.w[0], t.w[1], t.w[2], ncs, size_t(b - a) * ncs);
+            taps_row(o, p, nullptr, t.w[0], t.w[1], t.w[2], 1.0f, ncs, size_t(b - a) * ncs);
     }
     for (int u = b; u < z1; ++u)
         edge(u);
@@ -184,18 +189,6 @@ BOKEH_HOT void scaled_row(float* o, const float* h, const float* add, float scal
     else
         for (size_t i = 0; i < n; ++i)
             o[i] = h[i] * scale;
-}
-
-// o[i] = (three taps of h + add[i]) * scale; add may be null.
-BOKEH_HOT void unshear_row(float* o, const float* h, const float* add, float w0, float w1,
-                           float w2, float scale, size_t stride, size_t n)
-{
-    if (add)
-        for (size_t i = 0; i < n; ++i)
-            o[i] = (w0 * h[i] + w1 * h[i + stride] + w2 * h[i + 2 * stride] + add[i]) * scale;
-    else
-        for (size_t i = 0; i < n; ++i)
-            o[i] = (w0 * h[i] + w1 * h[i + stride] + w2 * h[i + 2 * stride]) * scale;
 }
 
 // A rectangle of plane pixels, [x0, x1) x [y0, y1).
@@ -290,8 +283,8 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
                         const float* a = add ? add->row(y) + size_t(x0) * ncs : nullptr;
                         float* o = out.row(y) + size_t(x0) * ncs;
                         if (shear)
-                            unshear_row(o, hrow.data() + k, a, t.w[0], t.w[1], t.w[2], scale, ncs,
-                                        size_t(x1 - x0) * ncs);
+                            taps_row(o, hrow.data() + k, a, t.w[0], t.w[1], t.w[2], scale, ncs,
+                                     size_t(x1 - x0) * ncs);
                         else  // the identity: the middle tap alone
                             scaled_row(o, hrow.data() + k + ncs, a, scale, size_t(x1 - x0) * ncs);
                     }
