@@ -204,11 +204,26 @@ struct Region {
 // row with one set of taps per row, so one sweep down the rows does it: a task owns a
 // strip of G's columns and keeps, per row, the two G rows entering and leaving the
 // window (recomputed from `in`, not stored), so the cost does not depend on the length.
+// `columns`: the same on the planes' columns (a flat segment, e = (ex, ey) then given as
+// (ey, ex) and the regions with x and y swapped): each column is gathered into a line and
+// each output line scattered back; a task's strip is a band of rows whose cache lines
+// serve four columns running, so nothing is transposed.
 void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Region& region,
-                   double ex, double ey, const Plane* add, float scale, int nthreads)
+                   double ex, double ey, const Plane* add, float scale, int nthreads,
+                   bool columns = false)
 {
     const int nc = in.nc;
     const size_t ncs = size_t(nc);
+    // Pixel c of line r: in(c, r) along a row, in(r, c) down a column.
+    const size_t along = columns ? in.stride() : ncs, across = columns ? ncs : in.stride();
+    auto at = [&](const Plane& p, int line, int c) {
+        return p.px.get() + size_t(line) * across + size_t(c) * along;
+    };
+    auto at_out = [&](int line, int c) { return out.px.get() + size_t(line) * across + size_t(c) * along; };
+    // Pixels [a, b) of line r of `p` into `dst` (contiguous).
+    auto gather = [&](const Plane& p, int r, int a, int b, float* dst) {
+        copy_pixels(dst, ncs, at(p, r, a), along, b - a, nc);
+    };
     // A slope under 1e-9 moves a segment of any allowed length by under a micro-pixel.
     const bool shear = std::abs(ex) >= 1e-9 * std::abs(ey);
     const double m   = shear ? ex / ey : 0.0;
@@ -236,10 +251,24 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
             float *zero = buf.data(), *newest = zero + n, *older = newest + n, *oldest = older + n;
             std::vector<float> hrow(n);
             std::vector<double> sum(n, 0.0);
+            std::vector<float> line(columns ? n + 4 * ncs : 0), line_out(columns ? n : 0),
+                line_add(columns && add ? n : 0);
             auto g_row = [&](int r, float* dst) -> const float* {
                 if (r < valid.y0 || r >= valid.y1)
                     return zero;
-                shifted_row(dst, in.row(r), valid.x0, valid.x1, nc, c0, he, Taps(m * r, !shear), !shear);
+                Taps t = Taps(m * r, !shear);
+                if (!columns) {
+                    shifted_row(dst, in.row(r), valid.x0, valid.x1, nc, c0, he, t, !shear);
+                    return dst;
+                }
+                // The pixels the taps read, [c0 + t.first, he + t.first + 3) inside `valid`,
+                // gathered; the taps re-based onto the gathered line.
+                const int a = std::max(valid.x0, c0 + t.first), b = std::min(valid.x1, he + t.first + 3);
+                if (b <= a)
+                    return zero;
+                gather(in, r, a, b, line.data());
+                t.first -= a;
+                shifted_row(dst, line.data(), 0, b - a, nc, c0, he, t, !shear);
                 return dst;
             };
             // G's rows [ra, rb) are the ones that reach into the strip (the shear moves a
@@ -280,13 +309,21 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
                     const int x0 = std::max(region.x0, c0 - t.first), x1 = std::min(region.x1, c1 - t.first);
                     if (x1 > x0) {
                         const size_t k = size_t(x0 + t.first - c0) * ncs;
-                        const float* a = add ? add->row(y) + size_t(x0) * ncs : nullptr;
-                        float* o = out.row(y) + size_t(x0) * ncs;
+                        const float* a = nullptr;
+                        if (add && columns) {
+                            gather(*add, y, x0, x1, line_add.data());
+                            a = line_add.data();
+                        } else if (add) {
+                            a = add->row(y) + size_t(x0) * ncs;
+                        }
+                        float* o = columns ? line_out.data() : out.row(y) + size_t(x0) * ncs;
                         if (shear)
                             taps_row(o, hrow.data() + k, a, t.w[0], t.w[1], t.w[2], scale, ncs,
                                      size_t(x1 - x0) * ncs);
                         else  // the identity: the middle tap alone
                             scaled_row(o, hrow.data() + k + ncs, a, scale, size_t(x1 - x0) * ncs);
+                        if (columns)
+                            copy_pixels(at_out(y, x0), along, o, ncs, x1 - x0, nc);
                     }
                 }
             }
@@ -344,7 +381,7 @@ void segment_rows(const Plane& in, const Region& valid, Plane& out, const Region
 
 // out = (seg(in) + add) * scale over `region`, `in` read as zero outside `valid`, for any
 // segment e: a sweep down the rows when e is steep, a pass along the rows when it is
-// horizontal, else a sweep of the transposed planes.
+// horizontal, else a sweep along the columns.
 void segment_pass(const Plane& in, const Region& valid, Plane& out, const Region& region,
                   double ex, double ey, const Plane* add, float scale, int nthreads)
 {
@@ -354,15 +391,7 @@ void segment_pass(const Plane& in, const Region& valid, Plane& out, const Region
         segment_rows(in, valid, out, region, ex, add, scale, nthreads);
     } else {
         auto flip = [](const Region& r) { return Region{ r.y0, r.x0, r.y1, r.x1 }; };
-        const Plane t = transposed(in, nthreads);
-        Plane r(t.w, t.h, t.nc);
-        segment_sweep(t, flip(valid), r, flip(region), ey, ex, nullptr, 1.0f, nthreads);
-        const Plane back = transposed(r, nthreads);
-        const size_t x0 = size_t(region.x0) * size_t(in.nc), n = size_t(region.x1 - region.x0) * size_t(in.nc);
-        parallel_for_chunks(region.y0, region.y1, 16, nthreads, [&](int64_t y0, int64_t y1) {
-            for (int y = int(y0); y < int(y1); ++y)
-                scaled_row(out.row(y) + x0, back.row(y) + x0, add ? add->row(y) + x0 : nullptr, scale, n);
-        });
+        segment_sweep(in, flip(valid), out, flip(region), ey, ex, add, scale, nthreads, true);
     }
 }
 

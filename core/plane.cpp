@@ -124,15 +124,15 @@ void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border
 
 namespace {
 
-// Copies `count` pixels of NC channels from a run with `src_step` floats between pixels
-// to one with `dst_step`: the transposing copies, with a fixed pixel size where it is
-// one of the common ones so each pixel is one vector move, not a call.
+// A fixed pixel size: one vector move per pixel, not a call.
 template<int NC>
 void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count)
 {
     for (int i = 0; i < count; ++i)
         std::memcpy(dst + size_t(i) * dst_step, src + size_t(i) * src_step, NC * sizeof(float));
 }
+
+}  // namespace
 
 void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count, int nc)
 {
@@ -145,8 +145,6 @@ void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step,
             std::copy_n(src + size_t(i) * src_step, nc, dst + size_t(i) * dst_step);
     }
 }
-
-}  // namespace
 
 Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads,
           bool transpose)

@@ -89,6 +89,11 @@ void prepare_destination(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const O
 bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi, const Plane& p,
             int ox = 0, int oy = 0, bool transposed = false, int nthreads = 0);
 
+/// Copies `count` pixels of `nc` channels from a run with `src_step` floats between pixels
+/// to one with `dst_step` (the transposing copies; one vector move per pixel for 1, 3 and 4
+/// channels).
+void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count, int nc);
+
 /// `r` grown by rx, ry pixels on each side.
 OIIO::ROI grown(OIIO::ROI r, int rx, int ry);
 
