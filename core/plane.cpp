@@ -289,25 +289,6 @@ bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* wh
     return true;
 }
 
-Plane transposed(const Plane& in, int nthreads)
-{
-    Plane out(in.h, in.w, in.nc);
-    const size_t nc = size_t(in.nc);
-    // 32 x 32 pixel tiles keep both the read and the written rows in cache.
-    constexpr int kTile = 32;
-    const int tx = (in.w + kTile - 1) / kTile, ty = (in.h + kTile - 1) / kTile;
-    parallel_for_chunks(0, int64_t(tx) * ty, 4, nthreads, [&](int64_t t0, int64_t t1) {
-        for (int64_t t = t0; t < t1; ++t) {
-            const int x0 = int(t % tx) * kTile, y0 = int(t / tx) * kTile;
-            const int x1 = std::min(in.w, x0 + kTile), y1 = std::min(in.h, y0 + kTile);
-            for (int y = y0; y < y1; ++y)
-                copy_pixels(out.row(x0) + size_t(y) * nc, out.stride(), in.row(y) + size_t(x0) * nc,
-                            nc, x1 - x0, in.nc);
-        }
-    });
-    return out;
-}
-
 // Four channels keep their running sums in registers (one vector add per pixel); others
 // go through memory.
 void row_prefix(double* p, const float* v, size_t npx, int nc)

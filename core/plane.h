@@ -192,7 +192,4 @@ template<class RowFn> void accumulate_in_strips(Plane& out, int nthreads, RowFn 
     });
 }
 
-/// The plane transposed (rows become columns), for passes written along x only.
-Plane transposed(const Plane& in, int nthreads);
-
 }  // namespace bokeh::detail
