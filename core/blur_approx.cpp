@@ -22,8 +22,8 @@
 // three directions are steep, and the third is a plain row pass for the upright and the
 // flat-topped hexagon; at other rotations it is sheared too and sweeps along the columns
 // (gathered per line). Each pass computes only the region the later ones read. Planes are
-// reused once their values are used up, and allocated on huge pages (plane.h): the page
-// faults of a fresh 1080p plane cost more than a pass. Measured (docs/benchmarks.md):
+// reused once their values are used up, and allocated on huge pages (plane.h): the first
+// touch of a fresh 1080p plane costs about half a pass even so. Measured (docs/benchmarks.md):
 // 67-92 ms at 15-255 px for 1080p RGBA on two threads, bound by memory traffic (four
 // passes, the padding and, upright, the transposing copies); fusing passes is what is left.
 //
