@@ -20,12 +20,15 @@ standard library and matplotlib (Debian: python3-matplotlib).
 """
 
 import argparse
-import csv
 import math
 import os
 import sys
 
+import chart  # its CSV reading and error messages, under this program's name
+
 PROG = "artifact_chart.py"
+chart.PROG = PROG
+fail = chart.fail
 REQUIRED = ("method", "peer", "factor", "mach", "overshoot_pct", "shimmer", "detail_pct")
 TIMING_REQUIRED = ("task", "method", "peer", "size_px", "median_ms", "psnr_db_tonemapped")
 PANELS = (  # column, title, log scale
@@ -36,39 +39,18 @@ PANELS = (  # column, title, log scale
 )
 
 
-def fail(path, reason):
-    print(f"{PROG}: {path}: {reason}", file=sys.stderr)
-    sys.exit(1)
-
-
 def read_csv(path, required, numbers):
     """Rows as dicts, the `numbers` columns parsed; exits with one line on bad input."""
-    try:
-        f = open(path, newline="", encoding="utf-8")
-    except OSError as e:
-        fail(path, e.strerror.lower() if e.strerror else str(e))
     rows = []
-    with f:
-        reader = csv.DictReader(f)
-        header = [h.strip() for h in (reader.fieldnames or [])]
-        if not header:
-            fail(path, "empty file (no header line)")
-        reader.fieldnames = header
-        missing = [c for c in required if c not in header]
-        if missing:
-            fail(path, "missing column(s) " + ", ".join(missing))
-        for row in reader:
-            if None in row:
-                fail(path, f"line {reader.line_num}: more fields than the header has columns")
-            out = {k: (v or "").strip() for k, v in row.items()}
-            for col in numbers:
-                if col not in out:
-                    continue
-                try:
-                    out[col] = float(out[col]) if out[col] else None
-                except ValueError:
-                    fail(path, f"line {reader.line_num}: {col} is not a number: {out[col]!r}")
-            rows.append(out)
+    for line, out in chart.csv_rows(path, required):
+        for col in numbers:
+            if col not in out:
+                continue
+            try:
+                out[col] = float(out[col]) if out[col] else None
+            except ValueError:
+                fail(path, f"line {line}: {col} is not a number: {out[col]!r}")
+        rows.append(out)
     if not rows:
         fail(path, "no data rows")
     return rows

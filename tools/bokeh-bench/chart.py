@@ -50,60 +50,67 @@ def note(msg):
     print(f"{PROG}: {msg}", file=sys.stderr)
 
 
-def read_rows(path):
-    """(task names in order of appearance, rows as dicts with numbers parsed); exits with
-    a one-line message on bad input. A task whose rows were all skipped is still named."""
+def csv_rows(path, required):
+    """(line number, row with its values stripped) for each row of a CSV whose header has
+    the `required` columns; exits with a one-line message on a file that cannot be read, a
+    missing header or column, or a row with more fields than the header has columns."""
     try:
         f = open(path, newline="", encoding="utf-8")
     except OSError as e:
         fail(path, e.strerror.lower() if e.strerror else str(e))
-    rows, tasks = [], {}
     with f:
         reader = csv.DictReader(f)
         header = [h.strip() for h in (reader.fieldnames or [])]
         if not header:
             fail(path, "empty file (no header line)")
         reader.fieldnames = header
-        missing = [c for c in REQUIRED if c not in header]
+        missing = [c for c in required if c not in header]
         if missing:
             fail(path, "missing column(s) " + ", ".join(missing))
         for row in reader:
-            line = reader.line_num
             if None in row:   # more fields than the header: a comma inside an unquoted name
-                fail(path, f"line {line}: more fields than the header has columns")
-            task = (row["task"] or "").strip()
-            if not task:
-                note(f"{path}: line {line}: no task name, row skipped")
-                continue
-            tasks[task] = None
-            values = {}
-            for col in ("size_px", "median_ms", "psnr_db_tonemapped"):
-                text = (row[col] or "").strip()
-                if not text:
-                    values = None   # a case that did not run; not an error in the file
-                    break
-                try:
-                    values[col] = float(text)
-                except ValueError:
-                    fail(path, f"line {line}: {col} is not a number: {text!r}")
-            if values is None:
-                note(f"{path}: line {line}: empty value, row skipped")
-                continue
-            if not values["median_ms"] > 0:
-                note(f"{path}: line {line}: median_ms {values['median_ms']} cannot go "
-                     "on a log axis, row skipped")
-                continue
-            psnr = values["psnr_db_tonemapped"]
-            rows.append({
-                "task": task,
-                "method": (row["method"] or "").strip(),
-                "peer": (row["peer"] or "").strip(),
-                "threads": (row.get("threads") or "").strip(),
-                "size": values["size_px"],
-                "ms": values["median_ms"],
-                "psnr": psnr,
-                "exact": not math.isfinite(psnr) or psnr >= EXACT_PSNR,
-            })
+                fail(path, f"line {reader.line_num}: more fields than the header has columns")
+            yield reader.line_num, {k: (v or "").strip() for k, v in row.items()}
+
+
+def read_rows(path):
+    """(task names in order of appearance, rows as dicts with numbers parsed); exits with
+    a one-line message on bad input. A task whose rows were all skipped is still named."""
+    rows, tasks = [], {}
+    for line, row in csv_rows(path, REQUIRED):
+        task = row["task"]
+        if not task:
+            note(f"{path}: line {line}: no task name, row skipped")
+            continue
+        tasks[task] = None
+        values = {}
+        for col in ("size_px", "median_ms", "psnr_db_tonemapped"):
+            text = row[col]
+            if not text:
+                values = None   # a case that did not run; not an error in the file
+                break
+            try:
+                values[col] = float(text)
+            except ValueError:
+                fail(path, f"line {line}: {col} is not a number: {text!r}")
+        if values is None:
+            note(f"{path}: line {line}: empty value, row skipped")
+            continue
+        if not values["median_ms"] > 0:
+            note(f"{path}: line {line}: median_ms {values['median_ms']} cannot go "
+                 "on a log axis, row skipped")
+            continue
+        psnr = values["psnr_db_tonemapped"]
+        rows.append({
+            "task": task,
+            "method": row["method"],
+            "peer": row["peer"],
+            "threads": row.get("threads", ""),
+            "size": values["size_px"],
+            "ms": values["median_ms"],
+            "psnr": psnr,
+            "exact": not math.isfinite(psnr) or psnr >= EXACT_PSNR,
+        })
     return list(tasks), rows
 
 
