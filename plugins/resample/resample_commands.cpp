@@ -85,7 +85,8 @@ bool push(CommandContext& c, const std::shared_ptr<OIIO::ImageBuf>& buf)
     return true;
 }
 
-bool resize_command(CommandContext& c)
+// --resize and --resample: the size argument, then `run(dst, src, width, height)`.
+template<class Run> bool to_new_size(CommandContext& c, Run run)
 {
     const OIIO::ImageBuf& src = *c.inputs[0].buf;
     int w = 0, h = 0;
@@ -93,22 +94,23 @@ bool resize_command(CommandContext& c)
     if (!parse_new_size(c.args[0], src.spec(), w, h, err))
         return c.fail(err);
     auto out = std::make_shared<OIIO::ImageBuf>();
-    if (!bokeh::resize(*out, src, w, h, resample_options(c), c.nthreads))
+    if (!run(*out, src, w, h))
         return c.fail(out->geterror());
     return push(c, out);
 }
 
+bool resize_command(CommandContext& c)
+{
+    return to_new_size(c, [&](OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int w, int h) {
+        return bokeh::resize(dst, src, w, h, resample_options(c), c.nthreads);
+    });
+}
+
 bool resample_command(CommandContext& c)
 {
-    const OIIO::ImageBuf& src = *c.inputs[0].buf;
-    int w = 0, h = 0;
-    std::string err;
-    if (!parse_new_size(c.args[0], src.spec(), w, h, err))
-        return c.fail(err);
-    auto out = std::make_shared<OIIO::ImageBuf>();
-    if (!bokeh::resample(*out, src, w, h, c.options.get_int("interp") != 0, c.nthreads))
-        return c.fail(out->geterror());
-    return push(c, out);
+    return to_new_size(c, [&](OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int w, int h) {
+        return bokeh::resample(dst, src, w, h, c.options.get_int("interp") != 0, c.nthreads);
+    });
 }
 
 bool reduce_command(CommandContext& c)
