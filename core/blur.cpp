@@ -19,8 +19,8 @@
 //   whose double accumulators stay in L1, each prefix row visited once per sub-tile and
 //   up to four spans added per pass (add_spans); with 4 channels each prefix row is kept
 //   twice, the copy one pixel on, so every span's vector loads start on a 64-byte boundary.
-// * Bands: the same code on a per-tile summed-area table while the kernel reaches at most
-//   64 px (beyond, recomputing the tiles' margins costs more than the whole-frame table).
+// * Bands: their own running sums per column strip (convolve_bands_direct, blur_approx.cpp).
+// * Gaussian by three boxes: three box passes, each writing the region the next reads.
 // Known limits: the span cost still grows linearly with the diameter (about 2.6 spans per
 // kernel row: 161 at 63 px); a tile recomputes the prefix sums of its kernel-high margin,
 // a share that grows with the kernel (tile height >= kernel height).

@@ -47,9 +47,10 @@
 // the fetches are free; on a CPU we convolve with the kernel they add up to.
 //
 // Known limits: the parallelogram split is for six-bladed straight apertures only;
-// bands do not model a catadioptric hole. Summed-area tables are double: an image whose
-// total energy exceeds ~1e12 loses digits in dark areas (none of the test scenes comes
-// within 1e4 of it).
+// bands do not model a catadioptric hole. Iris mode's whole-frame summed-area table is
+// double: an image whose total energy exceeds ~1e12 loses digits in dark areas (none of
+// the test scenes comes within 1e4 of it); the direct path's prefix sums span one strip's
+// row only.
 
 #include <bokeh/blur.h>
 #include <bokeh/parallel.h>
@@ -420,7 +421,7 @@ std::pair<double, double> hexagon_vertex(const Kernel& k, int i)
     return { 0.5 * k.width_px * std::cos(theta), -0.5 * k.height_px * std::sin(theta) };
 }
 
-// --- bands on a summed-area table ----------------------------------------------------
+// --- the banded kernel's rectangles (its runs of equal rows) -----------------------------
 
 struct Rect {
     int y0, y1, x0, x1;  // offsets, inclusive
@@ -628,6 +629,8 @@ bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     return true;
 }
 
+// The plane path, for iris mode: a whole-frame summed-area table (Crow 1984), four reads
+// a rectangle.
 Plane convolve_banded(const Plane& in, const KernelWeights& kernel, int nthreads)
 {
     const int nc = in.nc;

@@ -296,8 +296,8 @@ TEST(Blur, WideImagesMatchTheReferenceTileByTileForSpansAndBands)
 
 TEST(Blur, BandsGiveTheirKernelFromALone1e6Pixel)
 {
-    // The per-tile summed-area tables: a 1e6 pixel gives the banded kernel, and nothing
-    // drifts into the tiles around it (the image spans several tiles each way).
+    // The running sums: a 1e6 pixel gives the banded kernel, and nothing drifts into the
+    // rows below it or the column strips beside it (the image spans several strips).
     Kernel k;
     k.shape    = KernelShape::Disk;
     k.width_px = k.height_px = 31;
@@ -625,7 +625,7 @@ TEST(BlurApprox, BandsComputeTheirBandedKernelExactly)
             OIIO::ImageBuf got, ref;
             ASSERT_TRUE(blur(got, src, n.k, o));
             ASSERT_TRUE(convolve_reference(ref, src, banded));
-            // Summed-area tables are differences of large sums: 1e-5 of the peak.
+            // Running sums and prefix differences of large sums: 1e-5 of the peak.
             EXPECT_LE(bokeh_test::max_difference(got, ref), 1e-5 * peak(ref)) << bands;
         }
     }

@@ -39,7 +39,7 @@ enum class BlurMethod {
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
-    Bands,           ///< disk, polygon: BlurOptions::bands rectangles of a summed-area table
+    Bands,           ///< disk, polygon: rows grouped into BlurOptions::bands bands, by running sums
     BilinearTaps,    ///< disk: the seed's 9x9 (25 fetches) or 17x17 (81 fetches) kernel
 };
 
