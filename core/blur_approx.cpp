@@ -223,7 +223,6 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
     auto at = [&](const Plane& p, int line, int c) {
         return p.px.get() + size_t(line) * across + size_t(c) * along;
     };
-    auto at_out = [&](int line, int c) { return out.px.get() + size_t(line) * across + size_t(c) * along; };
     // Pixels [a, b) of line r of `p` into `dst` (contiguous).
     auto gather = [&](const Plane& p, int r, int a, int b, float* dst) {
         copy_pixels(dst, ncs, at(p, r, a), along, b - a, nc);
@@ -327,7 +326,7 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
                         else  // the identity: the middle tap alone
                             scaled_row(o, hrow.data() + k + ncs, a, scale, size_t(x1 - x0) * ncs);
                         if (columns)
-                            copy_pixels(at_out(y, x0), along, o, ncs, x1 - x0, nc);
+                            copy_pixels(at(out, y, x0), along, o, ncs, x1 - x0, nc);
                     }
                 }
             }
