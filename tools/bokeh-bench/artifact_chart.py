@@ -22,7 +22,6 @@ standard library and matplotlib (Debian: python3-matplotlib).
 import argparse
 import math
 import os
-import sys
 
 import chart  # its CSV reading and error messages, under this program's name
 
@@ -186,16 +185,7 @@ def main():
         timing_rows = read_csv(args.timings, TIMING_REQUIRED,
                                ("size_px", "median_ms", "psnr_db_tonemapped"))
 
-    try:
-        import matplotlib
-    except ImportError:
-        print(f"{PROG}: matplotlib is not available to {sys.executable} "
-              "(Debian: apt install python3-matplotlib, then run with /usr/bin/python3)",
-              file=sys.stderr)
-        sys.exit(1)
-    matplotlib.use("Agg")
-    matplotlib.rcParams["svg.hashsalt"] = "openbokeh"   # stable ids in the SVG
-    import matplotlib.pyplot as plt
+    plt = chart.pyplot()
 
     if os.path.exists(args.outdir) and not os.path.isdir(args.outdir):
         fail(args.outdir, "not a directory")

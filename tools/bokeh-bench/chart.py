@@ -73,6 +73,21 @@ def csv_rows(path, required):
             yield reader.line_num, {k: (v or "").strip() for k, v in row.items()}
 
 
+def pyplot():
+    """matplotlib.pyplot drawing to files (Agg) with stable SVG ids; exits with one line
+    when matplotlib is missing."""
+    try:
+        import matplotlib
+    except ImportError:
+        note(f"matplotlib is not available to {sys.executable} "
+             "(Debian: apt install python3-matplotlib, then run with /usr/bin/python3)")
+        sys.exit(1)
+    matplotlib.use("Agg")
+    matplotlib.rcParams["svg.hashsalt"] = "openbokeh"
+    import matplotlib.pyplot as plt
+    return plt
+
+
 def read_rows(path):
     """(task names in order of appearance, rows as dicts with numbers parsed); exits with
     a one-line message on bad input. A task whose rows were all skipped is still named."""
@@ -430,15 +445,7 @@ def main():
     if not rows:
         fail(args.csv, "no usable data rows")
 
-    try:
-        import matplotlib
-    except ImportError:
-        note(f"matplotlib is not available to {sys.executable} "
-             "(Debian: apt install python3-matplotlib, then run with /usr/bin/python3)")
-        sys.exit(1)
-    matplotlib.use("Agg")
-    matplotlib.rcParams["svg.hashsalt"] = "openbokeh"   # stable ids in the SVG
-    import matplotlib.pyplot as plt
+    plt = pyplot()
     from matplotlib import ticker
 
     if os.path.exists(args.outdir) and not os.path.isdir(args.outdir):
