@@ -17,7 +17,8 @@
 //   the ring straight into `dst`.
 // * Spans: per 256 x (>= 64)-pixel tile, the rows' prefix sums, then 64 x 8 sub-tiles
 //   whose double accumulators stay in L1, each prefix row visited once per sub-tile and
-//   up to four spans added per pass (add_spans); with 4 channels each prefix row is kept
+//   the spans of two kernel rows added per pass (add_spans; with the blocked row_prefix,
+//   3-4 % faster than one row per pass, A/B in one process); with 4 channels each prefix row is kept
 //   twice, the copy one pixel on, so every span's vector loads start on a 64-byte boundary.
 // * Bands: their own running sums per column strip (convolve_bands_direct, blur_approx.cpp).
 // * Gaussian by three boxes: three box passes, each writing the region the next reads.
@@ -527,6 +528,11 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
         }
         // Accumulators on a 64-byte boundary: rows of kSubW pixels then start on one too,
         // and no vector store splits a cache line.
+        size_t most = 0;  // spans of two kernel rows, at most
+        for (size_t d = 0; d + 1 < first.size(); ++d)
+            most = std::max(most, first[d + 1] - first[d] + (d + 2 < first.size() ? first[d + 2] - first[d + 1] : 0));
+        std::vector<const double*> hi_ptr(most), lo_ptr(most);
+        std::vector<double> w_list(most);
         std::vector<double> acc_store(size_t(kSubH) * size_t(kSubW) * ncs + 8);
         double* const acc_base = aligned64(acc_store.data());
         const size_t acc_len = size_t(kSubH) * size_t(kSubW) * ncs;
@@ -535,16 +541,30 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
                 const int sh = std::min(kSubH, ye - sy0);
                 const size_t n = size_t(std::min(kSubW, xe - sx0)) * ncs;
                 std::fill_n(acc_base, acc_len, 0.0);
-                // Output row y (tile-local yl) reads prefix rows yl .. yl + 2 ry.
-                const int yl0 = sy0 - ys;
-                for (int r = yl0; r < yl0 + sh + nd - 1; ++r) {
-                    const double* p = table + size_t(r) * rs + size_t(sx0 - xs) * ncs;
-                    const int j0 = std::max(0, r - yl0 - nd + 1), j1 = std::min(sh, r - yl0 + 1);
+                // Output row y (tile-local yl) reads prefix rows yl .. yl + 2 ry. Two prefix
+                // rows at a time: each output row takes the spans of both in one pass.
+                const int yl0   = sy0 - ys;
+                const int r_end = yl0 + sh + nd - 1;
+                for (int r = yl0; r < r_end; r += 2) {
+                    const double* p0 = table + size_t(r) * rs + size_t(sx0 - xs) * ncs;
+                    const bool pair  = r + 1 < r_end;
+                    const int j0 = std::max(0, r - yl0 - nd + 1);
+                    const int j1 = std::min(sh, r - yl0 + (pair ? 2 : 1));
                     for (int j = j0; j < j1; ++j) {
-                        const size_t d = size_t(r - yl0 - j);
-                        add_spans(acc_base + size_t(j) * n, p, hi_off.data() + first[d],
-                                  lo_off.data() + first[d], span_w.data() + first[d],
-                                  first[d + 1] - first[d], n);
+                        size_t count = 0;
+                        for (int q = 0; q < (pair ? 2 : 1); ++q) {
+                            const int d = r + q - yl0 - j;
+                            if (d < 0 || d >= nd)
+                                continue;
+                            const double* p = p0 + size_t(q) * rs;
+                            for (size_t i = first[size_t(d)]; i < first[size_t(d) + 1]; ++i) {
+                                hi_ptr[count] = p + hi_off[i];
+                                lo_ptr[count] = p + lo_off[i];
+                                w_list[count++] = span_w[i];
+                            }
+                        }
+                        add_spans(acc_base + size_t(j) * n, hi_ptr.data(), lo_ptr.data(),
+                                  w_list.data(), count, n);
                     }
                 }
                 for (int j = 0; j < sh; ++j)

@@ -1,7 +1,7 @@
 // plane.cpp — padded float planes for the blur methods (see plane.h), the border rule
 // per source row (source_row: shared by pad() and the direct paths of blur.cpp), and the
-// vectorised inner loops of the prefix-sum methods (add_span, add_spans: up to four spans
-// per pass over the accumulator, so it is loaded and stored once per four spans).
+// vectorised inner loops of the prefix-sum methods (add_span, add_spans: up to eight spans
+// per pass over the accumulator, so it is loaded and stored once per eight spans).
 
 #include "plane.h"
 
@@ -289,21 +289,36 @@ bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* wh
     return true;
 }
 
-// Four channels keep their running sums in registers (one vector add per pixel); others
-// go through memory.
-void row_prefix(double* p, const float* v, size_t npx, int nc)
+// Four channels: four pixels at a time, their sums within the block formed off the chain,
+// so the running sum (one vector add per block, not per pixel) is the only dependency
+// carried from block to block. Other channel counts go through memory.
+BOKEH_HOT void row_prefix(double* p, const float* v, size_t npx, int nc)
 {
     if (nc == 4) {
-        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+        double run[4] = { 0.0, 0.0, 0.0, 0.0 };
         p[0] = p[1] = p[2] = p[3] = 0.0;
-        for (size_t x = 0; x < npx; ++x) {
-            a0 += double(v[4 * x]);
-            a1 += double(v[4 * x + 1]);
-            a2 += double(v[4 * x + 2]);
-            a3 += double(v[4 * x + 3]);
-            double* o = p + 4 * (x + 1);
-            o[0] = a0, o[1] = a1, o[2] = a2, o[3] = a3;
+        size_t x = 0;
+        for (; x + 4 <= npx; x += 4) {
+            const float* q = v + 4 * x;
+            double* o      = p + 4 * (x + 1);
+            double s0[4], s1[4], s2[4], s3[4];
+            for (int c = 0; c < 4; ++c) {
+                s0[c] = double(q[c]);
+                s1[c] = s0[c] + double(q[4 + c]);
+                s2[c] = s1[c] + double(q[8 + c]);
+                s3[c] = s2[c] + double(q[12 + c]);
+            }
+            for (int c = 0; c < 4; ++c) {
+                o[c]      = run[c] + s0[c];
+                o[4 + c]  = run[c] + s1[c];
+                o[8 + c]  = run[c] + s2[c];
+                o[12 + c] = run[c] + s3[c];
+                run[c] += s3[c];
+            }
         }
+        for (; x < npx; ++x)
+            for (int c = 0; c < 4; ++c)
+                p[4 * (x + 1) + c] = run[c] += double(v[4 * x + c]);
         return;
     }
     const size_t ncs = size_t(nc);
@@ -319,37 +334,47 @@ BOKEH_HOT void add_span(double* acc, const double* hi, const double* lo, double 
         acc[i] += w * (hi[i] - lo[i]);
 }
 
-// acc[i] += sum over spans s of w[s] * (p[hi[s] + i] - p[lo[s] + i]), up to four spans per
-// pass over acc (the one to three left over in one pass): a span then costs its two loads
-// and a multiply-add, and the accumulator is loaded and stored once per pass instead of
-// once per span.
-BOKEH_HOT void add_spans(double* acc, const double* p, const size_t* hi, const size_t* lo,
+namespace {
+
+// acc[i] += sum over s < N of w[s] * (hi[s][i] - lo[s][i]), one pass over acc.
+template <int N>
+inline __attribute__((always_inline)) void add_spans_fixed(double* acc, const double* const* hi,
+                                                           const double* const* lo,
+                                                           const double* w, size_t n)
+{
+    const double* h[N];
+    const double* l[N];
+    double wk[N];
+    for (int k = 0; k < N; ++k)
+        h[k] = hi[k], l[k] = lo[k], wk[k] = w[k];
+    // The prefix rows are read only; acc is no prefix row.
+#pragma GCC ivdep
+    for (size_t i = 0; i < n; ++i) {
+        double s = 0.0;
+        for (int k = 0; k < N; ++k)
+            s += wk[k] * (h[k][i] - l[k][i]);
+        acc[i] += s;
+    }
+}
+
+}  // namespace
+
+// Up to eight spans per pass over acc: a span then costs its two loads and a multiply-add,
+// and the accumulator is loaded and stored once per pass instead of once per span.
+BOKEH_HOT void add_spans(double* acc, const double* const* hi, const double* const* lo,
                          const double* w, size_t count, size_t n)
 {
-    size_t s = 0;
-    for (; s + 4 <= count; s += 4) {
-        const double *h0 = p + hi[s], *h1 = p + hi[s + 1], *h2 = p + hi[s + 2], *h3 = p + hi[s + 3];
-        const double *l0 = p + lo[s], *l1 = p + lo[s + 1], *l2 = p + lo[s + 2], *l3 = p + lo[s + 3];
-        const double w0 = w[s], w1 = w[s + 1], w2 = w[s + 2], w3 = w[s + 3];
-        for (size_t i = 0; i < n; ++i)
-            acc[i] += (w0 * (h0[i] - l0[i]) + w1 * (h1[i] - l1[i]))
-                      + (w2 * (h2[i] - l2[i]) + w3 * (h3[i] - l3[i]));
-    }
-    // The last one to three spans in one pass.
-    if (count - s == 3) {
-        const double *h0 = p + hi[s], *h1 = p + hi[s + 1], *h2 = p + hi[s + 2];
-        const double *l0 = p + lo[s], *l1 = p + lo[s + 1], *l2 = p + lo[s + 2];
-        const double w0 = w[s], w1 = w[s + 1], w2 = w[s + 2];
-        for (size_t i = 0; i < n; ++i)
-            acc[i] += (w0 * (h0[i] - l0[i]) + w1 * (h1[i] - l1[i])) + w2 * (h2[i] - l2[i]);
-    } else if (count - s == 2) {
-        const double *h0 = p + hi[s], *h1 = p + hi[s + 1];
-        const double *l0 = p + lo[s], *l1 = p + lo[s + 1];
-        const double w0 = w[s], w1 = w[s + 1];
-        for (size_t i = 0; i < n; ++i)
-            acc[i] += w0 * (h0[i] - l0[i]) + w1 * (h1[i] - l1[i]);
-    } else if (count - s == 1) {
-        add_span(acc, p + hi[s], p + lo[s], w[s], n);
+    for (; count > 0; hi += 8, lo += 8, w += 8, count -= std::min<size_t>(count, 8)) {
+        switch (std::min<size_t>(count, 8)) {
+        case 1: add_spans_fixed<1>(acc, hi, lo, w, n); break;
+        case 2: add_spans_fixed<2>(acc, hi, lo, w, n); break;
+        case 3: add_spans_fixed<3>(acc, hi, lo, w, n); break;
+        case 4: add_spans_fixed<4>(acc, hi, lo, w, n); break;
+        case 5: add_spans_fixed<5>(acc, hi, lo, w, n); break;
+        case 6: add_spans_fixed<6>(acc, hi, lo, w, n); break;
+        case 7: add_spans_fixed<7>(acc, hi, lo, w, n); break;
+        default: add_spans_fixed<8>(acc, hi, lo, w, n); break;
+        }
     }
 }
 

@@ -105,9 +105,8 @@ bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* wh
 
 /// acc[i] += w * (hi[i] - lo[i]): one span of prefix sums.
 void add_span(double* acc, const double* hi, const double* lo, double w, size_t n);
-/// acc[i] += sum over s < count of w[s] * (p[hi[s] + i] - p[lo[s] + i]): several spans of
-/// one prefix row at once.
-void add_spans(double* acc, const double* p, const size_t* hi, const size_t* lo, const double* w,
+/// acc[i] += sum over s < count of w[s] * (hi[s][i] - lo[s][i]): several spans at once.
+void add_spans(double* acc, const double* const* hi, const double* const* lo, const double* w,
                size_t count, size_t n);
 /// acc[i] += w * src[i].
 void add_scaled(double* acc, const float* src, double w, size_t n);
