@@ -277,6 +277,66 @@ void box_row_running(float* out, const float* v, int npx, const BoxPass& b)
     }
 }
 
+// box_row_running<4>, four pixels per step: their window changes (entering minus leaving)
+// and the partial sums of those are formed off the running sum's chain, which then
+// carries one add per four pixels instead of one per pixel, and the four channels are
+// one vector (the template, compiled for baseline x86-64, ran scalar). The same sums
+// added in another order (double: the difference is in the last bits of a float, if
+// any). Measured A/B in one process: the box 15-21 % faster at 15-255 px, the Gaussian
+// by three boxes 18 %.
+template<bool Ends>
+inline __attribute__((always_inline)) void box_row_running4_body(float* out, const float* v,
+                                                                 int npx, int radius, int full,
+                                                                 double inner, double end)
+{
+    double s[4], part[4][4] = {};
+    const int a = radius - full, e = radius + full + 1;
+    for (int i = a; i < e; ++i)
+        for (int c = 0; c < 4; ++c)
+            part[(i - a) & 3][c] += double(v[size_t(i) * 4 + c]);
+    for (int c = 0; c < 4; ++c)
+        s[c] = (part[0][c] + part[1][c]) + (part[2][c] + part[3][c]);
+    const float* add = v + size_t(e) * 4;
+    const float* sub = v + size_t(a) * 4;
+    const float* hi  = v + size_t(2 * radius) * 4;
+    auto value = [&](double sum, size_t j) {
+        return Ends ? float(inner * sum + end * (double(v[j]) + double(hi[j]))) : float(inner * sum);
+    };
+    int x = 0;
+    for (; x + 4 <= npx; x += 4) {
+        const size_t i = size_t(x) * 4;
+        double q[4][4];  // q[k]: the sum k pixels on, less s
+        for (int c = 0; c < 4; ++c) {
+            q[0][c] = 0.0;
+            q[1][c] = double(add[i + c]) - double(sub[i + c]);
+            q[2][c] = q[1][c] + (double(add[i + 4 + c]) - double(sub[i + 4 + c]));
+            q[3][c] = q[2][c] + (double(add[i + 8 + c]) - double(sub[i + 8 + c]));
+        }
+        for (int k = 0; k < 4; ++k)
+            for (int c = 0; c < 4; ++c) {
+                const size_t j = i + size_t(k) * 4 + size_t(c);
+                out[j] = value(s[c] + q[k][c], j);
+            }
+        for (int c = 0; c < 4; ++c)
+            s[c] += q[3][c] + (double(add[i + 12 + c]) - double(sub[i + 12 + c]));
+    }
+    for (; x < npx; ++x)
+        for (int c = 0; c < 4; ++c) {
+            const size_t j = size_t(x) * 4 + size_t(c);
+            out[j] = value(s[c], j);
+            s[c] += double(add[j]) - double(sub[j]);
+        }
+}
+
+BOKEH_HOT void box_row_running4(float* out, const float* v, int npx, int radius, int full,
+                                double inner, double end)
+{
+    if (end != 0.0)
+        box_row_running4_body<true>(out, v, npx, radius, full, inner, end);
+    else
+        box_row_running4_body<false>(out, v, npx, radius, full, inner, end);
+}
+
 bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                 const BoxPass& bx, const BoxPass& by, Border border, int nthreads)
 {
@@ -310,7 +370,7 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
             switch (nc) {
             case 1: box_row_running<1>(o, v, xe - xs, bx); return;
             case 3: box_row_running<3>(o, v, xe - xs, bx); return;
-            case 4: box_row_running<4>(o, v, xe - xs, bx); return;
+            case 4: box_row_running4(o, v, xe - xs, bx.radius, bx.full, bx.inner, bx.end); return;
             default: break;
             }
             std::fill_n(prefix.begin(), ncs, 0.0);
