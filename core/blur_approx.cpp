@@ -370,8 +370,7 @@ void segment_rows(const Plane& in, const Region& valid, Plane& out, const Region
                 std::copy_n(in.row(y) + size_t(valid.x0) * ncs, vx, into);
             else
                 std::fill_n(into, vx, 0.0f);
-            for (size_t i = 0; i < row.size(); ++i)
-                prefix[i + ncs] = prefix[i] + double(row[i]);
+            row_prefix(prefix.data(), row.data(), size_t(hi - lo), nc);
             band_row(out.row(y) + x0, row.data() + size_t(-first - lo) * ncs + x0,
                      row.data() + size_t(-last - lo) * ncs + x0,
                      prefix.data() + size_t(-first - lo) * ncs + x0,
