@@ -676,6 +676,7 @@ bool resolve_method(const Kernel& k, BlurMethod asked, BlurMethod& m, std::strin
         if (!shape || k.hole != 0.0f)
             err = "method=bands is for disk and polygon kernels without a hole";
         return shape && k.hole == 0.0f;
+    case BlurMethod::Reduced: m = asked; return true;
     case BlurMethod::BilinearTaps: {
         m = asked;
         const bool ok = k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased
@@ -709,10 +710,22 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         dst.errorfmt("blur: iris {} is outside -1000..1000", opts.iris);
         return false;
     }
+    if (!(opts.reduction == 0.0f || (opts.reduction >= 1.0f && opts.reduction <= 16.0f))) {
+        dst.errorfmt("blur: reduction {} is outside 1..16 (0: automatic)", opts.reduction);
+        return false;
+    }
+    if (method == BlurMethod::Reduced && opts.iris != 0.0f) {
+        dst.errorfmt("blur: method=reduced does not take iris (the reduction averages linear "
+                     "values, not their exponentials)");
+        return false;
+    }
     if (!check_source(dst, src))
         return false;
     OIIO::ImageBuf holder;
     const OIIO::ImageBuf& in = float_source(src, holder);
+    // Before the exact weights, which it does not need at full size.
+    if (method == BlurMethod::Reduced)
+        return blur_reduced(dst, in, k, opts, roi, nthreads);
 
     // The weights the method computes with (the effective ones for the approximations
     // that have them) and how far the method reads around an output pixel.

@@ -169,9 +169,6 @@ KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s, int
 int reach_x(float coc_px) { return int(std::ceil(0.5f * std::abs(coc_px))) + 1; }
 int reach_y(float coc_px, float aspect) { return int(std::ceil(0.5f * std::abs(coc_px) * aspect)) + 1; }
 
-// Floor division for the reduced grid.
-int floor_div(int a, int s) { return a >= 0 ? a / s : -((-a + s - 1) / s); }
-
 // --- layers --------------------------------------------------------------------------
 
 // Layers are computed in tiles of kTile x kTile reduced pixels, only where the layer has

@@ -94,6 +94,9 @@ bool finish(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi
 /// channels).
 void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count, int nc);
 
+/// a / s rounded down (s > 0): the reduced pixel holding full-resolution coordinate a.
+inline int floor_div(int a, int s) { return a >= 0 ? a / s : -((-a + s - 1) / s); }
+
 /// `r` grown by rx, ry pixels on each side.
 OIIO::ROI grown(OIIO::ROI r, int rx, int ry);
 
@@ -153,6 +156,12 @@ bool hexagon_transposed(const Kernel& k);
 Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin_y, int nthreads);
 /// How far the parallelogram passes read along x (or y), interpolation included.
 int hexagon_reach(const Kernel& k, bool along_x);
+
+/// BlurMethod::Reduced (blur_approx.cpp): `k` at 1/N resolution, N = opts.reduction or the
+/// automatic factor (reduction_factor), enlarged back over `roi` (undefined: the source's
+/// data window, grown by the method's reach if opts.grow).
+bool blur_reduced(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const Kernel& k,
+                  const BlurOptions& opts, OIIO::ROI roi, int nthreads);
 /// Convolution with a kernel of repeated rows (bands) via a summed-area table (iris mode).
 Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads);
 

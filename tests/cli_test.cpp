@@ -378,13 +378,14 @@ TEST(Cli, BlurMethodsAndConvolve)
         "{0} --blur:kernel=disk:method=bands:bands=4 9 -o {1}/bands.exr "
         "{0} --blur:kernel=disk:method=taps 9 -o {1}/taps.exr "
         "{0} --blur:kernel=hex:method=fast 9 -o {1}/hex.exr "
+        "{0} --blur:kernel=disk:method=reduced:reduction=2 9 -o {1}/reduced.exr "
         "{0} --blur:kernel=disk:iris=2 9 -o {1}/iris.exr",
         in, dir));
     ASSERT_EQ(r.status, 0) << r.err;
     OIIO::ImageBuf exact(dir + "/exact.exr");
     const auto stats = OIIO::ImageBufAlgo::computePixelStats(exact);
     const double peak = *std::max_element(stats.max.begin(), stats.max.end());
-    for (const char* name : { "bands", "taps", "hex", "iris" }) {
+    for (const char* name : { "bands", "taps", "hex", "reduced", "iris" }) {
         OIIO::ImageBuf b(dir + "/" + name + ".exr");
         ASSERT_TRUE(b.read(0, 0, true)) << name;
         const double d = max_difference(exact, b);
@@ -435,6 +436,8 @@ TEST(Cli, Blur)
                                { "--blur:blades=2:kernel=polygon 9", "out of range [3, 64]" },
                                { "--blur:kernel=disk:method=parallelograms 9", "needs a hexagon" },
                                { "--blur:kernel=disk:method=taps 11", "9x9 or 17x17" },
+                               { "--blur:kernel=disk:method=reduced:reduction=0.5 9", "reduction 0.5 is outside 1..16" },
+                               { "--blur:kernel=disk:method=reduced:iris=2 9", "method=reduced does not take iris" },
                                { "--blur:iris=200 9", "exceeds 80" },
                                { "--convolve", "needs 2 image(s) on the stack" },
                                { "--blur 5000", "outside 0..4096" } }) {

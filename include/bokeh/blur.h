@@ -41,6 +41,9 @@ enum class BlurMethod {
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
     Bands,           ///< disk, polygon: rows grouped into BlurOptions::bands bands, by running sums
     BilinearTaps,    ///< disk: the seed's 9x9 (25 fetches) or 17x17 (81 fetches) kernel
+    Reduced,         ///< any kernel: blurred exactly at 1/N resolution (area reduction, the
+                     ///< kernel scaled by 1/N) and enlarged back bilinearly (SEEDS.md
+                     ///< sections 4 and 6); N = BlurOptions::reduction, any real >= 1
 };
 
 /// Pixels outside the source's data window.
@@ -67,6 +70,10 @@ struct BlurOptions {
     /// so bright values dominate the average as in a real lens; 0 = a plain average.
     /// Applies to every channel but alpha; iris * (max - min) must stay within 80.
     float iris = 0.0f;
+    /// Reduced: the reduction factor N (a real number in 1..16; 1 is the exact blur); 0
+    /// picks it from the kernel (reduction_factor). Iris mode is refused with it (the
+    /// reduction averages linear values, not their exponentials).
+    float reduction = 0.0f;
 };
 
 /// A kernel's normalised weights on a (2 rx + 1) x (2 ry + 1) grid centred on (0, 0).
@@ -80,6 +87,12 @@ struct KernelWeights {
 /// The Gaussian's sigma along x and y in pixels: `sigma_px` if set, else width / 4 and
 /// height / 4 (oiiotool's width-to-sigma rule for `--blur:kernel=gaussian WxH`).
 std::pair<double, double> gaussian_sigma(const Kernel& k);
+
+/// BlurMethod::Reduced's automatic factor: the kernel's narrower side (a Gaussian: 4 sigma)
+/// over 25, so the reduced kernel is 25 pixels across, at most 8; 1 (the exact blur) when
+/// that is under 1.5 (kernels under 37.5 pixels), where the reduction saves too little.
+/// docs/benchmarks.md charts what it costs and loses.
+double reduction_factor(const Kernel& k);
 
 /// Check a kernel's parameters; false + `err` naming the bad one.
 bool validate(const Kernel& k, std::string& err);

@@ -51,8 +51,10 @@ bool blur_command(CommandContext& c)
                : method == "parallelograms" ? bokeh::BlurMethod::Parallelograms
                : method == "bands"          ? bokeh::BlurMethod::Bands
                : method == "taps"           ? bokeh::BlurMethod::BilinearTaps
+               : method == "reduced"        ? bokeh::BlurMethod::Reduced
                                             : bokeh::BlurMethod::Auto;
-    o.bands = c.options.get_int("bands");
+    o.bands     = c.options.get_int("bands");
+    o.reduction = float(c.options.get_float("reduction"));
 
     bokeh::StackImage out = c.inputs[0];
     out.buf               = std::make_shared<OIIO::ImageBuf>();
@@ -100,11 +102,15 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk)"),
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
-                             "bands", "taps" },
+                             "bands", "taps", "reduced" },
                            "fast: the shape's approximation (gaussian: boxes3, hex: "
                            "parallelograms, disk/polygon: bands); taps: the seed's 9x9/17x17 "
-                           "bilinear-fetch disk; reference: brute force"),
+                           "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
+                           "bilinearly; reference: brute force"),
         OptionSpec::Int("bands", 8, 1, 64, "method=bands: bands per half kernel"),
+        OptionSpec::Float("reduction", 0.0, 0.0, 16.0,
+                          "method=reduced: the factor N, 1..16 (0: the kernel's narrower side "
+                          "over 25, at most 8; 1 below 38 px)"),
         OptionSpec::Float("sigma", 0.0, 0.0, 1024.0, "Gaussian sigma in pixels (0: W/4)"),
         OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
         OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon: degrees (0: a vertex up)"),
