@@ -171,10 +171,10 @@ int main(int argc, char* argv[])
         }
         ours("disk", "FFT (image kernel)", d, kernel(S::Disk, d));
         // The reduced buffer at its automatic factor N = D / 25 (1 below 37.5 px: exact).
-        ours("disk", "reduced 1/N (auto N, bilinear)", d, kernel(S::Disk, d), M::Reduced);
+        ours("disk", "reduced 1/N (bilinear)", d, kernel(S::Disk, d), M::Reduced);
         ours("hexagon", "row spans (exact)", d, kernel(S::Polygon, d));
         ours("hexagon", "3 parallelograms", d, kernel(S::Polygon, d), M::Parallelograms);
-        ours("hexagon", "reduced 1/N (auto N, bilinear)", d, kernel(S::Polygon, d), M::Reduced);
+        ours("hexagon", "reduced 1/N (bilinear)", d, kernel(S::Polygon, d), M::Reduced);
         bokeh::Kernel g = kernel(S::Gaussian, d);
         ours("gaussian", "separable (exact)", d, g);
         ours("gaussian", "3 boxes (fast)", d, g, M::ThreeBoxes);
