@@ -908,12 +908,12 @@ bool blur_reduced(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const Kernel& k
     low_k.width_px  = float(k.width_px / n);
     low_k.height_px = float(k.height_px / n);
     low_k.sigma_px  = float(k.sigma_px / n);
-    if (!roi.defined()) {
+    if (!roi.defined() && !opts.grow) {
+        roi = in.roi();
+    } else if (!roi.defined()) {
         // The method's reach: the reduced kernel's, and a reduced pixel more, at full size.
         const KernelWeights low_w = kernel_weights(low_k, nthreads);
-        roi = opts.grow ? grown(in.roi(), int(std::ceil((low_w.rx + 1) * n)),
-                                int(std::ceil((low_w.ry + 1) * n)))
-                        : in.roi();
+        roi = grown(in.roi(), int(std::ceil((low_w.rx + 1) * n)), int(std::ceil((low_w.ry + 1) * n)));
     }
     // Reduced pixel i covers [i n, (i + 1) n) (anchored at 0, as reduce() and enlarge()):
     // the reduced image is every pixel that touches the data window, the area mean of it
