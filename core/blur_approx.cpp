@@ -55,7 +55,7 @@
 // N) down to the reduction and enlargement; the error is the detail lost under 1/N of
 // the kernel, so the automatic N keeps the reduced kernel 25 px across. Measured on
 // bokeh-bench's crop of the "lights" frame, against the exact disk: 41.0-51.2 dB from
-// 38 to 255 px, with D = 63 at 41.3 dB in 18-20 ms (6 bands: 41.1 dB in 36-44 ms).
+// 38 to 255 px, with D = 63 at 41.3 dB in 21-23 ms (6 bands: 41.1 dB in 42-44 ms).
 // Known limit: not for iris mode (the reduction would average linear values).
 //
 // Known limits: the parallelogram split is for six-bladed straight apertures only;
