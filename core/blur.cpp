@@ -715,8 +715,12 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         return false;
     }
     if (method == BlurMethod::Reduced && opts.iris != 0.0f) {
-        dst.errorfmt("blur: method=reduced does not take iris (the reduction averages linear "
-                     "values, not their exponentials)");
+        // Tried: the reduction and the blur on exp(k x), back by log / k before the
+        // enlargement. A block's mean of exp(k x) is its brightest pixel's, so every
+        // highlight grows by up to a block: 20 dB against the exact iris blur (disk 51 px,
+        // iris 0.3, the lights scene at 640 x 360), too far to offer.
+        dst.errorfmt("blur: method=reduced does not take iris (a block's mean of exp(k x) "
+                     "widens every highlight by up to a block); use an exact method");
         return false;
     }
     if (!check_source(dst, src))
