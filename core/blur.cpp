@@ -165,9 +165,8 @@ struct BoxPass {
     }
 };
 
-// One box pass along x: a row's prefix sums (double), then each output is the
-// difference of two of them, plus the fractional end pixels. The prefix is one add per
-// value with the channels as independent chains; the rest vectorises.
+// One box pass along x: a row's prefix sums (double, row_prefix), then each output is the
+// difference of two of them, plus the fractional end pixels.
 Plane box_horizontal(const Plane& in, const BoxPass& b, int nthreads)
 {
     const int nc = in.nc;
@@ -177,9 +176,7 @@ Plane box_horizontal(const Plane& in, const BoxPass& b, int nthreads)
         std::vector<double> prefix(in.stride() + ncs);
         for (int y = int(y0); y < int(y1); ++y) {
             const float* v = in.row(y);
-            std::fill_n(prefix.begin(), ncs, 0.0);
-            for (size_t i = 0, e = in.stride(); i < e; ++i)
-                prefix[i + ncs] = prefix[i] + double(v[i]);
+            row_prefix(prefix.data(), v, size_t(in.w), nc);
             // Output x sums input [x + radius - full, x + radius + full].
             const double* hi = prefix.data() + size_t(b.radius + b.full + 1) * ncs;
             const double* lo = prefix.data() + size_t(b.radius - b.full) * ncs;
@@ -356,9 +353,7 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
             // The common channel counts slide a running sum; others take prefix sums.
             if (box_row_running(o, v, xe - xs, nc, bx.radius, bx.full, bx.inner, bx.end))
                 return;
-            std::fill_n(prefix.begin(), ncs, 0.0);
-            for (size_t i = 0; i < nrow; ++i)
-                prefix[i + ncs] = prefix[i] + double(v[i]);
+            row_prefix(prefix.data(), v, nrow / ncs, nc);
             // Output x sums padded [x + radius - full, x + radius + full].
             const double* hi = prefix.data() + size_t(bx.radius + bx.full + 1) * ncs;
             const double* lo = prefix.data() + size_t(bx.radius - bx.full) * ncs;
@@ -416,13 +411,8 @@ void row_prefix_sums(const Plane& in, double* prefix, int nthreads)
 {
     const size_t nc = size_t(in.nc), pstride = size_t(in.w + 1) * nc;
     parallel_for_chunks(0, in.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int64_t y = y0; y < y1; ++y) {
-            double* p      = prefix + size_t(y) * pstride;
-            const float* v = in.row(int(y));
-            std::fill_n(p, nc, 0.0);
-            for (size_t i = 0, n = size_t(in.w) * nc; i < n; ++i)
-                p[i + nc] = p[i] + v[i];
-        }
+        for (int64_t y = y0; y < y1; ++y)
+            row_prefix(prefix + size_t(y) * pstride, in.row(int(y)), size_t(in.w), in.nc);
     });
 }
 
