@@ -535,6 +535,10 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
         span_w.push_back(s.weight);
     }
 
+    // The most spans two consecutive kernel rows have (one pass of add_spans below).
+    size_t most = 0;
+    for (size_t d = 0; d + 1 < first.size(); ++d)
+        most = std::max(most, first[std::min(d + 2, first.size() - 1)] - first[d]);
     const int w = roi.width(), h = roi.height();
     // Tile height: at least the kernel's, so the prefix rows computed per output row stay
     // under three (fixed by the kernel alone, never by the thread count).
@@ -563,13 +567,10 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
             if (twin)
                 std::copy(p + ncs, p + pw, p + pal);
         }
-        // Accumulators on a 64-byte boundary: rows of kSubW pixels then start on one too,
-        // and no vector store splits a cache line.
-        size_t most = 0;  // spans of two kernel rows, at most
-        for (size_t d = 0; d + 1 < first.size(); ++d)
-            most = std::max(most, first[d + 1] - first[d] + (d + 2 < first.size() ? first[d + 2] - first[d + 1] : 0));
         std::vector<const double*> hi_ptr(most), lo_ptr(most);
         std::vector<double> w_list(most);
+        // Accumulators on a 64-byte boundary: rows of kSubW pixels then start on one too,
+        // and no vector store splits a cache line.
         std::vector<double> acc_store(size_t(kSubH) * size_t(kSubW) * ncs + 8);
         double* const acc_base = aligned64(acc_store.data());
         const size_t acc_len = size_t(kSubH) * size_t(kSubW) * ncs;
