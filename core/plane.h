@@ -96,6 +96,8 @@ void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step,
 
 /// a / s rounded down (s > 0): the reduced pixel holding full-resolution coordinate a.
 inline int floor_div(int a, int s) { return a >= 0 ? a / s : -((-a + s - 1) / s); }
+/// a / s rounded up (s > 0).
+inline int ceil_div(int a, int s) { return -floor_div(-a, s); }
 
 /// `r` grown by rx, ry pixels on each side.
 OIIO::ROI grown(OIIO::ROI r, int rx, int ry);

@@ -49,6 +49,8 @@
 namespace bokeh {
 
 using detail::border_index;
+using detail::ceil_div;
+using detail::floor_div;
 using detail::kOutside;
 using OIIO::Strutil::fmt::format;
 
@@ -1022,9 +1024,6 @@ std::pair<int, int> scaled(int begin, int end, double k)
     constexpr double eps = 1e-9;
     return { int(std::floor(begin * k + eps)), int(std::ceil(end * k - eps)) };
 }
-
-int floor_div(int a, int n) { return a >= 0 ? a / n : -((-a + n - 1) / n); }
-int ceil_div(int a, int n) { return -floor_div(-a, n); }
 
 // Windows of an image mapped to a new display size (resize's mapping). The display
 // origin scales with the size; the data window is the pixels its image touches.
