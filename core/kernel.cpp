@@ -134,6 +134,7 @@ struct Shape {
     const Kernel& k;
     double ax, ay;           // half sizes
     double alpha, vertex;    // polygon: sector angle, angle of a vertex
+    double apothem;          // polygon: cos(alpha / 2), the edges' distance (circumradius 1)
     bool polygon;
     // Polygon of up to 32 blades: the unit normals of its edges, (u, v) with v up. The
     // edge nearest in angle to a point is the one its projection is largest on,
@@ -149,6 +150,7 @@ struct Shape {
         , ay(0.5 * kernel.height_px)
         , alpha(2.0 * kPi / kernel.blades)
         , vertex(0.5 * kPi + kernel.rotation_deg * kPi / 180.0)
+        , apothem(std::cos(0.5 * alpha))
         , polygon(kernel.shape == KernelShape::Polygon && kernel.curvature < 1.0f)
     {
         if (polygon && kernel.blades <= 32)
@@ -169,11 +171,11 @@ struct Shape {
                 double p = 0.0;
                 for (const auto& [nx, ny] : normals)
                     p = std::max(p, u * nx + v * ny);
-                d_poly = std::cos(0.5 * alpha) * r / p;
+                d_poly = apothem * r / p;
             } else {
                 const double phi = std::fmod(std::fmod(std::atan2(v, u) - vertex, alpha) + alpha, alpha)
                                    - 0.5 * alpha;
-                d_poly = std::cos(0.5 * alpha) / std::cos(phi);
+                d_poly = apothem / std::cos(phi);
             }
             d = d_poly + k.curvature * (1.0 - d_poly);
         }
