@@ -20,6 +20,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -60,19 +61,24 @@ BlurFn load(const char* path)
 
 bool parse_case(const std::string& text, bokeh::Kernel& k, bokeh::BlurOptions& o)
 {
-    const std::vector<std::string> f = OIIO::Strutil::splits(text, ":");
-    if (f.size() < 2 || f.size() > 4)
-        return false;
     using S = bokeh::KernelShape;
     using M = bokeh::BlurMethod;
-    k.shape = f[0] == "box" ? S::Box : f[0] == "gaussian" ? S::Gaussian : f[0] == "disk" ? S::Disk : S::Polygon;
-    if (f[0] != "box" && f[0] != "gaussian" && f[0] != "disk" && f[0] != "hex")
+    static const std::map<std::string, S> shapes{ { "box", S::Box }, { "gaussian", S::Gaussian },
+                                                  { "disk", S::Disk }, { "hex", S::Polygon } };
+    static const std::map<std::string, M> methods{ { "auto", M::Auto },
+                                                   { "exact", M::Exact },
+                                                   { "fast", M::Fast },
+                                                   { "bands", M::Bands },
+                                                   { "parallelograms", M::Parallelograms },
+                                                   { "reduced", M::Reduced } };
+    const std::vector<std::string> f = OIIO::Strutil::splits(text, ":");
+    if (f.size() < 2 || f.size() > 4 || !shapes.count(f[0])
+        || (f.size() > 2 && !methods.count(f[2])))
         return false;
+    k.shape    = shapes.at(f[0]);
     k.blades   = 6;
     k.width_px = k.height_px = OIIO::Strutil::stof(f[1]);
-    const std::string m = f.size() > 2 ? f[2] : "auto";
-    o.method = m == "exact" ? M::Exact : m == "fast" ? M::Fast : m == "bands" ? M::Bands
-             : m == "parallelograms" ? M::Parallelograms : m == "reduced" ? M::Reduced : M::Auto;
+    o.method   = f.size() > 2 ? methods.at(f[2]) : M::Auto;
     if (f.size() > 3) {
         o.bands     = OIIO::Strutil::stoi(f[3]);
         o.reduction = OIIO::Strutil::stof(f[3]);
