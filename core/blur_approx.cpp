@@ -215,12 +215,13 @@ struct Region {
 
 // out = (seg(in) + add) * scale, where seg(in)(p) = mean over t in [0, 1] of in(p - t e),
 // e = (ex, ey) with |ex| <= |ey|; same-size planes, `in` read as zero outside `valid`,
-// `out` written over `region` alone, `add` optional. Shear: G(u, r) = in(u + m r, r), m = ex / ey, moves each row as a whole, so
-// the segment runs down G's columns; H = the running sum down the columns (interval
-// weights: fractional ends by overlap); out(x, y) = H(x - m y, y). Every step is along a
-// row with one set of taps per row, so one sweep down the rows does it: a task owns a
-// strip of G's columns and keeps, per row, the two G rows entering and leaving the
-// window (recomputed from `in`, not stored), so the cost does not depend on the length.
+// `out` written over `region` alone, `add` optional. Shear: G(u, r) = in(u + m r, r),
+// m = ex / ey, moves each row as a whole, so the segment runs down G's columns; H = the
+// running sum down the columns (interval weights: fractional ends by overlap);
+// out(x, y) = H(x - m y, y). Every step is along a row with one set of taps per row, so
+// one sweep down the rows does it: a task owns a strip of G's columns and keeps, per
+// row, the two G rows entering and leaving the window (recomputed from `in`, not stored),
+// so the cost does not depend on the length.
 // `columns`: the same on the planes' columns (a flat segment, e = (ex, ey) then given as
 // (ey, ex) and the regions with x and y swapped): each column is gathered into a line and
 // each output line scattered back; a task's strip is a band of rows whose cache lines
