@@ -15,7 +15,7 @@
 // * Box: per column strip (256 px; 512 for wide boxes), a horizontal running sum per
 //   source row into a ring of the last 2 ry + 2 rows, and the vertical running sum over
 //   the ring straight into `dst`.
-// * Spans: per 128 x (>= 64)-pixel tile, the rows' prefix sums, then 128 x 4 sub-tiles
+// * Spans: per 128 x (>= 256)-pixel tile, the rows' prefix sums in a ring, then 128 x 4 sub-tiles
 //   whose double accumulators stay in L1, each prefix row visited once per sub-tile and
 //   the spans of two kernel rows added per pass (add_spans; with the blocked row_prefix,
 //   3-4 % faster than one row per pass, A/B in one process); with 4 channels each prefix
@@ -24,8 +24,8 @@
 // * Bands: their own running sums per column strip (convolve_bands_direct, blur_approx.cpp).
 // * Gaussian by three boxes: three box passes, each writing the region the next reads.
 // Known limits: the span cost still grows linearly with the diameter (about 2.6 spans per
-// kernel row: 161 at 63 px); a tile recomputes the prefix sums of its kernel-high margin,
-// a share that grows with the kernel (tile height >= kernel height).
+// kernel row: 161 at 63 px); a tile recomputes the prefix sums of its kernel-high margin
+// (tile height >= twice the kernel height, so under half a row more per output row).
 //
 // Row spans (disk, polygon): each kernel row's weight profile is cut into horizontal
 // bars ("skyline" decomposition: one bar per rise of the profile), so a kernel becomes a
@@ -485,7 +485,8 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 // copy, no whole-frame prefix plane, no copy out. The output is cut into tiles of
 // kSpanTileW columns x th rows; a tile takes the row prefix sums (double) of the source
 // rows it reads, from its own first column on (border rule applied while reading), into a
-// buffer of its own that stays in L2. It then works in sub-tiles of kSubW x kSubH outputs
+// ring of its own that stays in L2: the rows one sub-tile reads, each computed once as the
+// sub-tiles move down the tile. It then works in sub-tiles of kSubW x kSubH outputs
 // whose double accumulators stay in L1, and walks the prefix rows once per sub-tile, each
 // row adding its spans into every output row that reads it: each prefix row is fetched
 // from L2 once per sub-tile instead of once per span and output row. Prefix sums start
@@ -495,9 +496,11 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                            int rx, int ry, std::vector<Span> spans, Border border, int nthreads)
 {
-    // 128-column tiles: at D = 63 the tile's prefix table (126 rows of 191 pixels, twice)
-    // is 1.5 MB and stays in L2, where 256 columns made 2.5 MB. Measured A/B in one process
-    // against 256 x 64 x 8: 5-9 % faster at 15-127 px; sub-tiles of 32 x 16 were slower.
+    // 128-column tiles: at D = 63 the tile's prefix ring (66 rows of 191 pixels, twice) is
+    // 0.8 MB and stays in L2. Measured A/B in one process against 256 x 64 x 8: 5-9 % faster
+    // at 15-127 px; sub-tiles of 32 x 16 were slower. The ring and tiles of >= 256 rows
+    // (before: a table of all the tile's rows, tiles of 64 rows, so the prefix rows were
+    // computed twice per output row at 63 px): 6-7 % faster at 63 and 127 px, same bits.
     constexpr int kSpanTileW = 128, kSubW = 128, kSubH = 4;
     prepare_destination(dst, in, roi);
     const int nc = in.nchannels();
@@ -540,33 +543,40 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     for (size_t d = 0; d + 1 < first.size(); ++d)
         most = std::max(most, first[std::min(d + 2, first.size() - 1)] - first[d]);
     const int w = roi.width(), h = roi.height();
-    // Tile height: at least the kernel's, so the prefix rows computed per output row stay
-    // under three (fixed by the kernel alone, never by the thread count).
-    const int th = std::max(64, (nd + kSubH - 1) / kSubH * kSubH);
+    // Tile height: twice the kernel's at least, so a tile computes under 1.5 prefix rows
+    // per output row (fixed by the kernel alone, never by the thread count).
+    const int th = std::max(256, (2 * nd + kSubH - 1) / kSubH * kSubH);
     const int ntx = (w + kSpanTileW - 1) / kSpanTileW, nty = (h + th - 1) / th;
+    // The prefix rows a sub-tile reads: a ring of that many, each row computed once per
+    // tile as the sub-tiles move down.
+    const int ring = nd - 1 + kSubH;
     parallel_for_chunks(0, int64_t(ntx) * nty, 1, nthreads, [&](int64_t t, int64_t) {
         const int xs = int(t % ntx) * kSpanTileW, xe = std::min(w, xs + kSpanTileW);
         const int ys = int(t / ntx) * th, ye = std::min(h, ys + th);
-        const int tw = xe - xs, nrows = ye - ys + nd - 1;
+        const int tw = xe - xs;
         const size_t pw = size_t(tw + 2 * rx + 1) * ncs;  // one prefix row
-        // Uninitialised: every value read is written below (zeroing megabytes per tile
-        // cost a tenth of the time).
-        std::unique_ptr<double[]> table_store(new double[size_t(nrows) * rs + 8]);
+        // Uninitialised: every value read is written below.
+        std::unique_ptr<double[]> table_store(new double[size_t(ring) * rs + 8]);
         double* const table = aligned64(table_store.get());
+        auto table_row = [&](int r) { return table + size_t(r % ring) * rs; };
         std::vector<float> row(pw);
-        for (int r = 0; r < nrows; ++r) {
-            double* p = table + size_t(r) * rs;
-            const int sy = border_index(roi.ybegin + ys - ry + r, data.ybegin, data.yend, border);
-            if (sy == kOutside) {
-                std::fill_n(p, pw, 0.0);
-            } else {
-                const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
-                const float* v = source_row_view(in, sy, x0, x1, border, row.data());
-                row_prefix(p, v, pw / ncs - 1, nc);
+        int computed = 0;  // tile-local prefix rows done
+        auto compute_rows = [&](int r_end) {
+            for (; computed < r_end; ++computed) {
+                double* p = table_row(computed);
+                const int sy = border_index(roi.ybegin + ys - ry + computed, data.ybegin,
+                                            data.yend, border);
+                if (sy == kOutside) {
+                    std::fill_n(p, pw, 0.0);
+                } else {
+                    const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
+                    const float* v = source_row_view(in, sy, x0, x1, border, row.data());
+                    row_prefix(p, v, pw / ncs - 1, nc);
+                }
+                if (twin)
+                    std::copy(p + ncs, p + pw, p + pal);
             }
-            if (twin)
-                std::copy(p + ncs, p + pw, p + pal);
-        }
+        };
         std::vector<const double*> hi_ptr(most), lo_ptr(most);
         std::vector<double> w_list(most);
         // Accumulators on a 64-byte boundary: rows of kSubW pixels then start on one too,
@@ -583,8 +593,8 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
                 // rows at a time: each output row takes the spans of both in one pass.
                 const int yl0   = sy0 - ys;
                 const int r_end = yl0 + sh + nd - 1;
+                compute_rows(r_end);
                 for (int r = yl0; r < r_end; r += 2) {
-                    const double* p0 = table + size_t(r) * rs + size_t(sx0 - xs) * ncs;
                     const bool pair  = r + 1 < r_end;
                     const int j0 = std::max(0, r - yl0 - nd + 1);
                     const int j1 = std::min(sh, r - yl0 + (pair ? 2 : 1));
@@ -594,7 +604,7 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
                             const int d = r + q - yl0 - j;
                             if (d < 0 || d >= nd)
                                 continue;
-                            const double* p = p0 + size_t(q) * rs;
+                            const double* p = table_row(r + q) + size_t(sx0 - xs) * ncs;
                             for (size_t i = first[size_t(d)]; i < first[size_t(d) + 1]; ++i) {
                                 hi_ptr[count] = p + hi_off[i];
                                 lo_ptr[count] = p + lo_off[i];
