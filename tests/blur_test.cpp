@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 
@@ -522,6 +523,184 @@ KernelWeights point_response(const Kernel& k, const BlurOptions& o, int r)
 }
 
 }  // namespace
+
+// The parallelogram method written out plainly from its definition in blur_approx.cpp,
+// in double, each segment pass a full sum over its rows: the reference the fused sweep
+// and the four passes must both equal.
+namespace parallelogram_reference {
+
+// A plane in the method's working frame: w x h pixels of nc channels, zero outside.
+struct Plane {
+    int w, h, nc;
+    std::vector<double> v;
+    Plane(int w_, int h_, int nc_) : w(w_), h(h_), nc(nc_), v(size_t(w_) * h_ * nc_, 0.0) {}
+    double at(int x, int y, int c) const
+    {
+        return x < 0 || y < 0 || x >= w || y >= h ? 0.0 : v[(size_t(y) * w + x) * nc + c];
+    }
+    double& ref(int x, int y, int c) { return v[(size_t(y) * w + x) * nc + c]; }
+};
+
+Plane transposed(const Plane& p)
+{
+    Plane t(p.h, p.w, p.nc);
+    for (int y = 0; y < p.h; ++y)
+        for (int x = 0; x < p.w; ++x)
+            for (int c = 0; c < p.nc; ++c)
+                t.ref(y, x, c) = p.at(x, y, c);
+    return t;
+}
+
+// Pixel i's share of the interval [a, b] (b > a): the overlap of [i - 1/2, i + 1/2].
+double share(int i, double a, double b)
+{
+    return std::max(0.0, std::min(b, i + 0.5) - std::max(a, i - 0.5)) / (b - a);
+}
+
+// The quadratic B-spline read at real position p: taps at first, first + 1, first + 2.
+struct Taps {
+    int first;
+    double w[3];
+    explicit Taps(double p)
+    {
+        const double n = std::floor(p + 0.5), d = p - n;
+        first = int(n) - 1;
+        w[0] = 0.5 * (0.5 - d) * (0.5 - d);
+        w[1] = 0.75 - d * d;
+        w[2] = 0.5 * (0.5 + d) * (0.5 + d);
+    }
+};
+
+// out(p) = mean over t in [0, 1] of q(p - t e), as the method computes it.
+Plane segment(const Plane& q, double ex, double ey)
+{
+    const double lo_y = std::min(0.0, ey), hi_y = std::max(0.0, ey);
+    if (std::abs(ey) < 1e-9 * std::abs(ex)) {  // along the rows
+        const double lo = std::min(0.0, ex), hi = std::max(0.0, ex);
+        Plane out(q.w, q.h, q.nc);
+        for (int y = 0; y < q.h; ++y)
+            for (int x = 0; x < q.w; ++x)
+                for (int i = int(std::floor(lo)) - 1; i <= int(std::ceil(hi)) + 1; ++i)
+                    for (int c = 0; c < q.nc; ++c)
+                        out.ref(x, y, c) += share(i, lo, hi) * q.at(x - i, y, c);
+        return out;
+    }
+    if (std::abs(ey) < std::abs(ex))  // flat: the steep case on the transposed plane
+        return transposed(segment(transposed(q), ey, ex));
+    const bool shear = std::abs(ex) >= 1e-9 * std::abs(ey);
+    const double m   = shear ? ex / ey : 0.0;
+    // G(u, r) = q(u + m r, r) through the taps; out(x, y) = sum_i share_i G(x - m y ... )
+    auto g = [&](int u, int r, int c) {
+        if (!shear)
+            return q.at(u, r, c);
+        const Taps t(m * r);
+        double s = 0.0;
+        for (int j = 0; j < 3; ++j)
+            s += t.w[j] * q.at(u + t.first + j, r, c);
+        return s;
+    };
+    auto h = [&](int u, int y, int c) {
+        double s = 0.0;
+        for (int i = int(std::floor(lo_y)) - 1; i <= int(std::ceil(hi_y)) + 1; ++i)
+            s += share(i, lo_y, hi_y) * g(u, y - i, c);
+        return s;
+    };
+    Plane out(q.w, q.h, q.nc);
+    for (int y = 0; y < q.h; ++y)
+        for (int x = 0; x < q.w; ++x)
+            for (int c = 0; c < q.nc; ++c) {
+                if (!shear) {
+                    out.ref(x, y, c) = h(x, y, c);
+                    continue;
+                }
+                const Taps t(-m * y);
+                for (int j = 0; j < 3; ++j)
+                    out.ref(x, y, c) += t.w[j] * h(x + t.first + j, y, c);
+            }
+    return out;
+}
+
+Plane add(Plane a, const Plane& b)
+{
+    for (size_t i = 0; i < a.v.size(); ++i)
+        a.v[i] += b.v[i];
+    return a;
+}
+
+// The hexagon of `k` over the data window of `src` (black outside, not grown).
+OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k)
+{
+    // Vertices as kernel.cpp places them (y down); segments P0, P2, P4.
+    double vx[6], vy[6];
+    for (int i = 0; i < 6; ++i) {
+        const double th = M_PI * (90.0 + k.rotation_deg + 60.0 * i) / 180.0;
+        vx[i] = 0.5 * k.width_px * std::cos(th);
+        vy[i] = -0.5 * k.height_px * std::sin(th);
+    }
+    int rx = 0, ry = 0;
+    for (int i = 0; i < 6; ++i) {
+        rx = std::max(rx, int(std::ceil(std::abs(vx[i]))) + 2);
+        ry = std::max(ry, int(std::ceil(std::abs(vy[i]))) + 2);
+    }
+    struct Dir {
+        double x, y;
+        bool steep() const { return std::abs(y) >= std::abs(x); }
+        double slope() const { return steep() ? std::abs(x / y) : 2.0; }
+    };
+    std::vector<Dir> d = { { vx[0], vy[0] }, { vx[2], vy[2] }, { vx[4], vy[4] } };
+    // The working frame: transposed unless two segments are steep as given.
+    const bool t = std::count_if(d.begin(), d.end(), [](Dir e) { return e.steep(); }) < 2;
+    if (t)
+        for (Dir& e : d)
+            std::swap(e.x, e.y);
+    std::sort(d.begin(), d.end(), [](Dir p, Dir q) { return p.slope() < q.slope(); });
+    const OIIO::ROI roi = src.roi();
+    const int x0 = roi.xbegin - rx, y0 = roi.ybegin - ry;
+    const int w = roi.width() + 2 * rx, h = roi.height() + 2 * ry, nc = src.nchannels();
+    Plane p(t ? h : w, t ? w : h, nc);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            for (int c = 0; c < nc; ++c) {
+                const bool inside = roi.contains(x0 + x, y0 + y);
+                p.ref(t ? y : x, t ? x : y, c) = inside ? src.getchannel(x0 + x, y0 + y, 0, c) : 0.0;
+            }
+    const Dir a = d[0], b = d[1], c = d[2];
+    const Plane seg_b = segment(p, b.x, b.y);
+    const Plane r = add(segment(add(segment(p, a.x, a.y), seg_b), c.x, c.y), segment(seg_b, a.x, a.y));
+    OIIO::ImageBuf out(src.spec());
+    std::vector<float> v(static_cast<size_t>(nc));
+    for (int y = roi.ybegin; y < roi.yend; ++y)
+        for (int x = roi.xbegin; x < roi.xend; ++x) {
+            const int px = x - x0, py = y - y0;
+            for (int ch = 0; ch < nc; ++ch)
+                v[size_t(ch)] = float(r.at(t ? py : px, t ? px : py, ch) / 3.0);
+            out.setpixel(x, y, v.data());
+        }
+    return out;
+}
+
+}  // namespace parallelogram_reference
+
+TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
+{
+    // Against the method written out plainly (above): the fused sweep (rotations 0 and 30,
+    // where the third segment runs along the rows of the working frame) and the four
+    // passes (7 and 20 degrees), on an image tall enough that the sweep's columns join
+    // and leave as the shear moves them, and wide enough for several chunks.
+    const OIIO::ImageBuf src = test_image(150, 120, 4, -3);
+    BlurOptions o;
+    o.method = BlurMethod::Parallelograms;
+    for (const Kernel& k : { hexagon(19, 19, 0), hexagon(19, 19, 30), hexagon(23, 17, 7),
+                             hexagon(21, 21, 20), hexagon(9, 9, 0) }) {
+        SCOPED_TRACE(k.rotation_deg);
+        SCOPED_TRACE(k.width_px);
+        OIIO::ImageBuf got;
+        ASSERT_TRUE(blur(got, src, k, o)) << got.geterror();
+        const OIIO::ImageBuf want = parallelogram_reference::hexagon(src, k);
+        ASSERT_EQ(got.roi(), want.roi());
+        EXPECT_LE(bokeh_test::max_difference(got, want), 2e-6 * peak(want));
+    }
+}
 
 TEST(BlurApprox, HexagonFromParallelogramsIsCloseToTheExactHexagon)
 {
