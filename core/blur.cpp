@@ -22,6 +22,8 @@
 //   row is kept twice, the copy one pixel on, so every span's vector loads start on a
 //   64-byte boundary.
 // * Bands: their own running sums per column strip (convolve_bands_direct, blur_approx.cpp).
+// * Parallelograms at rotations by 30 degrees: one sweep down the rows (hexagon_direct,
+//   blur_approx.cpp).
 // * Gaussian by three boxes: three box passes, each writing the region the next reads.
 // Known limits: the span cost still grows linearly with the diameter (about 2.6 spans per
 // kernel row: 161 at 63 px); a tile recomputes the prefix sums of its kernel-high margin
@@ -782,6 +784,9 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (method == BlurMethod::BilinearTaps && opts.iris == 0.0f && !weights.is_identity())
         return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
                                      kernel_spans(reflected(weights)), opts.border, nthreads);
+    if (method == BlurMethod::Parallelograms && opts.iris == 0.0f && !weights.is_identity()
+        && hexagon_sweeps(k))
+        return hexagon_direct(dst, in, roi, k, rx, ry, opts.border, nthreads);
     // The parallelograms of an upright hexagon run on the transposed plane (blur_approx.cpp);
     // it is padded and finished transposed rather than transposed twice more.
     const bool transpose = method == BlurMethod::Parallelograms && !weights.is_identity()

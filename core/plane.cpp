@@ -122,6 +122,34 @@ void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border
     }
 }
 
+void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border border, float* out)
+{
+    const int nc         = src.nchannels();
+    const size_t ncs     = size_t(nc);
+    const OIIO::ROI data = src.roi();
+    const size_t ystep   = size_t(src.scanline_stride()) / sizeof(float);
+    const int in0 = std::max(y0, data.ybegin), in1 = std::min(y1, data.yend);
+    if (in1 > in0)
+        copy_pixels(out + size_t(in0 - y0) * ncs, ncs,
+                    static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin)), ystep, in1 - in0, nc);
+    auto outside = [&](int ya, int yb) {
+        for (int y = ya; y < yb; ++y) {
+            const int sy = border_index(y, data.ybegin, data.yend, border);
+            float* o     = out + size_t(y - y0) * ncs;
+            if (sy != kOutside)
+                std::copy_n(static_cast<const float*>(src.pixeladdr(sx, sy, data.zbegin)), nc, o);
+            else
+                std::fill_n(o, nc, 0.0f);
+        }
+    };
+    if (in1 > in0) {
+        outside(y0, in0);
+        outside(in1, y1);
+    } else {
+        outside(y0, y1);
+    }
+}
+
 namespace {
 
 // A fixed pixel size: one vector move per pixel, not a call.

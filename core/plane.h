@@ -76,6 +76,10 @@ Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int
 /// fused methods call it per tile so no padded copy of the whole frame is made.
 void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border, float* out);
 
+/// Source column `sx` (inside the data window) over rows [y0, y1), filled past the data
+/// window by the border rule, into out[0 .. (y1 - y0) nc): a column of the transpose.
+void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border border, float* out);
+
 /// Source row `sy` over columns [x0, x1): read in place where they lie inside the data
 /// window, else filled into `buf` by source_row().
 const float* source_row_view(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border,
@@ -158,6 +162,13 @@ bool hexagon_transposed(const Kernel& k);
 Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin_y, int nthreads);
 /// How far the parallelogram passes read along x (or y), interpolation included.
 int hexagon_reach(const Kernel& k, bool along_x);
+/// Whether the hexagon of `k` takes the fused sweep (its third segment along the rows of
+/// the working frame: rotations by multiples of 30 degrees).
+bool hexagon_sweeps(const Kernel& k);
+/// The fused sweep straight from `in` into `dst` over roi (no padded plane, no copy out);
+/// rx, ry as hexagon_reach.
+bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                    const Kernel& k, int rx, int ry, Border border, int nthreads);
 
 /// BlurMethod::Reduced (blur_approx.cpp): `k` at 1/N resolution, N = opts.reduction or the
 /// automatic factor (reduction_factor), enlarged back over `roi` (undefined: the source's

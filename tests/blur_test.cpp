@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include <OpenImageIO/imagebufalgo.h>
 
@@ -627,8 +628,26 @@ Plane add(Plane a, const Plane& b)
     return a;
 }
 
-// The hexagon of `k` over the data window of `src` (black outside, not grown).
-OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k)
+// Coordinate i of [begin, end) under the border rule (blur.h); kBlack: outside, black.
+constexpr int kBlack = std::numeric_limits<int>::min();
+
+int border_coordinate(int i, int begin, int end, Border b)
+{
+    if (i >= begin && i < end)
+        return i;
+    const int n = end - begin;
+    if (b == Border::Clamp)
+        return std::clamp(i, begin, end - 1);
+    if (b == Border::Mirror) {
+        const int t = ((i - begin) % (2 * n) + 2 * n) % (2 * n);
+        return begin + (t < n ? t : 2 * n - 1 - t);
+    }
+    return kBlack;
+}
+
+// The hexagon of `k` over the data window of `src` (grown by the reach with `grow`), the
+// outside by the border rule.
+OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k, Border border, bool grow)
 {
     // Vertices as kernel.cpp places them (y down); segments P0, P2, P4.
     double vx[6], vy[6];
@@ -654,20 +673,33 @@ OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k)
         for (Dir& e : d)
             std::swap(e.x, e.y);
     std::sort(d.begin(), d.end(), [](Dir p, Dir q) { return p.slope() < q.slope(); });
-    const OIIO::ROI roi = src.roi();
+    const OIIO::ROI data = src.roi();
+    OIIO::ROI roi        = data;
+    if (grow) {
+        roi.xbegin -= rx;
+        roi.xend += rx;
+        roi.ybegin -= ry;
+        roi.yend += ry;
+    }
     const int x0 = roi.xbegin - rx, y0 = roi.ybegin - ry;
     const int w = roi.width() + 2 * rx, h = roi.height() + 2 * ry, nc = src.nchannels();
     Plane p(t ? h : w, t ? w : h, nc);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
             for (int c = 0; c < nc; ++c) {
-                const bool inside = roi.contains(x0 + x, y0 + y);
-                p.ref(t ? y : x, t ? x : y, c) = inside ? src.getchannel(x0 + x, y0 + y, 0, c) : 0.0;
+                const int sx = border_coordinate(x0 + x, data.xbegin, data.xend, border);
+                const int sy = border_coordinate(y0 + y, data.ybegin, data.yend, border);
+                p.ref(t ? y : x, t ? x : y, c) = sx == kBlack || sy == kBlack ? 0.0 : src.getchannel(sx, sy, 0, c);
             }
     const Dir a = d[0], b = d[1], c = d[2];
     const Plane seg_b = segment(p, b.x, b.y);
     const Plane r = add(segment(add(segment(p, a.x, a.y), seg_b), c.x, c.y), segment(seg_b, a.x, a.y));
-    OIIO::ImageBuf out(src.spec());
+    OIIO::ImageSpec spec = src.spec();
+    spec.x = roi.xbegin;
+    spec.y = roi.ybegin;
+    spec.width  = roi.width();
+    spec.height = roi.height();
+    OIIO::ImageBuf out(spec);
     std::vector<float> v(static_cast<size_t>(nc));
     for (int y = roi.ybegin; y < roi.yend; ++y)
         for (int x = roi.xbegin; x < roi.xend; ++x) {
@@ -687,16 +719,34 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
     // where the third segment runs along the rows of the working frame) and the four
     // passes (7 and 20 degrees), on an image tall enough that the sweep's columns join
     // and leave as the shear moves them, and wide enough for several chunks.
+    // Each border rule and the grown window too: the sweep reads the source directly,
+    // the four passes a padded copy.
     const OIIO::ImageBuf src = test_image(150, 120, 4, -3);
-    BlurOptions o;
-    o.method = BlurMethod::Parallelograms;
-    for (const Kernel& k : { hexagon(19, 19, 0), hexagon(19, 19, 30), hexagon(23, 17, 7),
-                             hexagon(21, 21, 20), hexagon(9, 9, 0) }) {
-        SCOPED_TRACE(k.rotation_deg);
-        SCOPED_TRACE(k.width_px);
+    struct Case {
+        Kernel k;
+        Border border;
+        bool grow;
+    };
+    for (const Case& c : { Case{ hexagon(19, 19, 0), Border::Black, false },
+                           Case{ hexagon(19, 19, 30), Border::Black, false },
+                           Case{ hexagon(23, 17, 7), Border::Black, false },
+                           Case{ hexagon(21, 21, 20), Border::Black, false },
+                           Case{ hexagon(9, 9, 0), Border::Black, false },
+                           Case{ hexagon(19, 19, 0), Border::Mirror, false },
+                           Case{ hexagon(19, 19, 30), Border::Clamp, true },
+                           Case{ hexagon(25, 25, 0), Border::Clamp, true },
+                           Case{ hexagon(17, 17, 30), Border::Mirror, true },
+                           Case{ hexagon(19, 19, 7), Border::Mirror, true } }) {
+        SCOPED_TRACE(c.k.rotation_deg);
+        SCOPED_TRACE(c.k.width_px);
+        SCOPED_TRACE(int(c.border));
+        BlurOptions o;
+        o.method = BlurMethod::Parallelograms;
+        o.border = c.border;
+        o.grow   = c.grow;
         OIIO::ImageBuf got;
-        ASSERT_TRUE(blur(got, src, k, o)) << got.geterror();
-        const OIIO::ImageBuf want = parallelogram_reference::hexagon(src, k);
+        ASSERT_TRUE(blur(got, src, c.k, o)) << got.geterror();
+        const OIIO::ImageBuf want = parallelogram_reference::hexagon(src, c.k, c.border, c.grow);
         ASSERT_EQ(got.roi(), want.roi());
         EXPECT_LE(bokeh_test::max_difference(got, want), 2e-6 * peak(want));
     }
