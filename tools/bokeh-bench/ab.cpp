@@ -6,7 +6,7 @@
 // medians compare two versions; separate runs do not (docs/benchmarks.md).
 //
 //   bokeh-ab OLD.so NEW.so [--threads N] [--reps N] [--channels N] [--image FILE] CASE...
-//   CASE: kernel:size[:method[:N]]  kernel: box gaussian disk hex; method: auto exact fast
+//   CASE: kernel:size[@rotation][:method[:N]]  kernel: box gaussian disk hex; method: auto exact fast
 //         bands parallelograms reduced; N: the bands, or the reduction
 //
 // Prints per case the two medians (ms), new / old, the minimums and the largest absolute
@@ -36,7 +36,7 @@ int usage(const char* why)
 {
     std::fprintf(stderr,
                  "bokeh-ab: %s\nusage: bokeh-ab OLD.so NEW.so [--threads N] [--reps N] "
-                 "[--channels N] [--image FILE] kernel:size[:method[:N]]...\n",
+                 "[--channels N] [--image FILE] kernel:size[@rotation][:method[:N]]...\n",
                  why);
     return 1;
 }
@@ -77,7 +77,11 @@ bool parse_case(const std::string& text, bokeh::Kernel& k, bokeh::BlurOptions& o
         return false;
     k.shape    = shapes.at(f[0]);
     k.blades   = 6;
-    k.width_px = k.height_px = OIIO::Strutil::stof(f[1]);
+    // SIZE[@DEGREES]: the kernel's rotation after '@'.
+    const std::vector<std::string> size = OIIO::Strutil::splits(f[1], "@");
+    k.width_px = k.height_px = OIIO::Strutil::stof(size[0]);
+    if (size.size() > 1)
+        k.rotation_deg = OIIO::Strutil::stof(size[1]);
     o.method   = f.size() > 2 ? methods.at(f[2]) : M::Auto;
     if (f.size() > 3) {
         o.bands     = OIIO::Strutil::stoi(f[3]);
