@@ -33,9 +33,10 @@
 // arithmetic, so equal to float rounding. Outside iris mode (hexagon_direct) it reads the
 // source ImageBuf directly (the upright hexagon's lines are its columns, gathered once
 // each into a ring) and writes `dst` directly: no padded or transposed copies. Measured
-// A/B against the four passes: 0.52-0.67 of their time at 15-255 px (1080p RGBA, two
-// threads). The sweep is bound by its arithmetic now: four sheared lines, three windows
-// in double and three unshears per row.
+// A/B against the four passes at 15-255 px (1080p RGBA, two threads): 0.56-0.68 of their
+// time upright, 0.42-0.53 flat-topped. The flat-topped sweep is bound by its arithmetic
+// (four sheared lines, three windows in double and three unshears per row); the upright
+// one's strided column reads and writes cost as much again (docs/benchmarks.md).
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
 // (boundaries by dynamic programming, least squares on the row areas), each band's rows

@@ -174,6 +174,10 @@ int main(int argc, char* argv[])
         ours("disk", "reduced 1/N (bilinear)", d, kernel(S::Disk, d), M::Reduced);
         ours("hexagon", "row spans (exact)", d, kernel(S::Polygon, d));
         ours("hexagon", "3 parallelograms", d, kernel(S::Polygon, d), M::Parallelograms);
+        // Flat-topped: the sweep reads rows, where the upright hexagon's reads columns.
+        bokeh::Kernel flat = kernel(S::Polygon, d);
+        flat.rotation_deg  = 30.0f;
+        ours("hexagon", "3 parallelograms (flat top)", d, flat, M::Parallelograms);
         ours("hexagon", "reduced 1/N (bilinear)", d, kernel(S::Polygon, d), M::Reduced);
         bokeh::Kernel g = kernel(S::Gaussian, d);
         ours("gaussian", "separable (exact)", d, g);
