@@ -94,60 +94,55 @@ void Iris::inverse(Plane& p, int nthreads) const
                  [&](float v, int c) { return float(shift[size_t(c)] + std::log(double(v)) / k); });
 }
 
-void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border, float* out)
-{
-    const int nc        = src.nchannels();
-    const OIIO::ROI data = src.roi();
-    // The part of the row inside the data window in one copy, the rest by the rule.
-    const int in0 = std::max(x0, data.xbegin);
-    const int in1 = std::min(x1, data.xend);
-    if (in1 > in0)
-        std::copy_n(static_cast<const float*>(src.pixeladdr(in0, sy, data.zbegin)),
-                    size_t(in1 - in0) * size_t(nc), out + size_t(in0 - x0) * size_t(nc));
-    auto outside = [&](int xa, int xb) {
-        for (int x = xa; x < xb; ++x) {
-            const int sx = border_index(x, data.xbegin, data.xend, border);
-            float* o     = out + size_t(x - x0) * size_t(nc);
-            if (sx != kOutside)
-                std::copy_n(static_cast<const float*>(src.pixeladdr(sx, sy, data.zbegin)), nc, o);
-            else
-                std::fill_n(o, nc, 0.0f);
-        }
-    };
-    if (in1 > in0) {
-        outside(x0, in0);
-        outside(in1, x1);
-    } else {
-        outside(x0, x1);  // the whole row lies outside the data window
-    }
-}
+namespace {
 
-void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border border, float* out)
+// Pixels [a0, a1) of source row `fixed` (along x) or column `fixed` (along y), which lies
+// inside the data window: the part inside in one copy, the rest by the border rule.
+void source_line(const OIIO::ImageBuf& src, bool along_x, int fixed, int a0, int a1, Border border,
+                 float* out)
 {
     const int nc         = src.nchannels();
     const size_t ncs     = size_t(nc);
     const OIIO::ROI data = src.roi();
-    const size_t ystep   = size_t(src.scanline_stride()) / sizeof(float);
-    const int in0 = std::max(y0, data.ybegin), in1 = std::min(y1, data.yend);
-    if (in1 > in0)
-        copy_pixels(out + size_t(in0 - y0) * ncs, ncs,
-                    static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin)), ystep, in1 - in0, nc);
-    auto outside = [&](int ya, int yb) {
-        for (int y = ya; y < yb; ++y) {
-            const int sy = border_index(y, data.ybegin, data.yend, border);
-            float* o     = out + size_t(y - y0) * ncs;
-            if (sy != kOutside)
-                std::copy_n(static_cast<const float*>(src.pixeladdr(sx, sy, data.zbegin)), nc, o);
+    const int begin = along_x ? data.xbegin : data.ybegin, end = along_x ? data.xend : data.yend;
+    auto at = [&](int a) {
+        return static_cast<const float*>(along_x ? src.pixeladdr(a, fixed, data.zbegin)
+                                                 : src.pixeladdr(fixed, a, data.zbegin));
+    };
+    const int in0 = std::max(a0, begin), in1 = std::min(a1, end);
+    if (in1 > in0 && along_x)
+        std::copy_n(at(in0), size_t(in1 - in0) * ncs, out + size_t(in0 - a0) * ncs);
+    else if (in1 > in0)
+        copy_pixels(out + size_t(in0 - a0) * ncs, ncs, at(in0),
+                    size_t(src.scanline_stride()) / sizeof(float), in1 - in0, nc);
+    auto outside = [&](int lo, int hi) {
+        for (int a = lo; a < hi; ++a) {
+            const int s = border_index(a, begin, end, border);
+            float* o    = out + size_t(a - a0) * ncs;
+            if (s != kOutside)
+                std::copy_n(at(s), nc, o);
             else
                 std::fill_n(o, nc, 0.0f);
         }
     };
     if (in1 > in0) {
-        outside(y0, in0);
-        outside(in1, y1);
+        outside(a0, in0);
+        outside(in1, a1);
     } else {
-        outside(y0, y1);
+        outside(a0, a1);  // the whole line lies outside the data window
     }
+}
+
+}  // namespace
+
+void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border, float* out)
+{
+    source_line(src, true, sy, x0, x1, border, out);
+}
+
+void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border border, float* out)
+{
+    source_line(src, false, sx, y0, y1, border, out);
 }
 
 namespace {
