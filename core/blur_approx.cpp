@@ -445,9 +445,9 @@ Region hull(const Region& a, const Region& b)
 // shear's taps); the window sums G rows [y - last, y - first] down G's columns (interval
 // weights, the inner rows' running sum in double); row y of the result reads the window
 // at x - m y (the unshear's taps). Buffers span every G column the sweep reaches; a step
-// works on the columns still to be read that some line so far reached (the shear moves
-// a line by under a pixel per row, so they form one range that drifts): a column joins
-// with nothing before it, and one that leaves is never read again.
+// works only on the columns read in the next few steps (the window's span), a range that
+// drifts by under a column per step: a column joins with an empty sum and is never read
+// before its window has filled, and one that leaves is never read again (see step()).
 class SteepWindow {
 public:
     // Input lines before `line0` are all zero; steps run from start() to ye.
