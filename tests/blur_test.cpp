@@ -752,6 +752,36 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
     }
 }
 
+TEST(BlurApprox, FastPicksTheReductionForLargeDisksAndTheBandsBelow)
+{
+    // Fast is the reduced buffer where the automatic reduction exceeds 1 (37.5 px and up)
+    // and the bands below it, and in iris mode (which the reduction refuses): the same
+    // pixels as asking for that method.
+    const OIIO::ImageBuf src = test_image(200, 150);
+    struct Case {
+        float size;
+        float iris;
+        BlurMethod same_as;
+    };
+    for (const Case& c : { Case{ 63.0f, 0.0f, BlurMethod::Reduced }, Case{ 40.0f, 0.0f, BlurMethod::Reduced },
+                           Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.1f, BlurMethod::Bands } }) {
+        SCOPED_TRACE(c.size);
+        SCOPED_TRACE(c.iris);
+        Kernel k;
+        k.shape     = KernelShape::Disk;
+        k.width_px  = c.size;
+        k.height_px = c.size;
+        BlurOptions fast, named;
+        fast.method  = BlurMethod::Fast;
+        named.method = c.same_as;
+        fast.iris = named.iris = c.iris;
+        OIIO::ImageBuf a, b;
+        ASSERT_TRUE(blur(a, src, k, fast)) << a.geterror();
+        ASSERT_TRUE(blur(b, src, k, named)) << b.geterror();
+        EXPECT_EQ(bokeh_test::max_difference(a, b), 0.0);
+    }
+}
+
 TEST(BlurApprox, HexagonFromParallelogramsIsCloseToTheExactHexagon)
 {
     BlurOptions par;

@@ -35,7 +35,8 @@ enum class BlurMethod {
     Auto,            ///< the fastest exact method for the shape
     Exact,           ///< box: running sums; Gaussian: separable convolution; shapes: row spans
     Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
-                     ///< hexagon -> parallelograms, disk and polygon -> bands
+                     ///< hexagon -> parallelograms, disk and polygon -> reduced from
+                     ///< 37.5 px up (not in iris mode), bands below
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
