@@ -646,9 +646,14 @@ int border_coordinate(int i, int begin, int end, Border b)
 }
 
 // The hexagon of `k` over the data window of `src` (grown by the reach with `grow`), the
-// outside by the border rule.
-OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k, Border border, bool grow)
+// outside by the border rule; with `iris`, of exp(iris x) and back by log / iris, alpha
+// plain (seed 002's iris filter, as blur.h defines it).
+OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k, Border border, bool grow,
+                       double iris = 0.0)
 {
+    const int alpha = src.spec().alpha_channel;
+    auto exp_space  = [&](double v, int c) { return iris != 0.0 && c != alpha ? std::exp(iris * v) : v; };
+    auto back       = [&](double v, int c) { return iris != 0.0 && c != alpha ? std::log(v) / iris : v; };
     // Vertices as kernel.cpp places them (y down); segments P0, P2, P4.
     double vx[6], vy[6];
     for (int i = 0; i < 6; ++i) {
@@ -689,7 +694,8 @@ OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k, Border border
             for (int c = 0; c < nc; ++c) {
                 const int sx = border_coordinate(x0 + x, data.xbegin, data.xend, border);
                 const int sy = border_coordinate(y0 + y, data.ybegin, data.yend, border);
-                p.ref(t ? y : x, t ? x : y, c) = sx == kBlack || sy == kBlack ? 0.0 : src.getchannel(sx, sy, 0, c);
+                const double v = sx == kBlack || sy == kBlack ? 0.0 : src.getchannel(sx, sy, 0, c);
+                p.ref(t ? y : x, t ? x : y, c) = exp_space(v, c);
             }
     const Dir a = d[0], b = d[1], c = d[2];
     const Plane seg_b = segment(p, b.x, b.y);
@@ -705,7 +711,7 @@ OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k, Border border
         for (int x = roi.xbegin; x < roi.xend; ++x) {
             const int px = x - x0, py = y - y0;
             for (int ch = 0; ch < nc; ++ch)
-                v[size_t(ch)] = float(r.at(t ? py : px, t ? px : py, ch) / 3.0);
+                v[size_t(ch)] = float(back(r.at(t ? py : px, t ? px : py, ch) / 3.0, ch));
             out.setpixel(x, y, v.data());
         }
     return out;
@@ -720,12 +726,15 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
     // passes (7 and 20 degrees), on an image tall enough that the sweep's columns join
     // and leave as the shear moves them, and wide enough for several chunks.
     // Each border rule and the grown window too: the sweep reads the source directly,
-    // the four passes a padded copy.
-    const OIIO::ImageBuf src = test_image(150, 120, 4, -3);
+    // the four passes a padded copy; in iris mode both run on the padded plane.
+    // (Iris mode on the image without its 500-bright pixels: exp(k x) over 20 orders of
+    // magnitude leaves every running sum's residue far above the dark pixels' values.)
+    const OIIO::ImageBuf src = test_image(150, 120, 4, -3), plain = test_image(150, 120, 4, -3, false);
     struct Case {
         Kernel k;
         Border border;
         bool grow;
+        float iris = 0.0f;
     };
     for (const Case& c : { Case{ hexagon(19, 19, 0), Border::Black, false },
                            Case{ hexagon(19, 19, 30), Border::Black, false },
@@ -736,7 +745,10 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
                            Case{ hexagon(19, 19, 30), Border::Clamp, true },
                            Case{ hexagon(25, 25, 0), Border::Clamp, true },
                            Case{ hexagon(17, 17, 30), Border::Mirror, true },
-                           Case{ hexagon(19, 19, 7), Border::Mirror, true } }) {
+                           Case{ hexagon(19, 19, 7), Border::Mirror, true },
+                           Case{ hexagon(19, 19, 0), Border::Black, false, 2.0f },
+                           Case{ hexagon(19, 19, 30), Border::Clamp, true, 2.0f },
+                           Case{ hexagon(21, 21, 20), Border::Black, false, 2.0f } }) {
         SCOPED_TRACE(c.k.rotation_deg);
         SCOPED_TRACE(c.k.width_px);
         SCOPED_TRACE(int(c.border));
@@ -744,9 +756,12 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
         o.method = BlurMethod::Parallelograms;
         o.border = c.border;
         o.grow   = c.grow;
+        o.iris   = c.iris;
+        SCOPED_TRACE(c.iris);
+        const OIIO::ImageBuf& in = c.iris != 0.0f ? plain : src;
         OIIO::ImageBuf got;
-        ASSERT_TRUE(blur(got, src, c.k, o)) << got.geterror();
-        const OIIO::ImageBuf want = parallelogram_reference::hexagon(src, c.k, c.border, c.grow);
+        ASSERT_TRUE(blur(got, in, c.k, o)) << got.geterror();
+        const OIIO::ImageBuf want = parallelogram_reference::hexagon(in, c.k, c.border, c.grow, c.iris);
         ASSERT_EQ(got.roi(), want.roi());
         EXPECT_LE(bokeh_test::max_difference(got, want), 2e-6 * peak(want));
     }
