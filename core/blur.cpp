@@ -809,6 +809,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (opts.iris != 0.0f) {
         iris.k     = opts.iris;
         iris.alpha = in.spec().alpha_channel;
+        iris.z     = in.spec().z_channel;
         if (!iris.forward(p, err, nthreads)) {
             dst.errorfmt("blur: {}", err);
             return false;

@@ -136,6 +136,7 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
     if (opts.iris != 0.0f) {
         iris.k     = opts.iris;
         iris.alpha = in.spec().alpha_channel;
+        iris.z     = in.spec().z_channel;
         std::string err;
         if (!iris.forward(p, err, nthreads)) {
             dst.errorfmt("blur: {}", err);

@@ -65,7 +65,7 @@ using OIIO::Strutil::fmt::format;
 // A exp(k (colour / A - shift)) (premultiplied exp-space colour), so each layer averages
 // exp(k x) weighted by coverage; every layer comes back by shift + log(mean) / k before it
 // is composited ("over" is linear). The shift (the channel's minimum for k > 0, maximum for
-// k < 0) keeps the exponents in [0, 80], as blur's Iris does.
+// k < 0) keeps the exponents in [0, kIrisMaxExponent], as blur's Iris does.
 struct IrisSpace {
     float k = 0.0f;
     std::array<float, 3> shift{};
@@ -825,7 +825,7 @@ void apply_bloom(WorkImage& w, float threshold, float gain, int nthreads)
 }
 
 // Iris mode: f.img's colour into iris space (see IrisSpace), the linear copy kept for the
-// disocclusion fill. False + err when |k| times a channel's range exceeds 80.
+// disocclusion fill. False + err when |k| times a channel's range exceeds kIrisMaxExponent.
 bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
 {
     std::array<float, 3> lo, hi;
@@ -842,10 +842,10 @@ bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
     for (size_t c = 0; c < 3; ++c) {
         if (!(hi[c] >= lo[c]))
             lo[c] = hi[c] = 0.0f;  // no covered pixel
-        if (std::abs(double(k)) * (double(hi[c]) - double(lo[c])) > 80.0) {
-            err = format("iris {} times channel {}'s range {} .. {} exceeds 80: exp() would overflow; "
-                         "lower iris",
-                         k, "RGB"[c], lo[c], hi[c]);
+        if (std::abs(double(k)) * (double(hi[c]) - double(lo[c])) > kIrisMaxExponent) {
+            err = format("iris {} times channel {}'s range {} .. {} exceeds {}: exp() would span "
+                         "more digits than the sums keep; lower iris",
+                         k, "RGB"[c], lo[c], hi[c], kIrisMaxExponent);
             return false;
         }
         f.iris.shift[c] = k > 0.0f ? lo[c] : hi[c];

@@ -42,15 +42,15 @@ int border_index(int i, int begin, int end, Border b)
 
 namespace {
 
-// p = f(p, channel) on every channel but `skip`.
-template<class F> void map_channels(Plane& p, int skip, int nthreads, F f)
+// p = f(p, channel) on every channel but `skip_a` and `skip_b`.
+template<class F> void map_channels(Plane& p, int skip_a, int skip_b, int nthreads, F f)
 {
     parallel_for_chunks(0, p.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
         for (int y = int(y0); y < int(y1); ++y) {
             float* r = p.row(y);
             for (size_t i = 0; i < p.stride(); ++i) {
                 const int c = int(i % size_t(p.nc));
-                if (c != skip)
+                if (c != skip_a && c != skip_b)
                     r[i] = f(r[i], c);
             }
         }
@@ -64,7 +64,7 @@ bool Iris::forward(Plane& p, std::string& err, int nthreads)
     const int nc = p.nc;
     shift.assign(size_t(nc), 0.0);
     for (int c = 0; c < nc; ++c) {
-        if (c == alpha)
+        if (c == alpha || c == z)
             continue;
         double lo = std::numeric_limits<double>::infinity(), hi = -lo;
         for (size_t i = size_t(c); i < p.size(); i += size_t(nc))
@@ -74,23 +74,23 @@ bool Iris::forward(Plane& p, std::string& err, int nthreads)
             }
         if (!(hi >= lo))
             continue;
-        if (std::abs(k) * (hi - lo) > 80.0) {
+        if (std::abs(k) * (hi - lo) > kIrisMaxExponent) {
             err = OIIO::Strutil::fmt::format(
-                "iris {} times channel {}'s range {} .. {} exceeds 80: exp() would overflow; "
-                "lower iris",
-                k, c, lo, hi);
+                "iris {} times channel {}'s range {} .. {} exceeds {}: exp() would span more "
+                "digits than the sums keep; lower iris",
+                k, c, lo, hi, kIrisMaxExponent);
             return false;
         }
         shift[size_t(c)] = k > 0 ? lo : hi;
     }
-    map_channels(p, alpha, nthreads,
+    map_channels(p, alpha, z, nthreads,
                  [&](float v, int c) { return float(std::exp(k * (v - shift[size_t(c)]))); });
     return true;
 }
 
 void Iris::inverse(Plane& p, int nthreads) const
 {
-    map_channels(p, alpha, nthreads,
+    map_channels(p, alpha, z, nthreads,
                  [&](float v, int c) { return float(shift[size_t(c)] + std::log(double(v)) / k); });
 }
 

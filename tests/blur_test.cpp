@@ -779,7 +779,7 @@ TEST(BlurApprox, FastPicksTheReductionForLargeDisksAndTheBandsBelow)
         BlurMethod same_as;
     };
     for (const Case& c : { Case{ 63.0f, 0.0f, BlurMethod::Reduced }, Case{ 40.0f, 0.0f, BlurMethod::Reduced },
-                           Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.1f, BlurMethod::Bands } }) {
+                           Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.05f, BlurMethod::Bands } }) {
         SCOPED_TRACE(c.size);
         SCOPED_TRACE(c.iris);
         Kernel k;
@@ -1095,10 +1095,80 @@ TEST(BlurIris, HighlightsDominateAndFlatAreasStay)
     iris.iris = 1e-3f;
     ASSERT_TRUE(blur(b, src, disk, iris));
     EXPECT_LE(bokeh_test::max_difference(a, b), 2e-3);
-    // exp(k x) past float's range is refused, not clamped.
+    // exp(k x) past what the sums keep (|k| times the range over 30) is refused, not clamped.
     iris.iris = 40.0f;
     EXPECT_FALSE(blur(b, src, disk, iris));
-    EXPECT_NE(b.geterror().find("exceeds 80"), std::string::npos) << b.geterror();
+    EXPECT_NE(b.geterror().find("exceeds 30"), std::string::npos) << b.geterror();
+}
+
+TEST(BlurIris, EveryMethodStaysWithinTheChannelRangeAtTheLimit)
+{
+    // An iris mean lies between the channel's least and greatest value (every method's
+    // weights are >= 0); at |k| times the range just under the limit (0.003 .. 500 here)
+    // each method keeps to it, and just over the limit the blur is refused. Past ~40 the
+    // running sums returned NaN (bands) and values below the least.
+    const OIIO::ImageBuf src = test_image(150, 120);
+    const double lo = 0.0, hi = 500.0;  // black outside: the padding counts as 0
+    struct Case {
+        KernelShape shape;
+        BlurMethod method;
+    };
+    for (const Case& c : { Case{ KernelShape::Disk, BlurMethod::Exact }, Case{ KernelShape::Disk, BlurMethod::Bands },
+                           Case{ KernelShape::Polygon, BlurMethod::Parallelograms },
+                           Case{ KernelShape::Gaussian, BlurMethod::ThreeBoxes }, Case{ KernelShape::Box, BlurMethod::Exact } }) {
+        SCOPED_TRACE(int(c.method));
+        SCOPED_TRACE(int(c.shape));
+        Kernel k;
+        k.shape     = c.shape;
+        k.blades    = 6;
+        k.width_px  = 19;
+        k.height_px = 19;
+        BlurOptions o;
+        o.method = c.method;
+        o.iris   = float(29.9 / (hi - lo));
+        OIIO::ImageBuf out;
+        ASSERT_TRUE(blur(out, src, k, o)) << out.geterror();
+        const auto stats = OIIO::ImageBufAlgo::computePixelStats(out);
+        for (int ch = 0; ch < 3; ++ch) {
+            EXPECT_EQ(stats.nancount[size_t(ch)] + stats.infcount[size_t(ch)], 0u) << ch;
+            EXPECT_GE(stats.min[size_t(ch)], lo - 1e-3) << ch;
+            EXPECT_LE(stats.max[size_t(ch)], hi + 1e-3) << ch;
+        }
+        o.iris = float(30.5 / (hi - lo));
+        EXPECT_FALSE(blur(out, src, k, o));
+        EXPECT_NE(out.geterror().find("exceeds 30"), std::string::npos) << out.geterror();
+    }
+}
+
+TEST(BlurIris, DepthStaysLinear)
+{
+    // Z is blurred plainly in iris mode, as alpha is: its range (here 2 .. 70, 68 times
+    // iris 1) does not count against the limit, and its values are the plain blur's.
+    OIIO::ImageSpec spec(60, 40, 5, OIIO::TypeFloat);
+    spec.channelnames = { "R", "G", "B", "A", "Z" };
+    spec.alpha_channel = 3;
+    spec.z_channel     = 4;
+    OIIO::ImageBuf src(spec);
+    for (int y = 0; y < 40; ++y)
+        for (int x = 0; x < 60; ++x) {
+            const float px[5] = { (x * 7 + y) % 13 == 0 ? 9.0f : 0.2f, 0.3f, 0.1f, 1.0f, 2.0f + float(x + y) * 0.7f };
+            src.setpixel(x, y, px);
+        }
+    Kernel k;
+    k.width_px = k.height_px = 11;
+    BlurOptions plain, iris;
+    iris.iris = 1.0f;
+    OIIO::ImageBuf a, b;
+    ASSERT_TRUE(blur(a, src, k, plain));
+    ASSERT_TRUE(blur(b, src, k, iris)) << b.geterror();
+    double z_diff = 0.0, r_diff = 0.0;
+    for (int y = 0; y < 40; ++y)
+        for (int x = 0; x < 60; ++x) {
+            z_diff = std::max(z_diff, double(std::abs(a.getchannel(x, y, 0, 4) - b.getchannel(x, y, 0, 4))));
+            r_diff = std::max(r_diff, double(std::abs(a.getchannel(x, y, 0, 0) - b.getchannel(x, y, 0, 0))));
+        }
+    EXPECT_LE(z_diff, 1e-4) << "depth is averaged plainly";
+    EXPECT_GT(r_diff, 0.5) << "colour takes the iris";
 }
 
 // --- image kernels by FFT ---------------------------------------------------------------

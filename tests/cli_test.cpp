@@ -438,7 +438,7 @@ TEST(Cli, Blur)
                                { "--blur:kernel=disk:method=taps 11", "9x9 or 17x17" },
                                { "--blur:kernel=disk:method=reduced:reduction=0.5 9", "reduction 0.5 is outside 1..16" },
                                { "--blur:kernel=disk:method=reduced:iris=2 9", "method=reduced does not take iris" },
-                               { "--blur:iris=200 9", "exceeds 80" },
+                               { "--blur:iris=200 9", "exceeds 30" },
                                { "--convolve", "needs 2 image(s) on the stack" },
                                { "--blur 5000", "outside 0..4096" } }) {
         SCOPED_TRACE(args);

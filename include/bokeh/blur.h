@@ -69,7 +69,8 @@ struct BlurOptions {
     int bands         = 8;      ///< Bands: horizontal bands per half kernel (1..64)
     /// Iris mode (SEEDS.md section 3): average exp(iris * x) and return log(mean) / iris,
     /// so bright values dominate the average as in a real lens; 0 = a plain average.
-    /// Applies to every channel but alpha; iris * (max - min) must stay within 80.
+    /// Applies to every channel but alpha and depth (Z); iris * (max - min) must stay
+    /// within 30 (past it the sums in exp space lose the dark values: refused).
     float iris = 0.0f;
     /// Reduced: the reduction factor N (a real number in 1..16; 1 is the exact blur); 0
     /// picks it from the kernel (reduction_factor). Iris mode is refused with it (a
