@@ -651,12 +651,12 @@ bool is_hexagon(const Kernel& k)
 
 // The concrete method for `k`, or false + `err` when the asked one does not apply.
 // Fast is the cheapest approximation measured at >= 40 dB on bokeh-bench's crop
-// (docs/benchmarks.md): for a disk or polygon from 37.5 px up (where the automatic
-// reduction exceeds 1) the reduced buffer, 2-6x faster than 6 bands at the same accuracy
-// (63 px: 21 ms at 41.3 dB against 46 ms at 41.1; 255 px: 11 ms at 51.2 against 66 at
-// 48.1), below it the bands; in iris mode, which the reduction does not take, the bands.
-// The hexagon keeps its parallelograms: reduced, it measured 39.8 dB at 63 px; hard-edged
-// shapes keep the bands (the reduction was measured on anti-aliased ones only).
+// (docs/benchmarks.md): for a disk or polygon where the automatic reduction exceeds 1
+// (37.5 px up; a polygon 45) the reduced buffer, 2-6x faster than 6 bands at the same
+// accuracy (disk 63 px: 21 ms at 41.3 dB against 46 ms at 41.1; 255 px: 11 ms at 51.2
+// against 66 at 48.1), below it the bands; in iris mode, which the reduction does not
+// take, the bands. The hexagon keeps its parallelograms (50-72 dB); hard-edged shapes keep
+// the bands (the reduction was measured on anti-aliased ones only).
 bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std::string& err)
 {
     const BlurMethod asked = opts.method;

@@ -944,11 +944,15 @@ double reduction_factor(const Kernel& k)
         const auto [sx, sy] = gaussian_sigma(k);
         across = 4.0 * std::min(sx, sy);
     }
-    // 25 px: the smallest that keeps 40 dB on bokeh-bench's crop at every size (24 px gave
-    // 39.9 dB at 63 px). The layered defocus found the same on its scenes: its 40 dB budget
-    // keeps reduced kernels of 24 px (settings_for_budget, defocus.cpp).
-    constexpr double kReducedPx = 25.0;
-    const double n = across / kReducedPx;
+    // 25 px for a disk: the smallest that keeps 40 dB on bokeh-bench's crop at every size
+    // (24 px gave 39.9 dB at 63 px). The layered defocus found the same on its scenes: its
+    // 40 dB budget keeps reduced kernels of 24 px (settings_for_budget, defocus.cpp).
+    // 30 px for a polygon, whose straight edges and corners lose more: at 25 px the crop
+    // measured 38.4-38.7 dB for a pentagon and 38.8-39.8 for a hexagon from 56 to 80 px;
+    // at 30 px, 40.4-48.4 (pentagon), 41.1-44.4 (hexagon) and 42.3-50.2 (octagon) from 56
+    // to 255 px.
+    const double reduced_px = k.shape == KernelShape::Polygon ? 30.0 : 25.0;
+    const double n = across / reduced_px;
     return n < 1.5 ? 1.0 : std::min(n, 8.0);
 }
 

@@ -35,8 +35,8 @@ enum class BlurMethod {
     Auto,            ///< the fastest exact method for the shape
     Exact,           ///< box: running sums; Gaussian: separable convolution; shapes: row spans
     Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
-                     ///< hexagon -> parallelograms, disk and polygon -> reduced from
-                     ///< 37.5 px up (not in iris mode), bands below
+                     ///< hexagon -> parallelograms, disk and polygon -> reduced where
+                     ///< its automatic factor exceeds 1 (not in iris mode), bands below
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
@@ -91,8 +91,9 @@ struct KernelWeights {
 std::pair<double, double> gaussian_sigma(const Kernel& k);
 
 /// BlurMethod::Reduced's automatic factor: the kernel's narrower side (a Gaussian: 4 sigma)
-/// over 25, so the reduced kernel is 25 pixels across, at most 8; 1 (the exact blur) when
-/// that is under 1.5 (kernels under 37.5 pixels), where the reduction saves too little.
+/// over 25, so the reduced kernel is 25 pixels across (a polygon's: 30, for its corners),
+/// at most 8; 1 (the exact blur) when that is under 1.5 (kernels under 37.5 pixels, a
+/// polygon under 45), where the reduction saves too little.
 /// docs/benchmarks.md charts what it costs and loses.
 double reduction_factor(const Kernel& k);
 

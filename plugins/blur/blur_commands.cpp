@@ -105,13 +105,13 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                              "bands", "taps", "reduced" },
                            "fast: the cheapest approximation measured at >= 40 dB "
                            "(gaussian: boxes3, hex: parallelograms, disk/polygon: reduced "
-                           "from 37.5 px, bands below and with iris); taps: the seed's 9x9/17x17 "
+                           "from 37.5/45 px, bands below and with iris); taps: the seed's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
                            "bilinearly; reference: brute force"),
         OptionSpec::Int("bands", 8, 1, 64, "method=bands: bands per half kernel"),
         OptionSpec::Float("reduction", 0.0, 0.0, 16.0,
                           "method=reduced: the factor N, 1..16 (0: the kernel's narrower side "
-                          "over 25, at most 8; 1 below 38 px)"),
+                          "over 25, a polygon's over 30, at most 8; 1 below 1.5)"),
         OptionSpec::Float("sigma", 0.0, 0.0, 1024.0, "Gaussian sigma in pixels (0: W/4)"),
         OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
         OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon: degrees (0: a vertex up)"),
