@@ -767,11 +767,11 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
     }
 }
 
-TEST(BlurApprox, FastPicksTheReductionForLargeDisksAndPolygonsAndTheBandsBelow)
+TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIris)
 {
     // Fast is the reduced buffer where the automatic reduction exceeds 1 (37.5 px and up)
-    // and the bands below it, and in iris mode (which the reduction refuses): the same
-    // pixels as asking for that method.
+    // and the bands below it; in iris mode, where every approximation measured under 40 dB,
+    // the exact method: the same pixels as asking for that method.
     const OIIO::ImageBuf src = test_image(200, 150);
     // A polygon (reduced to 30 px, not 25) from 45 px.
     struct Case {
@@ -781,9 +781,11 @@ TEST(BlurApprox, FastPicksTheReductionForLargeDisksAndPolygonsAndTheBandsBelow)
         KernelShape shape = KernelShape::Disk;
     };
     for (const Case& c : { Case{ 63.0f, 0.0f, BlurMethod::Reduced }, Case{ 40.0f, 0.0f, BlurMethod::Reduced },
-                           Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.05f, BlurMethod::Bands },
+                           Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.05f, BlurMethod::Exact },
                            Case{ 40.0f, 0.0f, BlurMethod::Bands, KernelShape::Polygon },
-                           Case{ 50.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon } }) {
+                           Case{ 50.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon },
+                           Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Gaussian },
+                           Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Polygon } }) {
         SCOPED_TRACE(c.size);
         SCOPED_TRACE(c.iris);
         SCOPED_TRACE(int(c.shape));

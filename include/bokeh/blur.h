@@ -36,7 +36,7 @@ enum class BlurMethod {
     Exact,           ///< box: running sums; Gaussian: separable convolution; shapes: row spans
     Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
                      ///< hexagon -> parallelograms, disk and polygon -> reduced where
-                     ///< its automatic factor exceeds 1 (not in iris mode), bands below
+                     ///< its automatic factor exceeds 1, bands below; in iris mode, Exact
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms

@@ -105,7 +105,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                              "bands", "taps", "reduced" },
                            "fast: the cheapest approximation measured at >= 40 dB "
                            "(gaussian: boxes3, hex: parallelograms, disk/polygon: reduced "
-                           "from 37.5/45 px, bands below and with iris); taps: the seed's 9x9/17x17 "
+                           "from 37.5/45 px, bands below; with iris: exact); taps: the seed's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
                            "bilinearly; reference: brute force"),
         OptionSpec::Int("bands", 8, 1, 64, "method=bands: bands per half kernel"),
