@@ -15,6 +15,7 @@
 
 #include "defocus_task.h"
 #include "gegl_peer.h"
+#include "iris_task.h"
 #include "resample_task.h"
 #include "timing.h"
 
@@ -89,7 +90,8 @@ int main(int argc, char* argv[])
             threads = std::atoi(argv[++i]);
         else if (a == "--task" && i + 1 < argc && (std::string(argv[i + 1]) == "blur"
                                                    || std::string(argv[i + 1]) == "defocus"
-                                                   || std::string(argv[i + 1]) == "resample"))
+                                                   || std::string(argv[i + 1]) == "resample"
+                                                   || std::string(argv[i + 1]) == "iris"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -109,7 +111,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample|iris] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b]\n",
                          a.c_str());
@@ -123,6 +125,12 @@ int main(int argc, char* argv[])
         args.threads = threads;
         args.reps    = reps;
         if (!bokeh_bench::run_defocus_task(args, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "iris") {
+        args.threads = threads;
+        if (!bokeh_bench::run_iris_task(args, rows))
             return 1;
         return write_csv(csv, rows);
     }
