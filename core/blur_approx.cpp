@@ -19,9 +19,10 @@
 // one sweep down the rows per strip of columns, two rows entering and leaving the window
 // recomputed from the source (not stored), nothing transposed; the passes run in the
 // frame (as given, or transposed when the plane is padded, see blur.cpp) where two of the
-// three directions are steep, and the third is a plain row pass for the upright and the
-// flat-topped hexagon; at other rotations it is sheared too and sweeps along the columns
-// (gathered per line). Each pass computes only the region the later ones read. Planes are
+// three directions are steep, and the third, at rotations other than multiples of 30
+// degrees, is sheared too and sweeps along the columns (gathered per line); along the rows
+// (the upright and the flat-topped hexagon) the fused sweep below takes over. Each pass
+// computes only the region the later ones read. Planes are
 // reused once their values are used up, and allocated on huge pages (plane.h): the first
 // touch of a fresh 1080p plane costs about half a pass even so. Measured (docs/benchmarks.md):
 // 67-92 ms at 15-255 px for 1080p RGBA on two threads, bound by memory traffic (four
@@ -117,6 +118,23 @@ IntervalWeights interval_weights(double a, double b)
     }
     return iw;
 }
+
+// A segment's weights along its major axis, for its signed length e there: an output reads
+// the pixels i in [first, last] behind it, the newest (i = first) and the oldest (i = last)
+// by their overlap, the ones between `inner` each (0 when there are none).
+struct SegmentWeights {
+    int first = 0, last = 0;
+    double newest = 0.0, inner = 0.0, oldest = 0.0;
+    explicit SegmentWeights(double e)
+    {
+        const IntervalWeights iw = interval_weights(std::min(0.0, e), std::max(0.0, e));
+        first  = iw.first;
+        last   = iw.last();
+        newest = iw.w.front();
+        oldest = last != first ? iw.w.back() : 0.0;
+        inner  = iw.w.size() > 2 ? iw.w[1] : 0.0;
+    }
+};
 
 // --- hexagon from three parallelograms -----------------------------------------------
 
@@ -256,10 +274,9 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
     // A slope under 1e-9 moves a segment of any allowed length by under a micro-pixel.
     const bool shear = std::abs(ex) >= 1e-9 * std::abs(ey);
     const double m   = shear ? ex / ey : 0.0;
-    const IntervalWeights iw = interval_weights(std::min(0.0, ey), std::max(0.0, ey));
-    const int first = iw.first, last = iw.last();
-    const double wf = iw.w.front(), wl = last != first ? iw.w.back() : 0.0;
-    const double inner = iw.w.size() > 2 ? iw.w[1] : 0.0;
+    const SegmentWeights sw(ey);
+    const int first = sw.first, last = sw.last;
+    const double wf = sw.newest, wl = sw.oldest, inner = sw.inner;
 
     // Output (x, y) reads H at columns x + back(y).first + j; the columns of G any reads.
     auto back = [&](int y) { return Taps(-m * y, !shear); };
@@ -372,51 +389,27 @@ BOKEH_HOT void band_row(float* o, const float* newest, const float* oldest, cons
     }
 }
 
-// out = (seg(in) + add) * scale for a segment along x, e = (ex, 0), as segment_sweep
-// (valid, region): per row, prefix sums in double and the interval weights (fractional
-// ends by overlap).
-void segment_rows(const Plane& in, const Region& valid, Plane& out, const Region& region,
-                  double ex, const Plane* add, float scale, int nthreads)
+// o = (seg(row) + add) * scale over n values, for a segment along a row of npx pixels,
+// zero-padded as far as the outputs read: the row's prefix sums (double) into `prefix`, and
+// output pixel 0 reads the row's pixels from `oldest` (its i = last) on.
+void segment_row(float* o, const float* row, double* prefix, size_t npx, int nc,
+                 const SegmentWeights& s, size_t oldest, const float* add, float scale, size_t n)
 {
-    const int w = in.w, nc = in.nc;
-    const size_t ncs = size_t(nc);
-    const IntervalWeights iw = interval_weights(std::min(0.0, ex), std::max(0.0, ex));
-    const int first = iw.first, last = iw.last();
-    const double wf = iw.w.front(), wl = last != first ? iw.w.back() : 0.0;
-    const double inner = iw.w.size() > 2 ? iw.w[1] : 0.0;
-    // out(x) reads in(x - i), i in [first, last]: the row zero-padded over [lo, hi).
-    const int lo = std::min(0, -last), hi = std::max(w, w - first);
-    const size_t vx = size_t(valid.x1 - valid.x0) * ncs, x0 = size_t(region.x0) * ncs;
-    parallel_for_chunks(region.y0, region.y1, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        std::vector<float> row(size_t(hi - lo) * ncs, 0.0f);  // zero outside `valid`
-        std::vector<double> prefix(size_t(hi - lo + 1) * ncs, 0.0);
-        for (int y = int(y0); y < int(y1); ++y) {
-            float* into = row.data() + size_t(valid.x0 - lo) * ncs;
-            if (y >= valid.y0 && y < valid.y1)
-                std::copy_n(in.row(y) + size_t(valid.x0) * ncs, vx, into);
-            else
-                std::fill_n(into, vx, 0.0f);
-            row_prefix(prefix.data(), row.data(), size_t(hi - lo), nc);
-            band_row(out.row(y) + x0, row.data() + size_t(-first - lo) * ncs + x0,
-                     row.data() + size_t(-last - lo) * ncs + x0,
-                     prefix.data() + size_t(-first - lo) * ncs + x0,
-                     prefix.data() + size_t(-last + 1 - lo) * ncs + x0,
-                     add ? add->row(y) + x0 : nullptr, wf, last - first >= 2 ? inner : 0.0, wl,
-                     scale, size_t(region.x1 - region.x0) * ncs);
-        }
-    });
+    const size_t ncs = size_t(nc), newest = oldest + size_t(s.last - s.first);
+    row_prefix(prefix, row, npx, nc);
+    // The pixels between the two ends: prefix sums to before the newest, less to the oldest.
+    band_row(o, row + newest * ncs, row + oldest * ncs, prefix + newest * ncs,
+             prefix + (oldest + 1) * ncs, add, s.newest, s.inner, s.oldest, scale, n);
 }
 
 // out = (seg(in) + add) * scale over `region`, `in` read as zero outside `valid`, for any
-// segment e: a sweep down the rows when e is steep, a pass along the rows when it is
-// horizontal, else a sweep along the columns.
+// segment e: a sweep down the rows when e is steep, else a sweep along the columns. (A
+// segment along the rows never comes here: with one, the hexagon takes hexagon_sweep.)
 void segment_pass(const Plane& in, const Region& valid, Plane& out, const Region& region,
                   double ex, double ey, const Plane* add, float scale, int nthreads)
 {
     if (std::abs(ey) >= std::abs(ex)) {
         segment_sweep(in, valid, out, region, ex, ey, add, scale, nthreads);
-    } else if (std::abs(ey) < 1e-9 * std::abs(ex)) {
-        segment_rows(in, valid, out, region, ex, add, scale, nthreads);
     } else {
         auto flip = [](const Region& r) { return Region{ r.y0, r.x0, r.y1, r.x1 }; };
         segment_sweep(in, flip(valid), out, flip(region), ey, ex, add, scale, nthreads, true);
@@ -456,12 +449,12 @@ public:
     {
         shear_ = std::abs(ex) >= 1e-9 * std::abs(ey);
         m_     = shear_ ? ex / ey : 0.0;
-        const IntervalWeights iw = interval_weights(std::min(0.0, ey), std::max(0.0, ey));
-        first = iw.first;
-        last  = iw.last();
-        wf_    = iw.w.front();
-        wl_    = last != first ? iw.w.back() : 0.0;
-        inner_ = iw.w.size() > 2 ? iw.w[1] : 0.0;
+        const SegmentWeights sw(ey);
+        first  = sw.first;
+        last   = sw.last;
+        wf_    = sw.newest;
+        wl_    = sw.oldest;
+        inner_ = sw.inner;
         // Every G column a line of the sweep or a read touches (the tap offsets are
         // monotonic in the row, so the ends decide).
         start_ = line0 + first;
@@ -594,10 +587,8 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
 {
     const size_t ncs = size_t(nc);
     // seg_c along the rows: out(x) reads S(x - i), i in [fc, lc].
-    const IntervalWeights iwc = interval_weights(std::min(0.0, cx), std::max(0.0, cx));
-    const int fc = iwc.first, lc = iwc.last();
-    const double wfc = iwc.w.front(), wlc = lc != fc ? iwc.w.back() : 0.0;
-    const double innerc = lc - fc >= 2 ? iwc.w[1] : 0.0;
+    const SegmentWeights seg_c(cx);
+    const int fc = seg_c.first, lc = seg_c.last;
     // seg_a of B reads B over [x - la, x + ha) around an output x (grown_by); a steep
     // segment's window reads its lines within the segment's width and three taps more.
     const int la = int(std::ceil(std::max(0.0, ax))) + 3, ha = int(std::ceil(std::max(0.0, -ax))) + 3;
@@ -667,11 +658,9 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
             seg_a.read(y, s_row.data() + size_t(sa - s0) * ncs,
                        b_here ? b_here + size_t(sa - b0) * ncs : nullptr, 1.0f);
             seg_ab.read(y, ab_row.data(), nullptr, 1.0f);
-            row_prefix(prefix.data(), s_row.data(), size_t(s1 - s0), nc);
             float* o = io.out_row(y, X0, X1);
-            band_row(o ? o : o_row.data(), s_row.data() + size_t(lc - fc) * ncs, s_row.data(),
-                     prefix.data() + size_t(lc - fc) * ncs, prefix.data() + ncs, ab_row.data(), wfc,
-                     innerc, wlc, float(1.0 / 3.0), size_t(X1 - X0) * ncs);
+            segment_row(o ? o : o_row.data(), s_row.data(), prefix.data(), size_t(s1 - s0), nc,
+                        seg_c, 0, ab_row.data(), float(1.0 / 3.0), size_t(X1 - X0) * ncs);
             if (!o)
                 io.store(y, X0, X1, o_row.data());
         }
