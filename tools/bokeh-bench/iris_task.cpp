@@ -4,7 +4,7 @@
 // of iris mode is the exact path's plus two passes over the plane.
 //
 // Scene: the blur task's crop of the "lights" frame (240x135 RGBA: lights, floor, the
-// sphere's edge), black border; PSNR after x / (1 + x) (bokeh::compare), as the blur task.
+// sphere's edge, main.cpp), black border; PSNR after x / (1 + x) (bokeh::compare), as the blur task.
 // What it showed (docs/benchmarks.md): exp(k x) magnifies every weight an approximation
 // misplaces next to a highlight, so none keeps 40 dB from |k| x range 5 on; method=fast is
 // the exact method in iris mode for that reason.
@@ -13,7 +13,6 @@
 
 #include <bokeh/blur.h>
 #include <bokeh/metrics.h>
-#include <bokeh/scene.h>
 
 #include <algorithm>
 #include <cstdio>
@@ -25,17 +24,9 @@ namespace bokeh_bench {
 
 using OIIO::Strutil::fmt::format;
 
-bool run_iris_task(const BenchArgs& args, std::vector<std::string>& rows)
+bool run_iris_task(const OIIO::ImageBuf& crop, int threads, std::vector<std::string>& rows)
 {
     namespace IBA = OIIO::ImageBufAlgo;
-    bokeh::SceneOptions so;
-    OIIO::ImageBuf scene;
-    if (!bokeh::make_scene(scene, "lights", so, args.threads)) {
-        std::fprintf(stderr, "bokeh-bench: %s\n", scene.geterror().c_str());
-        return false;
-    }
-    const OIIO::ImageBuf crop = IBA::cut(IBA::channels(scene, 4, { 0, 1, 2, 3 }),
-                                         OIIO::ROI(840, 1080, 300, 435, 0, 1, 0, 4));
     // The exponent's span is |k| times the widest colour channel's range (black outside
     // counts as 0).
     const auto stats = IBA::computePixelStats(crop);
@@ -71,22 +62,22 @@ bool run_iris_task(const BenchArgs& args, std::vector<std::string>& rows)
                 bokeh::BlurOptions exact = o;
                 exact.method             = M::Exact;
                 OIIO::ImageBuf got, want;
-                if (!bokeh::blur(got, crop, k, o, {}, args.threads)
-                    || !bokeh::blur(want, crop, k, exact, {}, args.threads)) {
+                if (!bokeh::blur(got, crop, k, o, {}, threads)
+                    || !bokeh::blur(want, crop, k, exact, {}, threads)) {
                     std::fprintf(stderr, "bokeh-bench: iris: %s%s\n", got.geterror().c_str(),
                                  want.geterror().c_str());
                     return false;
                 }
                 bokeh::ImageError e;
                 std::string err;
-                if (!bokeh::compare(e, got, want, err, {}, args.threads)) {
+                if (!bokeh::compare(e, got, want, err, {}, threads)) {
                     std::fprintf(stderr, "bokeh-bench: iris: %s\n", err.c_str());
                     return false;
                 }
                 std::printf("%-10g %-28s %6.0f %10.1f\n", span, m.name, size, e.psnr_db);
                 std::fflush(stdout);
                 rows.push_back(format("iris |k|xrange {:g},{},,{},{},,,{:.6g},{:.2f}", span,
-                                      OIIO::Strutil::replace(m.name, ",", ""), size, args.threads,
+                                      OIIO::Strutil::replace(m.name, ",", ""), size, threads,
                                       e.rmse_linear, e.psnr_db));
             }
     return true;

@@ -128,12 +128,6 @@ int main(int argc, char* argv[])
             return 1;
         return write_csv(csv, rows);
     }
-    if (task == "iris") {
-        args.threads = threads;
-        if (!bokeh_bench::run_iris_task(args, rows))
-            return 1;
-        return write_csv(csv, rows);
-    }
     if (task == "resample") {
         args.threads = threads;
         args.reps    = reps;
@@ -158,6 +152,11 @@ int main(int argc, char* argv[])
     const OIIO::ImageBuf frame = IBA::channels(scene, 4, { 0, 1, 2, 3 });
     OIIO::ROI crop(840, 1080, 300, 435, 0, 1, 0, 4);  // lights, floor, sphere edge
     const OIIO::ImageBuf small = IBA::cut(frame, crop);
+    if (task == "iris") {
+        if (!bokeh_bench::run_iris_task(small, threads, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
 
     using S = bokeh::KernelShape;
     std::vector<Case> cases;  // error is against the exact kernel of the case's shape
