@@ -183,8 +183,8 @@ Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads
 /// beside the dark ones' 1, and double's 16 digits leave the dark ones nothing past ~30.
 /// Measured (blur, 19 px kernels, a 0.003 .. 500 image): at k x range = 30 the exact
 /// methods stay within 3e-4 of the brute force; at 40 the bands return NaN and the exact
-/// methods err by 0.9; the layered defocus on the lights scene returned -2.9 at 43 (its
-/// darkest input 0.003) and stays within the input's range at 29.
+/// methods err by 0.9; the layered defocus on the lights scene returned -2.9 in red at 43
+/// (its darkest red 0.03) and stays within the input's range at 29.
 constexpr double kIrisMaxExponent = 30.0;
 
 /// Iris mode (SEEDS.md section 3): values go to exp(k (x - shift)) before the blur and
