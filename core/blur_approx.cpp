@@ -16,8 +16,10 @@
 // and soften the kernel's slanted edges by under a pixel; that is the method's error
 // against the exact hexagon.
 // Changed for speed (issue 3): a steep segment's shear moves whole rows, so its pass is
-// one sweep down the rows per strip of columns, two rows entering and leaving the window
-// recomputed from the source (not stored), nothing transposed; the passes run in the
+// one sweep down the rows per chunk of columns (a SteepWindow, the one the fused sweep
+// uses; its own strip sweep before measured 2-8 % faster, A/B, at rotations 7-20), the
+// rows entering and leaving the window recomputed from the source (not stored), nothing
+// transposed; the passes run in the
 // frame (as given, or transposed when the plane is padded, see blur.cpp) where two of the
 // three directions are steep, and the third, at rotations other than multiples of 30
 // degrees, is sheared too and sweeps along the columns (gathered per line); along the rows
@@ -243,196 +245,8 @@ struct Region {
     int x0, y0, x1, y1;
 };
 
-// out = (seg(in) + add) * scale, where seg(in)(p) = mean over t in [0, 1] of in(p - t e),
-// e = (ex, ey) with |ex| <= |ey|; same-size planes, `in` read as zero outside `valid`,
-// `out` written over `region` alone, `add` optional. Shear: G(u, r) = in(u + m r, r),
-// m = ex / ey, moves each row as a whole, so the segment runs down G's columns; H = the
-// running sum down the columns (interval weights: fractional ends by overlap);
-// out(x, y) = H(x - m y, y). Every step is along a row with one set of taps per row, so
-// one sweep down the rows does it: a task owns a strip of G's columns and keeps, per
-// row, the two G rows entering and leaving the window (recomputed from `in`, not stored),
-// so the cost does not depend on the length.
-// `columns`: the same on the planes' columns (a flat segment, e = (ex, ey) then given as
-// (ey, ex) and the regions with x and y swapped): each column is gathered into a line and
-// each output line scattered back; a task's strip is a band of rows whose cache lines
-// serve four columns running, so nothing is transposed.
-void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Region& region,
-                   double ex, double ey, const Plane* add, float scale, int nthreads,
-                   bool columns = false)
-{
-    const int nc = in.nc;
-    const size_t ncs = size_t(nc);
-    // Pixel c of line r: in(c, r) along a row, in(r, c) down a column.
-    const size_t along = columns ? in.stride() : ncs, across = columns ? ncs : in.stride();
-    auto at = [&](const Plane& p, int line, int c) {
-        return p.px.get() + size_t(line) * across + size_t(c) * along;
-    };
-    // Pixels [a, b) of line r of `p` into `dst` (contiguous).
-    auto gather = [&](const Plane& p, int r, int a, int b, float* dst) {
-        copy_pixels(dst, ncs, at(p, r, a), along, b - a, nc);
-    };
-    // A slope under 1e-9 moves a segment of any allowed length by under a micro-pixel.
-    const bool shear = std::abs(ex) >= 1e-9 * std::abs(ey);
-    const double m   = shear ? ex / ey : 0.0;
-    const SegmentWeights sw(ey);
-    const int first = sw.first, last = sw.last;
-    const double wf = sw.newest, wl = sw.oldest, inner = sw.inner;
-
-    // Output (x, y) reads H at columns x + back(y).first + j; the columns of G any reads.
-    auto back = [&](int y) { return Taps(-m * y, !shear); };
-    const int f0 = back(region.y0).first, f1 = back(region.y1 - 1).first;
-    const int g0 = std::min(f0, f1) + region.x0, g1 = std::max(f0, f1) + region.x1 + 2;
-    // Strips of ~256 columns, at least two per thread so the sweeps balance.
-    const int nstrips = std::max(2 * std::max(1, nthreads), (g1 - g0 + 255) / 256);
-    const int width   = (g1 - g0 + nstrips - 1) / nstrips;
-    parallel_for_chunks(0, nstrips, 1, nthreads, [&](int64_t s0, int64_t s1) {
-        for (int64_t strip = s0; strip < s1; ++strip) {
-            // Outputs whose first tap is in [c0, c1) are this task's; H over [c0, c1 + 2).
-            const int c0 = g0 + int(strip) * width, c1 = std::min(g1, c0 + width);
-            if (c1 <= c0)
-                continue;
-            const int he  = c1 + 2;
-            const size_t n = size_t(he - c0) * ncs;
-            std::vector<float> buf(4 * n, 0.0f);  // zero row, newest, previous newest, oldest
-            float *zero = buf.data(), *newest = zero + n, *older = newest + n, *oldest = older + n;
-            std::vector<float> hrow(n);
-            std::vector<double> sum(n, 0.0);
-            std::vector<float> line(columns ? n + 4 * ncs : 0), line_out(columns ? n : 0),
-                line_add(columns && add ? n : 0);
-            auto g_row = [&](int r, float* dst) -> const float* {
-                if (r < valid.y0 || r >= valid.y1)
-                    return zero;
-                Taps t = Taps(m * r, !shear);
-                if (!columns) {
-                    shifted_row(dst, in.row(r), valid.x0, valid.x1, nc, c0, he, t, !shear);
-                    return dst;
-                }
-                // The pixels the taps read, [c0 + t.first, he + t.first + 3) inside `valid`,
-                // gathered; the taps re-based onto the gathered line.
-                const int a = std::max(valid.x0, c0 + t.first), b = std::min(valid.x1, he + t.first + 3);
-                if (b <= a)
-                    return zero;
-                gather(in, r, a, b, line.data());
-                t.first -= a;
-                shifted_row(dst, line.data(), 0, b - a, nc, c0, he, t, !shear);
-                return dst;
-            };
-            // G's rows [ra, rb) are the ones that reach into the strip (the shear moves a
-            // row by under a pixel per row, so they are consecutive); H is zero outside
-            // [ra + first, rb + last), and the sweep runs only there.
-            const int reach = shear ? 2 : 0;
-            auto touches    = [&](int r) {
-                const int f = Taps(m * r, !shear).first + (shear ? 0 : 1);
-                return f + he - 1 + reach >= valid.x0 && f + c0 < valid.x1;
-            };
-            int ra = valid.y0;
-            while (ra < valid.y1 && !touches(ra))
-                ++ra;
-            int rb = ra;
-            while (rb < valid.y1 && touches(rb))
-                ++rb;
-            const int ys = ra + first, ye = ra < rb ? rb + last : ys;
-            std::fill(hrow.begin(), hrow.end(), 0.0f);
-            const float* prev = zero;  // G(y - first - 1)
-            for (int y = std::min(region.y0, ys); y < region.y1; ++y) {
-                if (y >= ys && y < ye) {
-                    const float* gn = g_row(y - first, newest);
-                    const float* go = last != first ? g_row(y - last, oldest) : zero;
-                    const bool inner_rows = last - first >= 2;
-                    slide_window(sum.data(), hrow.data(), gn, inner_rows ? prev : zero,
-                                 inner_rows ? go : zero, go, wf, inner, wl, n);
-                    if (gn == newest) {  // G(y - first) becomes G(y + 1 - first - 1)
-                        std::swap(newest, older);
-                        prev = older;
-                    } else {
-                        prev = zero;
-                    }
-                } else if (y == ye) {
-                    std::fill(hrow.begin(), hrow.end(), 0.0f);  // the window has drained
-                }
-                if (y >= region.y0) {
-                    const Taps t = back(y);
-                    const int x0 = std::max(region.x0, c0 - t.first), x1 = std::min(region.x1, c1 - t.first);
-                    if (x1 > x0) {
-                        const size_t k = size_t(x0 + t.first - c0) * ncs;
-                        const float* a = nullptr;
-                        if (add && columns) {
-                            gather(*add, y, x0, x1, line_add.data());
-                            a = line_add.data();
-                        } else if (add) {
-                            a = add->row(y) + size_t(x0) * ncs;
-                        }
-                        float* o = columns ? line_out.data() : out.row(y) + size_t(x0) * ncs;
-                        if (shear)
-                            taps_row(o, hrow.data() + k, a, t.w[0], t.w[1], t.w[2], scale, ncs,
-                                     size_t(x1 - x0) * ncs);
-                        else  // the identity: the middle tap alone
-                            scaled_row(o, hrow.data() + k + ncs, a, scale, size_t(x1 - x0) * ncs);
-                        if (columns)
-                            copy_pixels(at(out, y, x0), along, o, ncs, x1 - x0, nc);
-                    }
-                }
-            }
-        }
-    });
-}
-
-// o[i] = (wf newest[i] + wl oldest[i] + inner (p1[i] - p0[i]) + add[i]) * scale: a
-// segment along a row from its two end pixels and the prefix sums of the ones between.
-BOKEH_HOT void band_row(float* o, const float* newest, const float* oldest, const double* p1,
-                        const double* p0, const float* add, double wf, double inner, double wl,
-                        float scale, size_t n)
-{
-    for (size_t i = 0; i < n; ++i) {
-        const double v = wf * newest[i] + wl * oldest[i] + inner * (p1[i] - p0[i]);
-        o[i] = (float(v) + (add ? add[i] : 0.0f)) * scale;
-    }
-}
-
-// o = (seg(row) + add) * scale over n values, for a segment along a row of npx pixels,
-// zero-padded as far as the outputs read: the row's prefix sums (double) into `prefix`, and
-// output pixel 0 reads the row's pixels from `oldest` (its i = last) on.
-void segment_row(float* o, const float* row, double* prefix, size_t npx, int nc,
-                 const SegmentWeights& s, size_t oldest, const float* add, float scale, size_t n)
-{
-    const size_t ncs = size_t(nc), newest = oldest + size_t(s.last - s.first);
-    row_prefix(prefix, row, npx, nc);
-    // The pixels between the two ends: prefix sums to before the newest, less to the oldest.
-    band_row(o, row + newest * ncs, row + oldest * ncs, prefix + newest * ncs,
-             prefix + (oldest + 1) * ncs, add, s.newest, s.inner, s.oldest, scale, n);
-}
-
-// out = (seg(in) + add) * scale over `region`, `in` read as zero outside `valid`, for any
-// segment e: a sweep down the rows when e is steep, else a sweep along the columns. (A
-// segment along the rows never comes here: with one, the hexagon takes hexagon_sweep.)
-void segment_pass(const Plane& in, const Region& valid, Plane& out, const Region& region,
-                  double ex, double ey, const Plane* add, float scale, int nthreads)
-{
-    if (std::abs(ey) >= std::abs(ex)) {
-        segment_sweep(in, valid, out, region, ex, ey, add, scale, nthreads);
-    } else {
-        auto flip = [](const Region& r) { return Region{ r.y0, r.x0, r.y1, r.x1 }; };
-        segment_sweep(in, flip(valid), out, flip(region), ey, ex, add, scale, nthreads, true);
-    }
-}
-
-// `r` grown by what a segment pass along e reads around an output: out(p) reads in(p - t e),
-// t in [0, 1], through the shear's and the unshear's taps (a pixel each side each, so
-// three with rounding), clipped to the plane.
-Region grown_by(const Region& r, double ex, double ey, int w, int h)
-{
-    const int lx = int(std::ceil(std::max(0.0, ex))) + 3, hx = int(std::ceil(std::max(0.0, -ex))) + 3;
-    const int ly = int(std::ceil(std::max(0.0, ey))) + 3, hy = int(std::ceil(std::max(0.0, -ey))) + 3;
-    return { std::max(0, r.x0 - lx), std::max(0, r.y0 - ly), std::min(w, r.x1 + hx), std::min(h, r.y1 + hy) };
-}
-
-Region hull(const Region& a, const Region& b)
-{
-    return { std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1) };
-}
-
-// One steep segment's window for the fused hexagon (hexagon_sweep): what segment_sweep
-// does per strip, here over whole lines, one output row per step. Input lines are valid
+// One steep segment's window, for the four passes (segment_sweep) and the fused sweep
+// (hexagon_sweep): one output row per step. Input lines are valid
 // over columns [0, n_in) (zero outside; a null line is all zero); outputs are wanted over
 // [x0, x1) for the steps [read0, ye). G row r is input line r read at u + m r (the
 // shear's taps); the window sums G rows [y - last, y - first] down G's columns (interval
@@ -560,6 +374,130 @@ private:
     std::vector<double> sum_;
     const float* prev_ = nullptr;
 };
+
+// out = (seg(in) + add) * scale, where seg(in)(p) = mean over t in [0, 1] of in(p - t e),
+// e = (ex, ey) with |ex| <= |ey|; same-size planes, `in` read as zero outside `valid`,
+// `out` written over `region` alone, `add` optional: a SteepWindow per fixed chunk of
+// about 256 output columns, its lines the rows of `in` in place, so the cost does not
+// depend on the length.
+// `columns`: the same on the planes' columns (a flat segment, e = (ex, ey) then given as
+// (ey, ex) and the regions with x and y swapped): each column is gathered into a line and
+// each output line scattered back; a chunk is a band of rows whose cache lines serve four
+// columns running, so nothing is transposed.
+void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Region& region,
+                   double ex, double ey, const Plane* add, float scale, int nthreads,
+                   bool columns = false)
+{
+    const int nc = in.nc;
+    const size_t ncs = size_t(nc);
+    // Pixel c of line r: in(c, r) along a row, in(r, c) down a column.
+    const size_t along = columns ? in.stride() : ncs, across = columns ? ncs : in.stride();
+    auto at = [&](const Plane& p, int line, int c) {
+        return p.px.get() + size_t(line) * across + size_t(c) * along;
+    };
+    const SegmentWeights sw(ey);
+    const int width = region.x1 - region.x0;
+    // An output reads the input within the segment's width and three taps more.
+    const int reach = int(std::ceil(std::abs(ex))) + 4;
+    // Chunks of ~256 columns, at least two so the sweeps balance (fixed by the sizes alone).
+    const int nchunks = std::max(2, (width + 255) / 256);
+    const int chunk   = (width + nchunks - 1) / nchunks;
+    parallel_for_chunks(0, nchunks, 1, nthreads, [&](int64_t ci, int64_t) {
+        const int X0 = region.x0 + int(ci) * chunk, X1 = std::min(region.x1, X0 + chunk);
+        if (X1 <= X0)
+            return;
+        // Lines before valid.y0 are zero: the window starts with them, or a span before
+        // the first output row.
+        const int start = std::min(valid.y0 + sw.first, region.y0 - (sw.last - sw.first) - 1);
+        // The input columns the chunk reads, [i0, i1): the window's coordinates start at i0.
+        const int i0 = std::max(valid.x0, X0 - reach), i1 = std::max(i0, std::min(valid.x1, X1 + reach));
+        const int n_in = i1 - i0;
+        SteepWindow win(ex, ey, nc, n_in, X0 - i0, X1 - i0, start, region.y0, region.y1);
+        const size_t n = size_t(X1 - X0) * ncs;
+        std::vector<float> newest(columns ? size_t(n_in) * ncs : 0), oldest(newest.size()),
+            line_out(columns ? n : 0), line_add(columns && add ? n : 0);
+        // Line r of `in` over [i0, i1): in place along a row, gathered down a column.
+        auto line = [&](int r, std::vector<float>& buf) -> const float* {
+            if (r < valid.y0 || r >= valid.y1 || n_in == 0)
+                return nullptr;
+            if (!columns)
+                return at(in, r, i0);
+            copy_pixels(buf.data(), ncs, at(in, r, i0), along, n_in, nc);
+            return buf.data();
+        };
+        for (int y = start; y < region.y1; ++y) {
+            win.step(y, line(y - sw.first, newest), line(y - sw.last, oldest));
+            if (y < region.y0)
+                continue;
+            const float* a = nullptr;
+            if (add && columns) {
+                copy_pixels(line_add.data(), ncs, at(*add, y, X0), along, X1 - X0, nc);
+                a = line_add.data();
+            } else if (add) {
+                a = at(*add, y, X0);
+            }
+            float* o = columns ? line_out.data() : at(out, y, X0);
+            win.read(y, o, a, scale);
+            if (columns)
+                copy_pixels(at(out, y, X0), along, o, ncs, X1 - X0, nc);
+        }
+    });
+}
+
+// o[i] = (wf newest[i] + wl oldest[i] + inner (p1[i] - p0[i]) + add[i]) * scale: a
+// segment along a row from its two end pixels and the prefix sums of the ones between.
+BOKEH_HOT void band_row(float* o, const float* newest, const float* oldest, const double* p1,
+                        const double* p0, const float* add, double wf, double inner, double wl,
+                        float scale, size_t n)
+{
+    for (size_t i = 0; i < n; ++i) {
+        const double v = wf * newest[i] + wl * oldest[i] + inner * (p1[i] - p0[i]);
+        o[i] = (float(v) + (add ? add[i] : 0.0f)) * scale;
+    }
+}
+
+// o = (seg(row) + add) * scale over n values, for a segment along a row of npx pixels,
+// zero-padded as far as the outputs read: the row's prefix sums (double) into `prefix`, and
+// output pixel 0 reads the row's pixels from `oldest` (its i = last) on.
+void segment_row(float* o, const float* row, double* prefix, size_t npx, int nc,
+                 const SegmentWeights& s, size_t oldest, const float* add, float scale, size_t n)
+{
+    const size_t ncs = size_t(nc), newest = oldest + size_t(s.last - s.first);
+    row_prefix(prefix, row, npx, nc);
+    // The pixels between the two ends: prefix sums to before the newest, less to the oldest.
+    band_row(o, row + newest * ncs, row + oldest * ncs, prefix + newest * ncs,
+             prefix + (oldest + 1) * ncs, add, s.newest, s.inner, s.oldest, scale, n);
+}
+
+// out = (seg(in) + add) * scale over `region`, `in` read as zero outside `valid`, for any
+// segment e: a sweep down the rows when e is steep, else a sweep along the columns. (A
+// segment along the rows never comes here: with one, the hexagon takes hexagon_sweep.)
+void segment_pass(const Plane& in, const Region& valid, Plane& out, const Region& region,
+                  double ex, double ey, const Plane* add, float scale, int nthreads)
+{
+    if (std::abs(ey) >= std::abs(ex)) {
+        segment_sweep(in, valid, out, region, ex, ey, add, scale, nthreads);
+    } else {
+        auto flip = [](const Region& r) { return Region{ r.y0, r.x0, r.y1, r.x1 }; };
+        segment_sweep(in, flip(valid), out, flip(region), ey, ex, add, scale, nthreads, true);
+    }
+}
+
+// `r` grown by what a segment pass along e reads around an output: out(p) reads in(p - t e),
+// t in [0, 1], through the shear's and the unshear's taps (a pixel each side each, so
+// three with rounding), clipped to the plane.
+Region grown_by(const Region& r, double ex, double ey, int w, int h)
+{
+    const int lx = int(std::ceil(std::max(0.0, ex))) + 3, hx = int(std::ceil(std::max(0.0, -ex))) + 3;
+    const int ly = int(std::ceil(std::max(0.0, ey))) + 3, hy = int(std::ceil(std::max(0.0, -ey))) + 3;
+    return { std::max(0, r.x0 - lx), std::max(0, r.y0 - ly), std::min(w, r.x1 + hx), std::min(h, r.y1 + hy) };
+}
+
+Region hull(const Region& a, const Region& b)
+{
+    return { std::min(a.x0, b.x0), std::min(a.y0, b.y0), std::max(a.x1, b.x1), std::max(a.y1, b.y1) };
+}
+
 
 // Where the fused sweep reads and writes, in its working frame of w x h pixels: `line`
 // gives line r over columns [c0, c1) (a view, or filled into `buf`; null when all zero),
