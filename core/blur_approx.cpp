@@ -406,13 +406,11 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
         const int X0 = region.x0 + int(ci) * chunk, X1 = std::min(region.x1, X0 + chunk);
         if (X1 <= X0)
             return;
-        // Lines before valid.y0 are zero: the window starts with them, or a span before
-        // the first output row.
-        const int start = std::min(valid.y0 + sw.first, region.y0 - (sw.last - sw.first) - 1);
         // The input columns the chunk reads, [i0, i1): the window's coordinates start at i0.
         const int i0 = std::max(valid.x0, X0 - reach), i1 = std::max(i0, std::min(valid.x1, X1 + reach));
         const int n_in = i1 - i0;
-        SteepWindow win(ex, ey, nc, n_in, X0 - i0, X1 - i0, start, region.y0, region.y1);
+        // Lines before valid.y0 are zero; outputs before the window's start read zero.
+        SteepWindow win(ex, ey, nc, n_in, X0 - i0, X1 - i0, valid.y0, region.y0, region.y1);
         const size_t n = size_t(X1 - X0) * ncs;
         std::vector<float> newest(columns ? size_t(n_in) * ncs : 0), oldest(newest.size()),
             line_out(columns ? n : 0), line_add(columns && add ? n : 0);
@@ -425,8 +423,9 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
             copy_pixels(buf.data(), ncs, at(in, r, i0), along, n_in, nc);
             return buf.data();
         };
-        for (int y = start; y < region.y1; ++y) {
-            win.step(y, line(y - sw.first, newest), line(y - sw.last, oldest));
+        for (int y = std::min(win.start(), region.y0); y < region.y1; ++y) {
+            if (y >= win.start())
+                win.step(y, line(y - sw.first, newest), line(y - sw.last, oldest));
             if (y < region.y0)
                 continue;
             const float* a = nullptr;
