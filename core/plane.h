@@ -149,6 +149,24 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                            int rx, int ry, std::vector<Span> spans, Border border, int nthreads);
 
+/// Predicted single-thread time in ns of one channel of the FFT convolution of a w x h
+/// output with a kernel reaching rx, ry, in the cheapest tiling (blur_fft.cpp's cost model).
+double fft_convolve_cost_ns(int w, int h, int rx, int ry);
+/// The exact convolution by FFT in overlap-save tiles, straight from the source into `dst`
+/// over `roi`, by the border rule (blur_fft.cpp): channel c with kernels[kernel_of[c]],
+/// all of the same reach.
+bool convolve_fft_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                         const std::vector<KernelWeights>& kernels, const std::vector<int>& kernel_of,
+                         Border border, int nthreads);
+/// The same as a "valid" convolution of a padded plane (iris mode): the output is `in`
+/// less the kernels' reach on each side.
+Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
+                   const std::vector<int>& kernel_of, int nthreads);
+
+/// Predicted single-thread time in ns of one channel of convolve_spans_direct over a
+/// w x h output with `nspans` spans over 2 ry + 1 rows (blur.cpp's cost model).
+double spans_cost_ns(int w, int h, size_t nspans, int ry);
+
 /// A banded kernel (rows in runs of equal rows) straight from the source into `dst` over
 /// `roi` by running sums down the rows (blur_approx.cpp): cost independent of its size.
 bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,

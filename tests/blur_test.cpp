@@ -69,6 +69,20 @@ std::vector<Named> kernels()
     return list;
 }
 
+// The ways to compute `k` exactly: the automatic choice, and for a disk or polygon each
+// exact method by name (row spans and FFT tiles).
+std::vector<BlurMethod> exact_methods(const Kernel& k)
+{
+    if (k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon)
+        return { BlurMethod::Auto, BlurMethod::Spans, BlurMethod::Fft };
+    return { BlurMethod::Auto };
+}
+
+std::string method_name(BlurMethod m)
+{
+    return m == BlurMethod::Spans ? " (spans)" : m == BlurMethod::Fft ? " (fft)" : "";
+}
+
 double peak(const OIIO::ImageBuf& img)
 {
     const auto st = OIIO::ImageBufAlgo::computePixelStats(img);
@@ -93,10 +107,12 @@ TEST(Blur, EveryKernelMatchesTheBruteForceReference)
 {
     const OIIO::ImageBuf src = test_image(61, 47);
     for (const Named& n : kernels())
+        for (BlurMethod m : exact_methods(n.k))
         for (Border border : { Border::Black, Border::Clamp, Border::Mirror }) {
-            SCOPED_TRACE(n.name);
+            SCOPED_TRACE(n.name + method_name(m));
             BlurOptions o;
             o.border = border;
+            o.method = m;
             OIIO::ImageBuf fast, ref;
             ASSERT_TRUE(blur(fast, src, n.k, o)) << fast.geterror();
             ASSERT_TRUE(convolve_reference(ref, src, kernel_weights(n.k), o));
@@ -143,15 +159,18 @@ TEST(Blur, ZeroSizeIsTheIdentityBitForBit)
 
 TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
 {
-    for (const Named& n : kernels()) {
-        SCOPED_TRACE(n.name);
+    for (const Named& n : kernels())
+    for (BlurMethod m : exact_methods(n.k)) {
+        SCOPED_TRACE(n.name + method_name(m));
         const KernelWeights kw = kernel_weights(n.k);
         OIIO::ImageBuf src(OIIO::ImageSpec(2 * kw.rx + 9, 2 * kw.ry + 9, 1, OIIO::TypeFloat));
         const int cx = kw.rx + 4, cy = kw.ry + 4;
         const float bright = 1e6f;
         src.setpixel(cx, cy, &bright);
+        BlurOptions o;
+        o.method = m;
         OIIO::ImageBuf out;
-        ASSERT_TRUE(blur(out, src, n.k));
+        ASSERT_TRUE(blur(out, src, n.k, o));
         double worst = 0.0;
         for (int y = 0; y < src.spec().height; ++y)
             for (int x = 0; x < src.spec().width; ++x) {
@@ -205,10 +224,12 @@ TEST(Blur, TranslationEquivariance)
 {
     // The same pixels at another data-window origin give the same result there.
     const OIIO::ImageBuf a = test_image(45, 31, 0, 0), b = test_image(45, 31, 13, -7);
-    for (const Named& n : kernels()) {
-        SCOPED_TRACE(n.name);
+    for (const Named& n : kernels())
+    for (BlurMethod m : exact_methods(n.k)) {
+        SCOPED_TRACE(n.name + method_name(m));
         BlurOptions o;
-        o.grow = true;
+        o.grow   = true;
+        o.method = m;
         OIIO::ImageBuf ra, rb;
         ASSERT_TRUE(blur(ra, a, n.k, o));
         ASSERT_TRUE(blur(rb, b, n.k, o));
@@ -259,9 +280,10 @@ TEST(Blur, WideImagesMatchTheBruteForceReferenceStripByStrip)
     }
 }
 
-TEST(Blur, WideImagesMatchTheReferenceTileByTileForSpansAndBands)
+TEST(Blur, WideImagesMatchTheReferenceTileByTileForSpansFftAndBands)
 {
-    // Several 256-column x 64-row tiles of the direct span and band paths: inner tiles read
+    // Several tiles of the direct span, FFT and band paths (the FFT's: 64 x 64 up to 96 x 96
+    // transforms here, so partial tiles at the right and bottom edges): inner tiles read
     // the source in place, edge tiles by the border rule; an explicit ROI past the data;
     // 3 and 4 channels. Bands are checked against their own banded kernel.
     const OIIO::ImageBuf rgba = test_image(600, 150, 7, -9);
@@ -272,18 +294,18 @@ TEST(Blur, WideImagesMatchTheReferenceTileByTileForSpansAndBands)
     for (int nc : { 3, 4 }) {
         const OIIO::ImageBuf src = nc == 4 ? rgba : OIIO::ImageBufAlgo::channels(rgba, 3, { 0, 1, 2 });
         for (const Named& n : ks)
-            for (bool bands : { false, true }) {
+            for (BlurMethod m : { BlurMethod::Spans, BlurMethod::Fft, BlurMethod::Bands }) {
+                const bool bands = m == BlurMethod::Bands;
                 if (bands && n.k.hole > 0.0f)
                     continue;
                 for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
                     for (bool explicit_roi : { false, true }) {
-                        SCOPED_TRACE(std::string(n.name) + (bands ? " bands" : "") + ", "
+                        SCOPED_TRACE(std::string(n.name) + (bands ? " bands" : method_name(m)) + ", "
                                      + std::to_string(nc) + " channels, border "
                                      + std::to_string(int(border)) + (explicit_roi ? ", roi" : ""));
                         BlurOptions o;
                         o.border = border;
-                        if (bands)
-                            o.method = BlurMethod::Bands;
+                        o.method = m;
                         OIIO::ROI roi;
                         if (explicit_roi)
                             roi = OIIO::ROI(-20, 530, -30, 140);
@@ -335,10 +357,13 @@ TEST(Blur, NoDriftAlongA4KRowAfterA1e6Pixel)
             const float v = x == 20 && y == 1 ? 1e6f : 0.25f + 0.25f * float((x * 37) % 11) / 11.0f;
             src.setpixel(x, y, &v);
         }
-    for (const Named& n : kernels()) {
-        SCOPED_TRACE(n.name);
+    for (const Named& n : kernels())
+    for (BlurMethod m : exact_methods(n.k)) {
+        SCOPED_TRACE(n.name + method_name(m));
+        BlurOptions o;
+        o.method = m;
         OIIO::ImageBuf out, ref;
-        ASSERT_TRUE(blur(out, src, n.k));
+        ASSERT_TRUE(blur(out, src, n.k, o));
         ASSERT_TRUE(convolve_reference(ref, src, kernel_weights(n.k)));
         // Far from the bright pixel the values are ~0.3: any drift would show.
         OIIO::ROI far = src.roi();
@@ -347,6 +372,61 @@ TEST(Blur, NoDriftAlongA4KRowAfterA1e6Pixel)
                                              OIIO::ImageBufAlgo::cut(ref, far)),
                   1e-6);
     }
+}
+
+TEST(Blur, SpansAndFftTilesAgreeAndExactIsOneOfThem)
+{
+    // The cost models (blur.cpp, blur_fft.cpp) pick row spans at 15 px and FFT tiles at
+    // 151 px for the exact method. Both are exact in double, so their float results agree
+    // to the last bit or so (which one ran shows in the time only: docs/benchmarks.md).
+    const OIIO::ImageBuf src = test_image(640, 360);
+    for (float size : { 15.0f, 151.0f }) {
+        SCOPED_TRACE(size);
+        Kernel k;
+        k.shape    = KernelShape::Disk;
+        k.width_px = k.height_px = size;
+        BlurOptions spans, fft;
+        spans.method = BlurMethod::Spans;
+        fft.method   = BlurMethod::Fft;
+        OIIO::ImageBuf exact, by_spans, by_fft;
+        ASSERT_TRUE(blur(exact, src, k));
+        ASSERT_TRUE(blur(by_spans, src, k, spans));
+        ASSERT_TRUE(blur(by_fft, src, k, fft));
+        EXPECT_LE(bokeh_test::max_difference(by_fft, by_spans), 2e-7 * peak(by_spans));
+        EXPECT_LE(bokeh_test::max_difference(exact, size < 50.0f ? by_spans : by_fft), 2e-7 * peak(by_spans));
+    }
+}
+
+TEST(Blur, FftTilesGiveTheKernelFromALone1e6PixelAndNothingElsewhere)
+{
+    // A transform spreads its rounding over its whole tile: beside a 1e6 pixel, the 0.3
+    // around it must still come out as 0.3, in every tile (700 x 400 at 121 px: several).
+    Kernel k;
+    k.shape    = KernelShape::Disk;
+    k.width_px = k.height_px = 121;
+    const KernelWeights kw   = kernel_weights(k);
+    OIIO::ImageBuf src(OIIO::ImageSpec(700, 400, 1, OIIO::TypeFloat));
+    OIIO::ImageBufAlgo::fill(src, { 0.3f });
+    const int cx = 250, cy = 160;
+    const float bright = 1e6f;
+    src.setpixel(cx, cy, &bright);
+    BlurOptions o;
+    o.method = BlurMethod::Fft;
+    o.border = Border::Clamp;
+    OIIO::ImageBuf out;
+    ASSERT_TRUE(blur(out, src, k, o));
+    double worst_near = 0.0, worst_far = 0.0;
+    for (int y = 0; y < 400; ++y)
+        for (int x = 0; x < 700; ++x) {
+            float v;
+            out.getpixel(x, y, &v);
+            const int dx = x - cx, dy = y - cy;
+            const bool near = std::abs(dx) <= kw.rx && std::abs(dy) <= kw.ry;
+            const double want = (near ? kw.at(dx, dy) * (1e6 - 0.3) : 0.0) + 0.3;
+            (near ? worst_near : worst_far) = std::max(near ? worst_near : worst_far, std::abs(v - want));
+        }
+    EXPECT_LE(worst_near, 1e-7 * 1e6) << "the kernel, to float's precision of the peak";
+    EXPECT_LE(worst_far, 1e-6) << "0.3 away from the bright pixel, to float's precision";
 }
 
 TEST(Blur, HardDiskEqualsOiioDiskConvolution)
@@ -419,12 +499,15 @@ TEST(Blur, FastGaussianIsCloseToExact)
 TEST(Blur, ThreadCountDoesNotChangeResults)
 {
     const OIIO::ImageBuf src = test_image(300, 200);
-    for (const Named& n : kernels()) {
-        SCOPED_TRACE(n.name);
+    for (const Named& n : kernels())
+    for (BlurMethod m : exact_methods(n.k)) {
+        SCOPED_TRACE(n.name + method_name(m));
+        BlurOptions o;
+        o.method = m;
         OIIO::ImageBuf one, two, eight;
-        ASSERT_TRUE(blur(one, src, n.k, {}, {}, 1));
-        ASSERT_TRUE(blur(two, src, n.k, {}, {}, 2));
-        ASSERT_TRUE(blur(eight, src, n.k, {}, {}, 8));
+        ASSERT_TRUE(blur(one, src, n.k, o, {}, 1));
+        ASSERT_TRUE(blur(two, src, n.k, o, {}, 2));
+        ASSERT_TRUE(blur(eight, src, n.k, o, {}, 8));
         const size_t bytes = size_t(src.roi().npixels()) * 4 * sizeof(float);
         EXPECT_EQ(std::memcmp(one.localpixels(), two.localpixels(), bytes), 0);
         EXPECT_EQ(std::memcmp(one.localpixels(), eight.localpixels(), bytes), 0);
@@ -1124,7 +1207,8 @@ TEST(BlurIris, EveryMethodStaysWithinTheChannelRangeAtTheLimit)
         KernelShape shape;
         BlurMethod method;
     };
-    for (const Case& c : { Case{ KernelShape::Disk, BlurMethod::Exact }, Case{ KernelShape::Disk, BlurMethod::Bands },
+    for (const Case& c : { Case{ KernelShape::Disk, BlurMethod::Exact }, Case{ KernelShape::Disk, BlurMethod::Fft },
+                           Case{ KernelShape::Disk, BlurMethod::Bands },
                            Case{ KernelShape::Polygon, BlurMethod::Parallelograms },
                            Case{ KernelShape::Gaussian, BlurMethod::ThreeBoxes }, Case{ KernelShape::Box, BlurMethod::Exact } }) {
         SCOPED_TRACE(int(c.method));

@@ -379,12 +379,17 @@ TEST(Cli, BlurMethodsAndConvolve)
         "{0} --blur:kernel=disk:method=taps 9 -o {1}/taps.exr "
         "{0} --blur:kernel=hex:method=fast 9 -o {1}/hex.exr "
         "{0} --blur:kernel=disk:method=reduced:reduction=2 9 -o {1}/reduced.exr "
-        "{0} --blur:kernel=disk:iris=2 9 -o {1}/iris.exr",
+        "{0} --blur:kernel=disk:iris=2 9 -o {1}/iris.exr "
+        "{0} --blur:kernel=disk:method=spans 9 -o {1}/spans.exr "
+        "{0} --blur:kernel=disk:method=fft 9 -o {1}/fft.exr",
         in, dir));
     ASSERT_EQ(r.status, 0) << r.err;
     OIIO::ImageBuf exact(dir + "/exact.exr");
     const auto stats = OIIO::ImageBufAlgo::computePixelStats(exact);
     const double peak = *std::max_element(stats.max.begin(), stats.max.end());
+    // The two exact methods by name: the exact disk, to half float's precision.
+    for (const char* name : { "spans", "fft" })
+        EXPECT_LE(max_difference(exact, OIIO::ImageBuf(dir + "/" + name + ".exr")), 1e-3 * peak) << name;
     for (const char* name : { "bands", "taps", "hex", "reduced", "iris" }) {
         OIIO::ImageBuf b(dir + "/" + name + ".exr");
         ASSERT_TRUE(b.read(0, 0, true)) << name;
@@ -407,6 +412,8 @@ TEST(Cli, BlurMethodsAndConvolve)
     ASSERT_TRUE(zero.write(dir + "/zero.exr"));
     expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --convolve -o {2}", in, dir, out)),
                          "kernel image channel 0 sums to 0", out);
+    expect_clean_failure(bokehtool(format("{0} --blur:kernel=box:method=fft 9 -o {1}", in, out)),
+                         "method=fft is for disk and polygon kernels", out);
 }
 
 TEST(Cli, Blur)

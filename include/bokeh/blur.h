@@ -33,7 +33,9 @@ enum class KernelEdge {
 /// (BilinearTaps: fixed sizes); bokeh-bench charts what each one costs and loses.
 enum class BlurMethod {
     Auto,            ///< the fastest exact method for the shape
-    Exact,           ///< box: running sums; Gaussian: separable convolution; shapes: row spans
+    Exact,           ///< box: running sums; Gaussian: separable convolution; disk and
+                     ///< polygon: row spans or FFT tiles, whichever the cost model says is
+                     ///< cheaper (on the project's machine at 1080p: FFT from ~90 px)
     Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
                      ///< hexagon -> parallelograms, disk and polygon -> reduced where
                      ///< its automatic factor exceeds 1, bands below; in iris mode, Exact
@@ -45,6 +47,8 @@ enum class BlurMethod {
     Reduced,         ///< any kernel: blurred exactly at 1/N resolution (area reduction, the
                      ///< kernel scaled by 1/N) and enlarged back bilinearly (SEEDS.md
                      ///< sections 4 and 6); N = BlurOptions::reduction, any real >= 1
+    Spans,           ///< disk, polygon: exact, by row spans of prefix sums
+    Fft,             ///< disk, polygon: exact, by FFT in overlap-save tiles
 };
 
 /// Pixels outside the source's data window.
@@ -134,6 +138,7 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// the kernel's (alpha, say) use the mean of the kernel's channels. Each kernel channel
 /// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
 /// kernel value, is refused. opts.method and opts.bands are ignored; opts.iris applies.
+/// Computed in overlap-save tiles (core/blur_fft.cpp) in double.
 bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
                     const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
 

@@ -52,6 +52,8 @@ bool blur_command(CommandContext& c)
                : method == "bands"          ? bokeh::BlurMethod::Bands
                : method == "taps"           ? bokeh::BlurMethod::BilinearTaps
                : method == "reduced"        ? bokeh::BlurMethod::Reduced
+               : method == "spans"          ? bokeh::BlurMethod::Spans
+               : method == "fft"            ? bokeh::BlurMethod::Fft
                                             : bokeh::BlurMethod::Auto;
     o.bands     = c.options.get_int("bands");
     o.reduction = float(c.options.get_float("reduction"));
@@ -102,7 +104,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk)"),
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
-                             "bands", "taps", "reduced" },
+                             "bands", "taps", "reduced", "spans", "fft" },
+                           "exact: disk/polygon by spans or fft, whichever is cheaper; "
                            "fast: the cheapest approximation measured at >= 40 dB "
                            "(gaussian: boxes3, hex: parallelograms, disk/polygon: reduced "
                            "from 37.5/45 px, bands below; with iris: exact); taps: the seed's 9x9/17x17 "

@@ -70,7 +70,9 @@ bool parse_case(const std::string& text, bokeh::Kernel& k, bokeh::BlurOptions& o
                                                    { "fast", M::Fast },
                                                    { "bands", M::Bands },
                                                    { "parallelograms", M::Parallelograms },
-                                                   { "reduced", M::Reduced } };
+                                                   { "reduced", M::Reduced },
+                                                   { "spans", M::Spans },
+                                                   { "fft", M::Fft } };
     const std::vector<std::string> f = OIIO::Strutil::splits(text, ":");
     if (f.size() < 2 || f.size() > 4 || !shapes.count(f[0])
         || (f.size() > 2 && !methods.count(f[2])))
