@@ -25,8 +25,10 @@
 // sizes only, never on the thread count, so results are identical for any thread count.
 // FFTW_ESTIMATE plans: measured plans (FFTW_MEASURE) run 20-30 % faster but take
 // 0.2-2.5 s to make, and may differ from run to run, and so would the last bits.
-// Known limits: a transform tile holds at most 2^25 points (256 MB in double), enough for
-// kernels up to 4096 px; tiles recompute the kernel-wide margins they share.
+// Known limits: tiles grow with the kernel (a 4096 px kernel needs 6144 x 6144 points,
+// 300 MB in double); tiles of over 2^24 points (128 MB) run one at a time, so a call
+// holds at most the kernel's transform and two tiles of that size. Tiles recompute the
+// kernel-wide margins they share.
 
 #include <bokeh/blur.h>
 #include <bokeh/parallel.h>
@@ -63,7 +65,9 @@ struct FftBuffer {
     FftBuffer& operator=(const FftBuffer&) = delete;
 };
 
-constexpr double kMaxTilePoints = double(1 << 25);
+// The largest tile (8192 x 8192, for kernels up to 4096 px across, the most a kernel
+// image may be), and the size above which tiles run one at a time.
+constexpr double kMaxTilePoints = double(1 << 26), kParallelTilePoints = double(1 << 24);
 
 // One transform tile: ny x nx points; a real row is stored in 2 (nx / 2 + 1) doubles, as
 // FFTW's in-place real transforms want.
@@ -93,15 +97,16 @@ double tile_cost_ns(int ny, int nx)
 }
 
 // The cheapest tiling of a w x h output for a kernel reaching rx, ry, by tile_cost_ns.
-// Sizes: powers of two and 3 times them, 8 .. 8192. FFTW_ESTIMATE plans of others
+// Sizes: powers of two 8 .. 8192 and 3 times them from 384. FFTW_ESTIMATE plans of others
 // measured up to 1.7x slower per point, alone (96, 192, 288, 360) and in this loop
-// (1152 x 1024: 1.15x 1024 x 1024; 1215 x 2048: 1.5x 1024 x 2048).
+// (1152 x 1024: 1.15x 1024 x 1024; 1215 x 2048: 1.5x 1024 x 2048; 192 x 384 at 1080p:
+// 1.3x the 256 x 256 tiles).
 TileGrid choose_tiles(int w, int h, int rx, int ry)
 {
     std::vector<int> sizes;
     for (int p = 8; p <= 8192; p *= 2) {
         sizes.push_back(p);
-        if (3 * p <= 8192)
+        if (3 * p >= 384 && 3 * p <= 8192)
             sizes.push_back(3 * p);
     }
     TileGrid best;
@@ -181,7 +186,8 @@ void convolve_tiles(int w, int h, int nc, const std::vector<KernelWeights>& kern
     // Work items: a channel of a tile, channel fastest (neighbouring items read the same
     // source rows).
     const int64_t items = int64_t(g.nty) * g.ntx * nc;
-    parallel_for_chunks(0, items, 1, nthreads, [&](int64_t i0, int64_t i1) {
+    const bool huge     = double(g.points()) > kParallelTilePoints;
+    parallel_for_chunks(0, items, 1, huge ? 1 : nthreads, [&](int64_t i0, int64_t i1) {
         Scratch& s = scratch.local();
         if (!s.tile) {
             s.tile = std::make_unique<FftBuffer>(g.points());

@@ -167,6 +167,10 @@ Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
 /// w x h output with `nspans` spans over 2 ry + 1 rows (blur.cpp's cost model).
 double spans_cost_ns(int w, int h, size_t nspans, int ry);
 
+/// Predicted single-thread time in ns of one channel of the separable convolution over a
+/// w x h output with taps_x and taps_y taps (blur.cpp's cost model).
+double separable_cost_ns(int w, int h, int taps_x, int taps_y);
+
 /// A banded kernel (rows in runs of equal rows) straight from the source into `dst` over
 /// `roi` by running sums down the rows (blur_approx.cpp): cost independent of its size.
 bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,

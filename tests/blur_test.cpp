@@ -69,12 +69,14 @@ std::vector<Named> kernels()
     return list;
 }
 
-// The ways to compute `k` exactly: the automatic choice, and for a disk or polygon each
-// exact method by name (row spans and FFT tiles).
+// The ways to compute `k` exactly: the automatic choice, and each exact method by name
+// (disk, polygon: row spans and FFT tiles; Gaussian: FFT tiles).
 std::vector<BlurMethod> exact_methods(const Kernel& k)
 {
     if (k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon)
         return { BlurMethod::Auto, BlurMethod::Spans, BlurMethod::Fft };
+    if (k.shape == KernelShape::Gaussian)
+        return { BlurMethod::Auto, BlurMethod::Fft };
     return { BlurMethod::Auto };
 }
 
@@ -1304,6 +1306,26 @@ TEST(BlurImageKernel, FftEqualsBruteForce)
             EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
         }
     }
+}
+
+TEST(BlurImageKernel, KernelsLargerThanTheImageMatchTheSpans)
+{
+    // A 601 px disk as an image on a 300 x 200 image: every output reads past the data
+    // window (mirror border), and a tile is larger than the image.
+    Kernel k;
+    k.shape    = KernelShape::Disk;
+    k.width_px = k.height_px = 601;
+    const KernelWeights kw   = kernel_weights(k);
+    const OIIO::ImageBuf src = test_image(300, 200, -5, 9);
+    BlurOptions o;
+    o.border = Border::Mirror;
+    OIIO::ImageBuf got, spans;
+    ASSERT_TRUE(convolve_image(got, src, kernel_image(kw), o)) << got.geterror();
+    o.method = BlurMethod::Spans;
+    ASSERT_TRUE(blur(spans, src, k, o));
+    ASSERT_EQ(got.roi(), spans.roi());
+    // The kernel image is float: its weights differ from the double ones by ~1e-7 relative.
+    EXPECT_LE(bokeh_test::max_difference(got, spans), 2e-6 * peak(spans));
 }
 
 TEST(BlurImageKernel, ColourKernelsAndTheCentreRule)

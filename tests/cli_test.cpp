@@ -413,7 +413,7 @@ TEST(Cli, BlurMethodsAndConvolve)
     expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --convolve -o {2}", in, dir, out)),
                          "kernel image channel 0 sums to 0", out);
     expect_clean_failure(bokehtool(format("{0} --blur:kernel=box:method=fft 9 -o {1}", in, out)),
-                         "method=fft is for disk and polygon kernels", out);
+                         "method=fft is for disk, polygon and gaussian kernels", out);
 }
 
 TEST(Cli, Blur)

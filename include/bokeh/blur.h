@@ -33,9 +33,10 @@ enum class KernelEdge {
 /// (BilinearTaps: fixed sizes); bokeh-bench charts what each one costs and loses.
 enum class BlurMethod {
     Auto,            ///< the fastest exact method for the shape
-    Exact,           ///< box: running sums; Gaussian: separable convolution; disk and
-                     ///< polygon: row spans or FFT tiles, whichever the cost model says is
-                     ///< cheaper (on the project's machine at 1080p: FFT from ~90 px)
+    Exact,           ///< box: running sums; Gaussian: separable convolution or FFT tiles;
+                     ///< disk and polygon: row spans or FFT tiles; whichever the cost model
+                     ///< says is cheaper (on the project's machine at 1080p: FFT from
+                     ///< ~90 px for a disk, sigma ~7 for a Gaussian)
     Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
                      ///< hexagon -> parallelograms, disk and polygon -> reduced where
                      ///< its automatic factor exceeds 1, bands below; in iris mode, Exact
@@ -48,7 +49,7 @@ enum class BlurMethod {
                      ///< kernel scaled by 1/N) and enlarged back bilinearly (SEEDS.md
                      ///< sections 4 and 6); N = BlurOptions::reduction, any real >= 1
     Spans,           ///< disk, polygon: exact, by row spans of prefix sums
-    Fft,             ///< disk, polygon: exact, by FFT in overlap-save tiles
+    Fft,             ///< disk, polygon, Gaussian: exact, by FFT in overlap-save tiles
 };
 
 /// Pixels outside the source's data window.

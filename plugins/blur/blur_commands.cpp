@@ -105,7 +105,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps", "reduced", "spans", "fft" },
-                           "exact: disk/polygon by spans or fft, whichever is cheaper; "
+                           "exact: disk/polygon by spans or fft, gaussian separable or fft, whichever is cheaper; "
                            "fast: the cheapest approximation measured at >= 40 dB "
                            "(gaussian: boxes3, hex: parallelograms, disk/polygon: reduced "
                            "from 37.5/45 px, bands below; with iris: exact); taps: the seed's 9x9/17x17 "
