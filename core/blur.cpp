@@ -329,7 +329,6 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
     prepare_destination(dst, in, roi);
     const int nc = in.nchannels();
     const size_t ncs = size_t(nc);
-    const OIIO::ROI data = in.roi();
     const int w = roi.width(), h = roi.height(), ry = by.radius;
     const int ring = 2 * ry + 2;  // rows y .. y + 2 ry are in use, and row y - 1 by the slide
     // Wide boxes take wider strips, so the reach each strip reads on both sides stays
@@ -344,14 +343,13 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
         std::vector<double> prefix(nrow + ncs), sum(n, 0.0);
         // Horizontal box of padded row j (source row roi.ybegin - ry + j) into its ring slot.
         auto horizontal = [&](int j) {
-            float* o     = rows.data() + size_t(j % ring) * n;
-            const int sy = border_index(roi.ybegin - ry + j, data.ybegin, data.yend, border);
-            if (sy == kOutside) {
+            float* o       = rows.data() + size_t(j % ring) * n;
+            const int x0   = roi.xbegin + xs - bx.radius, x1 = roi.xbegin + xe + bx.radius;
+            const float* v = bordered_row_view(in, roi.ybegin - ry + j, x0, x1, border, row.data());
+            if (!v) {
                 std::fill_n(o, n, 0.0f);
                 return;
             }
-            const int x0 = roi.xbegin + xs - bx.radius, x1 = roi.xbegin + xe + bx.radius;
-            const float* v = source_row_view(in, sy, x0, x1, border, row.data());
             // The common channel counts slide a running sum; others take prefix sums.
             if (box_row_running(o, v, xe - xs, nc, bx.radius, bx.full, bx.inner, bx.end))
                 return;
@@ -528,7 +526,6 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     prepare_destination(dst, in, roi);
     const int nc = in.nchannels();
     const size_t ncs = size_t(nc);
-    const OIIO::ROI data = in.roi();
     // Output row y reads table rows y + d, d = dy + ry in [0, nd): the padded rows
     // y .. y + 2 ry.
     const int nd = 2 * ry + 1;
@@ -586,16 +583,14 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
         int computed = 0;  // tile-local prefix rows done
         auto compute_rows = [&](int r_end) {
             for (; computed < r_end; ++computed) {
-                double* p = table_row(computed);
-                const int sy = border_index(roi.ybegin + ys - ry + computed, data.ybegin,
-                                            data.yend, border);
-                if (sy == kOutside) {
-                    std::fill_n(p, pw, 0.0);
-                } else {
-                    const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
-                    const float* v = source_row_view(in, sy, x0, x1, border, row.data());
+                double* p      = table_row(computed);
+                const int x0   = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
+                const float* v = bordered_row_view(in, roi.ybegin + ys - ry + computed, x0, x1,
+                                                   border, row.data());
+                if (v)
                     row_prefix(p, v, pw / ncs - 1, nc);
-                }
+                else
+                    std::fill_n(p, pw, 0.0);
                 if (twin)
                     std::copy(p + ncs, p + pw, p + pal);
             }
@@ -720,6 +715,11 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         if (!shape)
             err = "method=spans is for disk and polygon kernels";
         return shape;
+    case BlurMethod::Separable:
+        m = asked;
+        if (!gaussian)
+            err = "method=separable is for the gaussian kernel";
+        return gaussian;
     case BlurMethod::Fft:
         m = asked;
         if (!shape && !gaussian)
@@ -814,19 +814,28 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // A Gaussian: the separable convolution or FFT tiles, by the same rule (at 1080p the
     // FFT from sigma ~7: 0.72x the separable's time at sigma 7.75, 0.47x at 15.75, 0.25x
     // at 63.75, A/B).
-    std::vector<Span> spans;
-    const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
-    if (shape && method == BlurMethod::Exact && !weights.is_identity()) {
-        spans  = kernel_spans(reflected(weights));
-        method = fft_convolve_cost_ns(roi.width(), roi.height(), rx, ry)
-                         < 0.85 * spans_cost_ns(roi.width(), roi.height(), spans.size(), ry)
+    const int nc = in.nchannels();
+    const double fft_ns = fft_convolve_cost_ns(roi.width(), roi.height(), nc, rx, ry);
+    const bool shape    = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
+    const bool by_spans = method == BlurMethod::Spans || method == BlurMethod::BilinearTaps
+                          || (shape && method == BlurMethod::Exact);
+    const std::vector<Span> spans = by_spans && !weights.is_identity()
+                                        ? kernel_spans(reflected(weights))
+                                        : std::vector<Span>{};
+    if (shape && method == BlurMethod::Exact && !weights.is_identity())
+        method = fft_ns < 0.85 * nc * spans_cost_ns(roi.width(), roi.height(), spans.size(), ry)
                      ? BlurMethod::Fft
                      : BlurMethod::Spans;
+    if (k.shape == KernelShape::Gaussian && method == BlurMethod::Exact && !weights.is_identity())
+        method = fft_ns < 0.85 * nc * separable_cost_ns(roi.width(), roi.height(), 2 * rx + 1, 2 * ry + 1)
+                     ? BlurMethod::Fft
+                     : BlurMethod::Separable;
+    if (method == BlurMethod::Fft && !std::isfinite(fft_ns)) {
+        dst.errorfmt("blur: method=fft takes kernels under 8192 px across; this one reaches {}x{}",
+                     2 * rx + 1, 2 * ry + 1);
+        return false;
     }
-    if (k.shape == KernelShape::Gaussian && method == BlurMethod::Exact && !weights.is_identity()
-        && fft_convolve_cost_ns(roi.width(), roi.height(), rx, ry)
-               < 0.85 * separable_cost_ns(roi.width(), roi.height(), 2 * rx + 1, 2 * ry + 1))
-        method = BlurMethod::Fft;
+    const std::vector<int> one_kernel(size_t(nc), 0);
     // The exact box and shapes go straight from the source to `dst` (no padded plane);
     // iris mode transforms a padded plane, so it keeps the plane path.
     if (method == BlurMethod::Exact && opts.iris == 0.0f && !weights.is_identity()) {
@@ -834,13 +843,11 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
             return box_direct(dst, in, roi, BoxPass(box_weights_1d(k.width_px)),
                               BoxPass(box_weights_1d(k.height_px)), opts.border, nthreads);
     }
-    if (method == BlurMethod::Spans && opts.iris == 0.0f && !weights.is_identity())
-        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
-                                     spans.empty() ? kernel_spans(reflected(weights)) : spans,
-                                     opts.border, nthreads);
+    if ((method == BlurMethod::Spans || method == BlurMethod::BilinearTaps) && opts.iris == 0.0f
+        && !weights.is_identity())
+        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry, spans, opts.border, nthreads);
     if (method == BlurMethod::Fft && opts.iris == 0.0f && !weights.is_identity())
-        return convolve_fft_direct(dst, in, roi, { weights }, std::vector<int>(size_t(in.nchannels()), 0),
-                                   opts.border, nthreads);
+        return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads);
     if (method == BlurMethod::ThreeBoxes && opts.iris == 0.0f && !weights.is_identity()) {
         // Three direct boxes, each writing the region the next one reads (the border rule
         // acts in the first alone): three reads and writes of the frame, no padded plane.
@@ -852,9 +859,6 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     }
     if (method == BlurMethod::Bands && opts.iris == 0.0f && !weights.is_identity())
         return convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
-    if (method == BlurMethod::BilinearTaps && opts.iris == 0.0f && !weights.is_identity())
-        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry,
-                                     kernel_spans(reflected(weights)), opts.border, nthreads);
     if (method == BlurMethod::Parallelograms && opts.iris == 0.0f && !weights.is_identity()
         && hexagon_sweeps(k))
         return hexagon_direct(dst, in, roi, k, rx, ry, opts.border, nthreads);
@@ -893,22 +897,14 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     case BlurMethod::Bands: out = convolve_banded(p, weights, nthreads); break;
     case BlurMethod::BilinearTaps:
     case BlurMethod::Spans: out = convolve_spans(p, weights, nthreads); break;
-    case BlurMethod::Fft:
-        out = convolve_fft(p, { weights }, std::vector<int>(size_t(p.nc), 0), nthreads);
+    case BlurMethod::Fft: out = convolve_fft(p, { weights }, one_kernel, nthreads); break;
+    case BlurMethod::Separable: {
+        const auto [sx, sy] = gaussian_sigma(k);
+        out = convolve_separable(p, gaussian_weights_1d(sx), gaussian_weights_1d(sy), nthreads);
         break;
-    default:
-        switch (k.shape) {
-        case KernelShape::Box:
-            out = box_blur(p, box_weights_1d(k.width_px), box_weights_1d(k.height_px), nthreads);
-            break;
-        case KernelShape::Gaussian: {
-            const auto [sx, sy] = gaussian_sigma(k);
-            out = convolve_separable(p, gaussian_weights_1d(sx), gaussian_weights_1d(sy), nthreads);
-            break;
-        }
-        case KernelShape::Disk:
-        case KernelShape::Polygon: out = convolve_spans(p, weights, nthreads); break;
-        }
+    }
+    default:  // Exact: the box (the shapes and the Gaussian took their methods above)
+        out = box_blur(p, box_weights_1d(k.width_px), box_weights_1d(k.height_px), nthreads);
     }
     if (opts.iris != 0.0f)
         iris.inverse(out, nthreads);

@@ -744,7 +744,6 @@ bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     prepare_destination(dst, in, roi);
     const int nc = in.nchannels();
     const size_t ncs = size_t(nc);
-    const OIIO::ROI data = in.roi();
     const int w = roi.width(), h = roi.height(), rx = banded.rx, ry = banded.ry;
     const std::vector<Profile> profiles = band_profiles(banded);
     // Per profile, its bars as offsets into a prefix row that starts rx columns left of
@@ -777,14 +776,13 @@ bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
         auto ring_row = [&](size_t p, int j) { return rows.data() + (p * size_t(ring) + size_t(j % ring)) * n; };
         // Padded row j (source row roi.ybegin - ry + j) through every profile.
         auto horizontal = [&](int j) {
-            const int sy = border_index(roi.ybegin - ry + j, data.ybegin, data.yend, border);
-            if (sy == kOutside) {
+            const int x0   = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
+            const float* v = bordered_row_view(in, roi.ybegin - ry + j, x0, x1, border, row.data());
+            if (!v) {
                 for (size_t p = 0; p < np; ++p)
                     std::fill_n(ring_row(p, j), n, 0.0f);
                 return;
             }
-            const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
-            const float* v = source_row_view(in, sy, x0, x1, border, row.data());
             row_prefix(prefix.data(), v, npx, nc);
             for (size_t p = 0; p < np; ++p)
                 profile_row(ring_row(p, j), prefix.data(), hi.data() + first_bar[p],
@@ -1123,11 +1121,9 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
     const Region out_region{ t ? ry : rx, t ? rx : ry, io.w - (t ? ry : rx), io.h - (t ? rx : ry) };
     const size_t ystep = size_t(dst.spec().width) * ncs;
     if (!t) {
-        io.line = [&](int r, int c0, int c1, float* buf) -> const float* {
-            const int sy = border_index(region.ybegin + r, data.ybegin, data.yend, border);
-            if (sy == kOutside)
-                return nullptr;
-            return source_row_view(in, sy, region.xbegin + c0, region.xbegin + c1, border, buf);
+        io.line = [&](int r, int c0, int c1, float* buf) {
+            return bordered_row_view(in, region.ybegin + r, region.xbegin + c0, region.xbegin + c1,
+                                     border, buf);
         };
         io.out_row = [&](int y, int x0, int) {
             return static_cast<float*>(dst.pixeladdr(region.xbegin + x0, region.ybegin + y));

@@ -1,5 +1,6 @@
 // blur_fft.cpp — convolution by FFT in overlap-save tiles: image kernels (any shape,
-// colour allowed) and, where it is cheaper than row spans, the exact disk and polygon.
+// colour allowed) and, where its cost model says it is cheaper, the exact disk, polygon
+// (against row spans) and Gaussian (against the separable convolution).
 //
 // Overlap-save (Stockham 1966, "High-speed convolution and correlation"; Oppenheim and
 // Schafer, "Discrete-Time Signal Processing", section 8.7): a tile of ny x nx source
@@ -8,27 +9,28 @@
 // the (ny - 2 ry) x (nx - 2 rx) outputs whose footprint lies inside the tile equal the
 // linear convolution, and only those are kept. Tiles step by that valid size over the
 // output and read the source straight through the border rule, so no padded copy of the
-// frame is made and a channel of a tile (a few hundred pixels square) stays in L2.
+// frame is made, and a channel of a tile of a few hundred pixels square stays in L2.
 //
-// What changed and why (issue 3): the first version transformed the whole padded frame,
-// ~3 double planes per channel in flight (~80 MB at 1080p) and 60-70 ms per channel at
-// 1080p. Tiles cost 12-15 ns per transformed point (measured on the project's machine,
-// FFTW_ESTIMATE plans, 256-512 square, in place) against 20-27 for 640 and up, which
-// leave L2; the tile is chosen per call by that cost model (fft_convolve_cost_ns), and
-// blur.cpp compares it with the row spans' to pick the exact method for a disk or
-// polygon: at 1080p the FFT is the cheaper from about 90 px across (measured: 0.5x the
-// spans' time at 127 px, 0.45x at 255; 1.2-1.3x at 63).
+// What changed and why (issue 3): the first version transformed the whole padded frame:
+// ~3 double planes per channel in flight (~80 MB at 1080p), 55-70 ms per channel at 1080p
+// on one thread. Tiles cost ~14 ns per transformed point at 256 x 256 and more as they
+// grow (tile_cost_ns); the tiling is chosen per call by that model, and blur.cpp compares
+// the result (fft_convolve_cost_ns) with the other exact method's model. At 1080p the FFT
+// takes a disk from about 90 px across (A/B against the spans: 0.48x their time at 127 px,
+// 0.42x at 255; 1.1-1.3x at 63) and a Gaussian from sigma ~7.
 //
 // Double precision throughout: float transforms leave noise of ~1e-7 of a tile's largest
 // value everywhere, so a 1e6 highlight would put ~0.1 into the black around it; in double
 // it is ~1e-10. Tiles, plans and the order of every sum depend on the image and kernel
 // sizes only, never on the thread count, so results are identical for any thread count.
 // FFTW_ESTIMATE plans: measured plans (FFTW_MEASURE) run 20-30 % faster but take
-// 0.2-2.5 s to make, and may differ from run to run, and so would the last bits.
-// Known limits: tiles grow with the kernel (a 4096 px kernel needs 6144 x 6144 points,
-// 300 MB in double); tiles of over 2^24 points (128 MB) run one at a time, so a call
-// holds at most the kernel's transform and two tiles of that size. Tiles recompute the
-// kernel-wide margins they share.
+// 0.2-2.5 s to make, and may differ from run to run, and so would the last bits. Debian's
+// FFTW has SSE2 and AVX kernels, not AVX-512.
+// Known limits: tiles grow with the kernel: a 4096 px kernel needs 6144 x 6144 points,
+// 300 MB in double, per kernel channel in use plus one tile in flight (tiles of over 2^24
+// points run one at a time): a 4096 px kernel image on a 640 x 360 image took 7.9 s and
+// 0.9 GB. Kernels must be under 8192 px across. Tiles recompute the kernel-wide margins
+// they share.
 
 #include <bokeh/blur.h>
 #include <bokeh/parallel.h>
@@ -65,8 +67,8 @@ struct FftBuffer {
     FftBuffer& operator=(const FftBuffer&) = delete;
 };
 
-// The largest tile (8192 x 8192, for kernels up to 4096 px across, the most a kernel
-// image may be), and the size above which tiles run one at a time.
+// The largest tile (8192 x 8192: kernels under 8192 px across), and the size above which
+// tiles run one at a time.
 constexpr double kMaxTilePoints = double(1 << 26), kParallelTilePoints = double(1 << 24);
 
 // One transform tile: ny x nx points; a real row is stored in 2 (nx / 2 + 1) doubles, as
@@ -86,7 +88,7 @@ struct TileGrid {
 // transformed point): 14.2 at 256 x 256, 15.4 at 256 x 512, 18-19 at 384 x 384 to
 // 512 x 512, 17.4 at 512 x 1024, 21-25 at 768, 23-30 at 1024, 29-32 at 1024 x 2048 and
 // 1536 x 1536, 34 at 1536 x 768 (the larger, the more the two cores contend for L3);
-// ~10 at 64 alone; the copy in ~2.5. The fit errs high for 512-1024 rather than low
+// ~10 at 64 x 64 alone; the copy in ~2.5. The fit errs high for 512-1024 rather than low
 // for the largest.
 double tile_cost_ns(int ny, int nx)
 {
@@ -145,27 +147,35 @@ struct Plans {
     Plans& operator=(const Plans&) = delete;
 };
 
-// The convolution of a w x h output, every channel c with kernel kernels[kernel_of[c]]
-// (all reaching the same rx, ry), tile by tile. `read_row(y, x0, x1, buf)` returns the
-// source row y (output coordinates; y in [-ry, h + ry)) over columns [x0, x1), all
-// channels interleaved, border rule applied (or `buf` filled with it); `out_pixel(x, y)`
-// is where output pixel (x, y) goes, channels interleaved.
+// The convolution of a w x h output in tiling `g`, every channel c with kernel
+// kernels[kernel_of[c]] (all reaching the same rx, ry). `read_row(y, x0, x1, buf)`
+// returns the source row y (output coordinates; y in [-ry, h + ry)) over columns
+// [x0, x1), all channels interleaved, border rule applied (or `buf` filled with it), or
+// nullptr for a black row; `out_pixel(x, y)` is where output pixel (x, y) goes, channels
+// interleaved.
 template<class ReadRow, class OutPixel>
-void convolve_tiles(int w, int h, int nc, const std::vector<KernelWeights>& kernels,
+void convolve_tiles(int w, int h, int nc, const TileGrid& g, const std::vector<KernelWeights>& kernels,
                     const std::vector<int>& kernel_of, ReadRow read_row, OutPixel out_pixel,
                     int nthreads)
 {
+    if (w <= 0 || h <= 0)
+        return;
     const int rx = kernels[0].rx, ry = kernels[0].ry;
-    const TileGrid g = choose_tiles(w, h, rx, ry);
     const Plans plans(g);
     const size_t rs = g.row(), ncs = size_t(nc);
     const double scale = 1.0 / (double(g.ny) * double(g.nx));  // FFTW's transforms are unnormalised
 
-    // The kernels' transforms, each placed cyclically with its centre at the origin, and
-    // divided by the transform size. out(x) = sum_d w(d) in(x - d), as convolve_brute.
+    // The transforms of the kernels in use, each placed cyclically with its centre at the
+    // origin, and divided by the transform size. out(x) = sum_d w(d) in(x - d), as
+    // convolve_brute.
     std::vector<std::unique_ptr<FftBuffer>> spectra(kernels.size());
+    std::vector<bool> used(kernels.size(), false);
+    for (int k : kernel_of)
+        used[size_t(k)] = true;
     parallel_for_chunks(0, int64_t(kernels.size()), 1, nthreads, [&](int64_t k0, int64_t k1) {
         for (int64_t k = k0; k < k1; ++k) {
+            if (!used[size_t(k)])
+                continue;
             const KernelWeights& kw = kernels[size_t(k)];
             auto s = std::make_unique<FftBuffer>(g.points());
             std::fill_n(s->data, g.points(), 0.0);
@@ -205,9 +215,10 @@ void convolve_tiles(int w, int h, int nc, const std::vector<KernelWeights>& kern
             for (int r = 0; r < rows; ++r) {
                 const float* v = read_row(y0 - ry + r, x0 - rx, x0 - rx + cols, s.row.data());
                 double* o      = t + size_t(r) * rs;
-                for (int x = 0; x < cols; ++x)
+                int x          = 0;
+                for (; v && x < cols; ++x)
                     o[x] = double(v[size_t(x) * ncs + size_t(c)]);
-                std::fill(o + cols, o + rs, 0.0);
+                std::fill(o + x, o + rs, 0.0);
             }
             std::fill(t + size_t(rows) * rs, t + g.points(), 0.0);
             auto* spec = reinterpret_cast<std::complex<double>*>(t);
@@ -232,26 +243,28 @@ void convolve_tiles(int w, int h, int nc, const std::vector<KernelWeights>& kern
 
 namespace detail {
 
-double fft_convolve_cost_ns(int w, int h, int rx, int ry)
+double fft_convolve_cost_ns(int w, int h, int nc, int rx, int ry)
 {
-    return choose_tiles(w, h, rx, ry).cost_ns;
+    const TileGrid g = choose_tiles(w, h, rx, ry);
+    // The kernel's transform, one tile's worth, runs before the tiles.
+    return double(nc) * g.cost_ns + tile_cost_ns(g.ny, g.nx);
 }
 
 bool convolve_fft_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                          const std::vector<KernelWeights>& kernels, const std::vector<int>& kernel_of,
                          Border border, int nthreads)
 {
+    const TileGrid g = choose_tiles(roi.width(), roi.height(), kernels[0].rx, kernels[0].ry);
+    if (g.ny == 0) {
+        dst.errorfmt("blur: FFT tiles take kernels under 8192 px across; this one reaches {}x{}",
+                     2 * kernels[0].rx + 1, 2 * kernels[0].ry + 1);
+        return false;
+    }
     prepare_destination(dst, in, roi);
-    const OIIO::ROI data = in.roi();
     convolve_tiles(
-        roi.width(), roi.height(), in.nchannels(), kernels, kernel_of,
-        [&](int y, int x0, int x1, float* buf) -> const float* {
-            const int sy = border_index(roi.ybegin + y, data.ybegin, data.yend, border);
-            if (sy == kOutside) {
-                std::fill_n(buf, size_t(x1 - x0) * size_t(in.nchannels()), 0.0f);
-                return buf;
-            }
-            return source_row_view(in, sy, roi.xbegin + x0, roi.xbegin + x1, border, buf);
+        roi.width(), roi.height(), in.nchannels(), g, kernels, kernel_of,
+        [&](int y, int x0, int x1, float* buf) {
+            return bordered_row_view(in, roi.ybegin + y, roi.xbegin + x0, roi.xbegin + x1, border, buf);
         },
         [&](int x, int y) {
             return static_cast<float*>(dst.pixeladdr(roi.xbegin + x, roi.ybegin + y));
@@ -267,7 +280,7 @@ Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
     Plane out(in.w - 2 * rx, in.h - 2 * ry, in.nc);
     const size_t ncs = size_t(in.nc);
     convolve_tiles(
-        out.w, out.h, in.nc, kernels, kernel_of,
+        out.w, out.h, in.nc, choose_tiles(out.w, out.h, rx, ry), kernels, kernel_of,
         [&](int y, int x0, int, float*) { return in.row(y + ry) + size_t(x0 + rx) * ncs; },
         [&](int x, int y) { return out.row(y) + size_t(x) * ncs; }, nthreads);
     return out;

@@ -217,6 +217,14 @@ const float* source_row_view(const OIIO::ImageBuf& src, int sy, int x0, int x1, 
     return buf;
 }
 
+const float* bordered_row_view(const OIIO::ImageBuf& src, int y, int x0, int x1, Border border,
+                               float* buf)
+{
+    const OIIO::ROI data = src.roi();
+    const int sy         = border_index(y, data.ybegin, data.yend, border);
+    return sy == kOutside ? nullptr : source_row_view(src, sy, x0, x1, border, buf);
+}
+
 void prefer_huge_pages(void* p, size_t bytes)
 {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)

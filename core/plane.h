@@ -85,6 +85,11 @@ void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border bor
 const float* source_row_view(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border,
                              float* buf);
 
+/// Padded source row `y` (any row: the border rule picks the source row) over columns
+/// [x0, x1), as source_row_view(); nullptr where the row is black (Border::Black).
+const float* bordered_row_view(const OIIO::ImageBuf& src, int y, int x0, int x1, Border border,
+                               float* buf);
+
 /// `dst` reset to float pixels (uninitialised) over `roi`, with `src`'s metadata.
 void prepare_destination(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi);
 
@@ -149,9 +154,10 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                            int rx, int ry, std::vector<Span> spans, Border border, int nthreads);
 
-/// Predicted single-thread time in ns of one channel of the FFT convolution of a w x h
-/// output with a kernel reaching rx, ry, in the cheapest tiling (blur_fft.cpp's cost model).
-double fft_convolve_cost_ns(int w, int h, int rx, int ry);
+/// Predicted single-thread time in ns of the FFT convolution of a w x h output of nc
+/// channels with a kernel reaching rx, ry, in the cheapest tiling, its kernel's transform
+/// included (blur_fft.cpp's cost model); infinite for kernels of 8192 px or more.
+double fft_convolve_cost_ns(int w, int h, int nc, int rx, int ry);
 /// The exact convolution by FFT in overlap-save tiles, straight from the source into `dst`
 /// over `roi`, by the border rule (blur_fft.cpp): channel c with kernels[kernel_of[c]],
 /// all of the same reach.

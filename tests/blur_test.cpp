@@ -284,8 +284,8 @@ TEST(Blur, WideImagesMatchTheBruteForceReferenceStripByStrip)
 
 TEST(Blur, WideImagesMatchTheReferenceTileByTileForSpansFftAndBands)
 {
-    // Several tiles of the direct span, FFT and band paths (the FFT's: 64 x 64 up to 96 x 96
-    // transforms here, so partial tiles at the right and bottom edges): inner tiles read
+    // Several tiles of the direct span, FFT and band paths (the FFT's transforms are 64 to
+    // 256 px here, with partial tiles at the right and bottom edges): inner tiles read
     // the source in place, edge tiles by the border rule; an explicit ROI past the data;
     // 3 and 4 channels. Bands are checked against their own banded kernel.
     const OIIO::ImageBuf rgba = test_image(600, 150, 7, -9);
@@ -397,6 +397,30 @@ TEST(Blur, SpansAndFftTilesAgreeAndExactIsOneOfThem)
         EXPECT_LE(bokeh_test::max_difference(by_fft, by_spans), 2e-7 * peak(by_spans));
         EXPECT_LE(bokeh_test::max_difference(exact, size < 50.0f ? by_spans : by_fft), 2e-7 * peak(by_spans));
     }
+    // 1 and 5 channels through the tiles.
+    Kernel k;
+    k.shape    = KernelShape::Polygon;
+    k.width_px = k.height_px = 41;
+    for (int nc : { 1, 5 }) {
+        SCOPED_TRACE(nc);
+        const OIIO::ImageBuf img = OIIO::ImageBufAlgo::channels(src, nc, nc == 1 ? std::vector<int>{ 2 }
+                                                                       : std::vector<int>{ 0, 1, 2, 3, 0 });
+        BlurOptions fft;
+        fft.method = BlurMethod::Fft;
+        OIIO::ImageBuf by_fft, ref;
+        ASSERT_TRUE(blur(by_fft, img, k, fft));
+        ASSERT_TRUE(convolve_reference(ref, img, kernel_weights(k)));
+        EXPECT_LE(bokeh_test::max_difference(by_fft, ref), 2e-6 * peak(ref));
+    }
+    // Past the largest transform (8192 px): refused by name, not crashed.
+    Kernel huge;
+    huge.shape    = KernelShape::Gaussian;
+    huge.sigma_px = 1024;  // 4 sigma each side: 8193 px
+    BlurOptions fft;
+    fft.method = BlurMethod::Fft;
+    OIIO::ImageBuf out;
+    EXPECT_FALSE(blur(out, OIIO::ImageBufAlgo::cut(src, OIIO::ROI(0, 8, 0, 8)), huge, fft));
+    EXPECT_NE(out.geterror().find("under 8192 px"), std::string::npos) << out.geterror();
 }
 
 TEST(Blur, FftTilesGiveTheKernelFromALone1e6PixelAndNothingElsewhere)

@@ -50,6 +50,7 @@ enum class BlurMethod {
                      ///< sections 4 and 6); N = BlurOptions::reduction, any real >= 1
     Spans,           ///< disk, polygon: exact, by row spans of prefix sums
     Fft,             ///< disk, polygon, Gaussian: exact, by FFT in overlap-save tiles
+    Separable,       ///< Gaussian: exact, by the separable convolution
 };
 
 /// Pixels outside the source's data window.

@@ -54,6 +54,7 @@ bool blur_command(CommandContext& c)
                : method == "reduced"        ? bokeh::BlurMethod::Reduced
                : method == "spans"          ? bokeh::BlurMethod::Spans
                : method == "fft"            ? bokeh::BlurMethod::Fft
+               : method == "separable"      ? bokeh::BlurMethod::Separable
                                             : bokeh::BlurMethod::Auto;
     o.bands     = c.options.get_int("bands");
     o.reduction = float(c.options.get_float("reduction"));
@@ -104,7 +105,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk)"),
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
-                             "bands", "taps", "reduced", "spans", "fft" },
+                             "bands", "taps", "reduced", "spans", "fft", "separable" },
                            "exact: disk/polygon by spans or fft, gaussian separable or fft, whichever is cheaper; "
                            "fast: the cheapest approximation measured at >= 40 dB "
                            "(gaussian: boxes3, hex: parallelograms, disk/polygon: reduced "

@@ -72,7 +72,8 @@ bool parse_case(const std::string& text, bokeh::Kernel& k, bokeh::BlurOptions& o
                                                    { "parallelograms", M::Parallelograms },
                                                    { "reduced", M::Reduced },
                                                    { "spans", M::Spans },
-                                                   { "fft", M::Fft } };
+                                                   { "fft", M::Fft },
+                                                   { "separable", M::Separable } };
     const std::vector<std::string> f = OIIO::Strutil::splits(text, ":");
     if (f.size() < 2 || f.size() > 4 || !shapes.count(f[0])
         || (f.size() > 2 && !methods.count(f[2])))

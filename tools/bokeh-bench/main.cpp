@@ -189,7 +189,8 @@ int main(int argc, char* argv[])
         ours("hexagon", "3 parallelograms (flat top)", d, flat, M::Parallelograms);
         ours("hexagon", "reduced 1/N (bilinear)", d, kernel(S::Polygon, d), M::Reduced);
         bokeh::Kernel g = kernel(S::Gaussian, d);
-        ours("gaussian", "separable (exact)", d, g);
+        ours("gaussian", "separable (exact)", d, g, M::Separable);
+        ours("gaussian", "FFT tiles (exact)", d, g, M::Fft);
         ours("gaussian", "3 boxes (fast)", d, g, M::ThreeBoxes);
     }
     for (double d : { 9.0, 17.0 })
