@@ -6,7 +6,7 @@ BUILD ?= build
 JOBS  ?= 2
 BOKEHTOOL = $(BUILD)/bin/bokehtool
 
-.PHONY: all deps configure build demo test bench install clean
+.PHONY: all deps configure build demo test bench micro install clean
 
 all: build
 
@@ -39,6 +39,12 @@ bench: build
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/blur.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/defocus.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/resample.csv docs/bench --size-label "reduction factor" && /usr/bin/python3 tools/bokeh-bench/artifact_chart.py docs/bench/resample_artifacts.csv docs/bench --timings docs/bench/resample.csv
+
+# The microbenchmarks behind the exact methods' cost models (Google Benchmark), the
+# methods' repetitions interleaved so the machine's drift falls on all of them alike.
+micro: build
+	$(BUILD)/bin/bokeh-micro --benchmark_repetitions=3 --benchmark_enable_random_interleaving=true \
+	  --benchmark_report_aggregates_only=true
 
 install: build
 	cmake --install $(BUILD) --prefix $(or $(PREFIX),/usr/local)
