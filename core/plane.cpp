@@ -367,46 +367,66 @@ BOKEH_HOT void add_span(double* acc, const double* hi, const double* lo, double 
 
 namespace {
 
-// acc[i] += sum over s < N of w[s] * (hi[s][i] - lo[s][i]), one pass over acc.
-template <int N>
-inline __attribute__((always_inline)) void add_spans_fixed(double* acc, const double* const* hi,
-                                                           const double* const* lo,
-                                                           const double* w, size_t n)
+// s = sum over k < N of w[k] * (hi[k][i] - lo[k][i]); a[i] += s, and b[i] += s when Both.
+template <int N, bool Both>
+inline __attribute__((always_inline)) void add_spans_fixed(double* a, double* b, const double* const* hi,
+                                                           const double* const* lo, const double* w,
+                                                           size_t n)
 {
     const double* h[N];
     const double* l[N];
     double wk[N];
     for (int k = 0; k < N; ++k)
         h[k] = hi[k], l[k] = lo[k], wk[k] = w[k];
-    // The prefix rows are read only; acc is no prefix row.
+    // The prefix rows are read only; a and b are no prefix rows.
 #pragma GCC ivdep
     for (size_t i = 0; i < n; ++i) {
         double s = 0.0;
         for (int k = 0; k < N; ++k)
             s += wk[k] * (h[k][i] - l[k][i]);
-        acc[i] += s;
+        a[i] += s;
+        if (Both)
+            b[i] += s;
+    }
+}
+
+// Up to eight spans per pass over the accumulators: a span then costs its two loads and a
+// multiply-add, and an accumulator is loaded and stored once per pass instead of once per
+// span.
+template <bool Both>
+inline __attribute__((always_inline)) void add_spans_n(double* a, double* b, const double* const* hi,
+                                                       const double* const* lo, const double* w,
+                                                       size_t count, size_t n)
+{
+    for (; count > 0; hi += 8, lo += 8, w += 8, count -= std::min<size_t>(count, 8)) {
+        switch (std::min<size_t>(count, 8)) {
+        case 1: add_spans_fixed<1, Both>(a, b, hi, lo, w, n); break;
+        case 2: add_spans_fixed<2, Both>(a, b, hi, lo, w, n); break;
+        case 3: add_spans_fixed<3, Both>(a, b, hi, lo, w, n); break;
+        case 4: add_spans_fixed<4, Both>(a, b, hi, lo, w, n); break;
+        case 5: add_spans_fixed<5, Both>(a, b, hi, lo, w, n); break;
+        case 6: add_spans_fixed<6, Both>(a, b, hi, lo, w, n); break;
+        case 7: add_spans_fixed<7, Both>(a, b, hi, lo, w, n); break;
+        default: add_spans_fixed<8, Both>(a, b, hi, lo, w, n); break;
+        }
     }
 }
 
 }  // namespace
 
-// Up to eight spans per pass over acc: a span then costs its two loads and a multiply-add,
-// and the accumulator is loaded and stored once per pass instead of once per span.
 BOKEH_HOT void add_spans(double* acc, const double* const* hi, const double* const* lo,
                          const double* w, size_t count, size_t n)
 {
-    for (; count > 0; hi += 8, lo += 8, w += 8, count -= std::min<size_t>(count, 8)) {
-        switch (std::min<size_t>(count, 8)) {
-        case 1: add_spans_fixed<1>(acc, hi, lo, w, n); break;
-        case 2: add_spans_fixed<2>(acc, hi, lo, w, n); break;
-        case 3: add_spans_fixed<3>(acc, hi, lo, w, n); break;
-        case 4: add_spans_fixed<4>(acc, hi, lo, w, n); break;
-        case 5: add_spans_fixed<5>(acc, hi, lo, w, n); break;
-        case 6: add_spans_fixed<6>(acc, hi, lo, w, n); break;
-        case 7: add_spans_fixed<7>(acc, hi, lo, w, n); break;
-        default: add_spans_fixed<8>(acc, hi, lo, w, n); break;
-        }
-    }
+    add_spans_n<false>(acc, nullptr, hi, lo, w, count, n);
+}
+
+BOKEH_HOT void add_spans_pair(double* a, double* b, const double* const* hi, const double* const* lo,
+                              const double* w, size_t count, size_t n)
+{
+    if (b)
+        add_spans_n<true>(a, b, hi, lo, w, count, n);
+    else
+        add_spans_n<false>(a, nullptr, hi, lo, w, count, n);
 }
 
 // acc[i] += w * src[i].

@@ -122,6 +122,10 @@ void add_span(double* acc, const double* hi, const double* lo, double w, size_t 
 /// acc[i] += sum over s < count of w[s] * (hi[s][i] - lo[s][i]): several spans at once.
 void add_spans(double* acc, const double* const* hi, const double* const* lo, const double* w,
                size_t count, size_t n);
+/// a[i] += v[i] and, unless b is null, b[i] += v[i], where v[i] = sum over s < count of
+/// w[s] * (hi[s][i] - lo[s][i]): spans shared by two output rows.
+void add_spans_pair(double* a, double* b, const double* const* hi, const double* const* lo,
+                    const double* w, size_t count, size_t n);
 /// acc[i] += w * src[i].
 void add_scaled(double* acc, const float* src, double w, size_t n);
 /// out[i] = float(acc[i]).
@@ -170,8 +174,13 @@ Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
                    const std::vector<int>& kernel_of, int nthreads);
 
 /// Predicted single-thread time in ns of one channel of convolve_spans_direct over a
-/// w x h output with `nspans` spans over 2 ry + 1 rows (blur.cpp's cost model).
-double spans_cost_ns(int w, int h, size_t nspans, int ry);
+/// w x h output with `nspans` spans over 2 ry + 1 rows, `mirrored` as spans_mirror_in_y
+/// (blur.cpp's cost model).
+double spans_cost_ns(int w, int h, size_t nspans, int ry, bool mirrored);
+/// Whether kernel rows dy and -dy have the same spans (a disk; a polygon symmetric about
+/// its horizontal axis): convolve_spans_direct then shares each span sum between two
+/// output rows.
+bool spans_mirror_in_y(const std::vector<Span>& spans);
 
 /// Predicted single-thread time in ns of one channel of the separable convolution over a
 /// w x h output with taps_x and taps_y taps (blur.cpp's cost model).
