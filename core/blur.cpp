@@ -920,7 +920,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // exp(k x)'s rounding over its tile as the spans do along their rows. The FFT must
     // promise to be 15 % cheaper: its wall time measured 15-25 % above its model at
     // 63-255 px (its kernel's transform runs on one thread; large tiles contend for L3),
-    // and with the margin the two methods cross where they were measured to, ~90 px.
+    // and with the margin the two methods crossed where they were measured to, ~90 px,
+    // before the mirrored spans (convolve_symmetric_spans) moved the crossing to ~120 px.
     // A Gaussian: the separable convolution or FFT tiles, by the same rule (at 1080p the
     // FFT from sigma ~7: 0.72x the separable's time at sigma 7.75, 0.47x at 15.75, 0.25x
     // at 63.75, A/B).

@@ -36,7 +36,7 @@ enum class BlurMethod {
     Exact,           ///< box: running sums; Gaussian: separable convolution or FFT tiles;
                      ///< disk and polygon: row spans or FFT tiles; whichever the cost model
                      ///< says is cheaper (on the project's machine at 1080p: FFT from
-                     ///< ~90 px for a disk, sigma ~7 for a Gaussian)
+                     ///< ~120 px for a disk, sigma ~7 for a Gaussian)
     Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
                      ///< hexagon -> parallelograms, disk and polygon -> reduced where
                      ///< its automatic factor exceeds 1, bands below; in iris mode, Exact
