@@ -412,7 +412,62 @@ inline __attribute__((always_inline)) void add_spans_n(double* a, double* b, con
     }
 }
 
+// v = sum over k < N of w[k] * (hi[k][i] - lo[k][i]); fresh[i] = v when Fresh,
+// out[i] = float(last[i] + v) when Last.
+template <int N, bool Fresh, bool Last>
+inline __attribute__((always_inline)) void start_finish_fixed(double* fresh, const double* last, float* out,
+                                                              const double* const* hi,
+                                                              const double* const* lo, const double* w,
+                                                              size_t n)
+{
+    const double* h[N > 0 ? N : 1];  // a kernel row may have no spans
+    const double* l[N > 0 ? N : 1];
+    double wk[N > 0 ? N : 1];
+    for (int k = 0; k < N; ++k)
+        h[k] = hi[k], l[k] = lo[k], wk[k] = w[k];
+#pragma GCC ivdep
+    for (size_t i = 0; i < n; ++i) {
+        double v = 0.0;
+        for (int k = 0; k < N; ++k)
+            v += wk[k] * (h[k][i] - l[k][i]);
+        if (Fresh)
+            fresh[i] = v;
+        if (Last)
+            out[i] = float(last[i] + v);
+    }
+}
+
+template <bool Fresh, bool Last>
+inline __attribute__((always_inline)) void start_finish_n(double* fresh, const double* last, float* out,
+                                                          const double* const* hi, const double* const* lo,
+                                                          const double* w, size_t count, size_t n)
+{
+    switch (count) {
+    case 0: start_finish_fixed<0, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    case 1: start_finish_fixed<1, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    case 2: start_finish_fixed<2, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    case 3: start_finish_fixed<3, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    case 4: start_finish_fixed<4, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    case 5: start_finish_fixed<5, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    case 6: start_finish_fixed<6, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    case 7: start_finish_fixed<7, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    default: start_finish_fixed<8, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
+    }
+}
+
 }  // namespace
+
+BOKEH_HOT void start_and_finish_rows(double* fresh, const double* last, float* out,
+                                     const double* const* hi, const double* const* lo,
+                                     const double* w, size_t count, size_t n)
+{
+    if (fresh && last)
+        start_finish_n<true, true>(fresh, last, out, hi, lo, w, count, n);
+    else if (fresh)
+        start_finish_n<true, false>(fresh, nullptr, nullptr, hi, lo, w, count, n);
+    else if (last)
+        start_finish_n<false, true>(nullptr, last, out, hi, lo, w, count, n);
+}
 
 BOKEH_HOT void add_spans(double* acc, const double* const* hi, const double* const* lo,
                          const double* w, size_t count, size_t n)
