@@ -613,17 +613,8 @@ bool convolve_symmetric_spans(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, con
                 // written out as float, with no pass to zero or copy either.
                 float* out = b_ok ? static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + ys + yb))
                                   : nullptr;
-                if (count <= 8) {
-                    start_and_finish_rows(a_ok ? acc(ya) : nullptr, b_ok ? acc(yb) : nullptr, out,
-                                          hi_ptr.data(), lo_ptr.data(), w_d, count, n);
-                } else {
-                    if (a_ok)
-                        std::fill_n(acc(ya), n, 0.0);
-                    add_spans_pair(a_ok ? acc(ya) : acc(yb), a_ok && b_ok ? acc(yb) : nullptr,
-                                   hi_ptr.data(), lo_ptr.data(), w_d, count, n);
-                    if (b_ok)
-                        to_float(out, acc(yb), n);
-                }
+                start_and_finish_rows(a_ok ? acc(ya) : nullptr, b_ok ? acc(yb) : nullptr, out,
+                                      hi_ptr.data(), lo_ptr.data(), w_d, count, n);
             }
         }
     });

@@ -367,106 +367,97 @@ BOKEH_HOT void add_span(double* acc, const double* hi, const double* lo, double 
 
 namespace {
 
-// s = sum over k < N of w[k] * (hi[k][i] - lo[k][i]); a[i] += s, and b[i] += s when Both.
-template <int N, bool Both>
-inline __attribute__((always_inline)) void add_spans_fixed(double* a, double* b, const double* const* hi,
-                                                           const double* const* lo, const double* w,
-                                                           size_t n)
-{
-    const double* h[N];
-    const double* l[N];
-    double wk[N];
-    for (int k = 0; k < N; ++k)
-        h[k] = hi[k], l[k] = lo[k], wk[k] = w[k];
-    // The prefix rows are read only; a and b are no prefix rows.
-#pragma GCC ivdep
-    for (size_t i = 0; i < n; ++i) {
-        double s = 0.0;
-        for (int k = 0; k < N; ++k)
-            s += wk[k] * (h[k][i] - l[k][i]);
-        a[i] += s;
-        if (Both)
-            b[i] += s;
-    }
-}
-
-// Up to eight spans per pass over the accumulators: a span then costs its two loads and a
-// multiply-add, and an accumulator is loaded and stored once per pass instead of once per
-// span.
-template <bool Both>
-inline __attribute__((always_inline)) void add_spans_n(double* a, double* b, const double* const* hi,
-                                                       const double* const* lo, const double* w,
-                                                       size_t count, size_t n)
-{
-    for (; count > 0; hi += 8, lo += 8, w += 8, count -= std::min<size_t>(count, 8)) {
-        switch (std::min<size_t>(count, 8)) {
-        case 1: add_spans_fixed<1, Both>(a, b, hi, lo, w, n); break;
-        case 2: add_spans_fixed<2, Both>(a, b, hi, lo, w, n); break;
-        case 3: add_spans_fixed<3, Both>(a, b, hi, lo, w, n); break;
-        case 4: add_spans_fixed<4, Both>(a, b, hi, lo, w, n); break;
-        case 5: add_spans_fixed<5, Both>(a, b, hi, lo, w, n); break;
-        case 6: add_spans_fixed<6, Both>(a, b, hi, lo, w, n); break;
-        case 7: add_spans_fixed<7, Both>(a, b, hi, lo, w, n); break;
-        default: add_spans_fixed<8, Both>(a, b, hi, lo, w, n); break;
-        }
-    }
-}
-
-// v = sum over k < N of w[k] * (hi[k][i] - lo[k][i]); fresh[i] = v when Fresh,
-// out[i] = float(last[i] + v) when Last.
-template <int N, bool Fresh, bool Last>
-inline __attribute__((always_inline)) void start_finish_fixed(double* fresh, const double* last, float* out,
-                                                              const double* const* hi,
-                                                              const double* const* lo, const double* w,
-                                                              size_t n)
+// For each i < n, store(i, v) with v = sum over k < N of w[k] * (hi[k][i] - lo[k][i]): the
+// span sums of N spans, kept in registers per i, stored once.
+template <int N, class Store>
+inline __attribute__((always_inline)) void span_sums(const double* const* hi, const double* const* lo,
+                                                     const double* w, size_t n, Store store)
 {
     const double* h[N > 0 ? N : 1];  // a kernel row may have no spans
     const double* l[N > 0 ? N : 1];
     double wk[N > 0 ? N : 1];
     for (int k = 0; k < N; ++k)
         h[k] = hi[k], l[k] = lo[k], wk[k] = w[k];
+    // The prefix rows are read only; what `store` writes is no prefix row.
 #pragma GCC ivdep
     for (size_t i = 0; i < n; ++i) {
         double v = 0.0;
         for (int k = 0; k < N; ++k)
             v += wk[k] * (h[k][i] - l[k][i]);
-        if (Fresh)
-            fresh[i] = v;
-        if (Last)
-            out[i] = float(last[i] + v);
+        store(i, v);
     }
 }
 
+// span_sums for count <= 8 spans, their number a compile-time constant.
+template <class Store>
+inline __attribute__((always_inline)) void span_sums_upto8(size_t count, const double* const* hi,
+                                                           const double* const* lo, const double* w,
+                                                           size_t n, Store store)
+{
+    switch (count) {
+    case 0: span_sums<0>(hi, lo, w, n, store); break;
+    case 1: span_sums<1>(hi, lo, w, n, store); break;
+    case 2: span_sums<2>(hi, lo, w, n, store); break;
+    case 3: span_sums<3>(hi, lo, w, n, store); break;
+    case 4: span_sums<4>(hi, lo, w, n, store); break;
+    case 5: span_sums<5>(hi, lo, w, n, store); break;
+    case 6: span_sums<6>(hi, lo, w, n, store); break;
+    case 7: span_sums<7>(hi, lo, w, n, store); break;
+    default: span_sums<8>(hi, lo, w, n, store); break;
+    }
+}
+
+// a[i] += v, and b[i] += v when Both, eight spans per pass: a span then costs its two
+// loads and a multiply-add, and an accumulator is loaded and stored once per pass
+// instead of once per span.
+template <bool Both>
+inline __attribute__((always_inline)) void add_spans_n(double* a, double* b, const double* const* hi,
+                                                       const double* const* lo, const double* w,
+                                                       size_t count, size_t n)
+{
+    for (; count > 0; hi += 8, lo += 8, w += 8, count -= std::min<size_t>(count, 8))
+        span_sums_upto8(std::min<size_t>(count, 8), hi, lo, w, n, [=](size_t i, double v) {
+            a[i] += v;
+            if (Both)
+                b[i] += v;
+        });
+}
+
+// fresh[i] = v when Fresh, out[i] = float(last[i] + v) when Last; count <= 8.
 template <bool Fresh, bool Last>
 inline __attribute__((always_inline)) void start_finish_n(double* fresh, const double* last, float* out,
                                                           const double* const* hi, const double* const* lo,
                                                           const double* w, size_t count, size_t n)
 {
-    switch (count) {
-    case 0: start_finish_fixed<0, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    case 1: start_finish_fixed<1, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    case 2: start_finish_fixed<2, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    case 3: start_finish_fixed<3, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    case 4: start_finish_fixed<4, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    case 5: start_finish_fixed<5, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    case 6: start_finish_fixed<6, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    case 7: start_finish_fixed<7, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    default: start_finish_fixed<8, Fresh, Last>(fresh, last, out, hi, lo, w, n); break;
-    }
+    span_sums_upto8(count, hi, lo, w, n, [=](size_t i, double v) {
+        if (Fresh)
+            fresh[i] = v;
+        if (Last)
+            out[i] = float(last[i] + v);
+    });
 }
 
 }  // namespace
 
-BOKEH_HOT void start_and_finish_rows(double* fresh, const double* last, float* out,
-                                     const double* const* hi, const double* const* lo,
-                                     const double* w, size_t count, size_t n)
+BOKEH_HOT void start_and_finish_rows(double* fresh, double* last, float* out, const double* const* hi,
+                                     const double* const* lo, const double* w, size_t count, size_t n)
 {
-    if (fresh && last)
+    if (count > 8) {  // rare: through the accumulators, then out
+        if (fresh)
+            std::fill_n(fresh, n, 0.0);
+        if (fresh && last)
+            add_spans_n<true>(fresh, last, hi, lo, w, count, n);
+        else if (fresh || last)
+            add_spans_n<false>(fresh ? fresh : last, nullptr, hi, lo, w, count, n);
+        if (last)
+            to_float(out, last, n);
+    } else if (fresh && last) {
         start_finish_n<true, true>(fresh, last, out, hi, lo, w, count, n);
-    else if (fresh)
+    } else if (fresh) {
         start_finish_n<true, false>(fresh, nullptr, nullptr, hi, lo, w, count, n);
-    else if (last)
+    } else if (last) {
         start_finish_n<false, true>(nullptr, last, out, hi, lo, w, count, n);
+    }
 }
 
 BOKEH_HOT void add_spans(double* acc, const double* const* hi, const double* const* lo,

@@ -126,10 +126,10 @@ void add_spans(double* acc, const double* const* hi, const double* const* lo, co
 /// w[s] * (hi[s][i] - lo[s][i]): spans shared by two output rows.
 void add_spans_pair(double* a, double* b, const double* const* hi, const double* const* lo,
                     const double* w, size_t count, size_t n);
-/// With v[i] = sum over s < count (at most 8) of w[s] * (hi[s][i] - lo[s][i]): fresh[i] = v[i]
-/// (a row's first spans) unless fresh is null, and out[i] = float(last[i] + v[i]) (a row's
-/// last spans, stored as its result) unless last is null.
-void start_and_finish_rows(double* fresh, const double* last, float* out, const double* const* hi,
+/// With v[i] = sum over s < count of w[s] * (hi[s][i] - lo[s][i]): fresh[i] = v[i] (a row's
+/// first spans) unless fresh is null, and out[i] = float(last[i] + v[i]) (a row's last
+/// spans, stored as its result) unless last is null; `last` is left undefined.
+void start_and_finish_rows(double* fresh, double* last, float* out, const double* const* hi,
                            const double* const* lo, const double* w, size_t count, size_t n);
 /// acc[i] += w * src[i].
 void add_scaled(double* acc, const float* src, double w, size_t n);

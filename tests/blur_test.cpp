@@ -61,6 +61,7 @@ std::vector<Named> kernels()
     add("disk 15", KernelShape::Disk, 15, 15);
     add("disk 10.5", KernelShape::Disk, 10.5f, 10.5f);
     add("disk 21x9", KernelShape::Disk, 21, 9);
+    add("disk 61x7 (15 spans in its top row)", KernelShape::Disk, 61, 7);
     add("disk hard 12", KernelShape::Disk, 12, 12)->edge = KernelEdge::Hard;
     add("hexagon 17", KernelShape::Polygon, 17, 17);
     Kernel* p = add("pentagon 19 rotated curved", KernelShape::Polygon, 19, 19);
