@@ -798,6 +798,13 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
     const BlurMethod asked = opts.method;
     const bool gaussian = k.shape == KernelShape::Gaussian;
     const bool shape    = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
+    // A method asked for by name: taken where it applies to `k`, else refused with `why`.
+    auto named = [&](bool applies, const char* why) {
+        m = asked;
+        if (!applies)
+            err = why;
+        return applies;
+    };
     switch (asked) {
     case BlurMethod::Auto:
     case BlurMethod::Exact: m = BlurMethod::Exact; return true;
@@ -811,46 +818,21 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
             : shape && k.hole == 0.0f ? BlurMethod::Bands
                                       : BlurMethod::Exact;  // box: running sums are the fast method
         return true;
-    case BlurMethod::ThreeBoxes:
-        m = asked;
-        if (!gaussian)
-            err = "method=boxes3 is for the gaussian kernel";
-        return gaussian;
+    case BlurMethod::ThreeBoxes: return named(gaussian, "method=boxes3 is for the gaussian kernel");
     case BlurMethod::Parallelograms:
-        m = asked;
-        if (!is_hexagon(k))
-            err = "method=parallelograms needs a hexagon (6 straight blades, no hole)";
-        return is_hexagon(k);
+        return named(is_hexagon(k), "method=parallelograms needs a hexagon (6 straight blades, no hole)");
     case BlurMethod::Bands:
-        m = asked;
-        if (!shape || k.hole != 0.0f)
-            err = "method=bands is for disk and polygon kernels without a hole";
-        return shape && k.hole == 0.0f;
+        return named(shape && k.hole == 0.0f, "method=bands is for disk and polygon kernels without a hole");
     case BlurMethod::Reduced: m = asked; return true;
-    case BlurMethod::Spans:
-        m = asked;
-        if (!shape)
-            err = "method=spans is for disk and polygon kernels";
-        return shape;
-    case BlurMethod::Separable:
-        m = asked;
-        if (!gaussian)
-            err = "method=separable is for the gaussian kernel";
-        return gaussian;
+    case BlurMethod::Spans: return named(shape, "method=spans is for disk and polygon kernels");
+    case BlurMethod::Separable: return named(gaussian, "method=separable is for the gaussian kernel");
     case BlurMethod::Fft:
-        m = asked;
-        if (!shape && !gaussian)
-            err = "method=fft is for disk, polygon and gaussian kernels";
-        return shape || gaussian;
-    case BlurMethod::BilinearTaps: {
-        m = asked;
-        const bool ok = k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased
-                        && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f)
-                        && k.hole == 0.0f;
-        if (!ok)
-            err = "method=taps is the seed's 9x9 or 17x17 anti-aliased disk only";
-        return ok;
-    }
+        return named(shape || gaussian, "method=fft is for disk, polygon and gaussian kernels");
+    case BlurMethod::BilinearTaps:
+        return named(k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased
+                         && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f)
+                         && k.hole == 0.0f,
+                     "method=taps is the seed's 9x9 or 17x17 anti-aliased disk only");
     }
     err = "unknown method";
     return false;
@@ -933,23 +915,23 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // FFT from sigma ~7: 0.72x the separable's time at sigma 7.75, 0.47x at 15.75, 0.25x
     // at 63.75, A/B).
     const int nc = in.nchannels();
-    const double fft_ns = fft_convolve_cost_ns(roi.width(), roi.height(), nc, rx, ry);
-    const bool shape    = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
+    auto fft_ns      = [&] { return fft_convolve_cost_ns(roi.width(), roi.height(), nc, rx, ry); };
+    const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
     const bool by_spans = method == BlurMethod::Spans || method == BlurMethod::BilinearTaps
                           || (shape && method == BlurMethod::Exact);
     const std::vector<Span> spans = by_spans && !weights.is_identity()
                                         ? kernel_spans(reflected(weights))
                                         : std::vector<Span>{};
     if (shape && method == BlurMethod::Exact && !weights.is_identity())
-        method = fft_ns < 0.85 * nc * spans_cost_ns(roi.width(), roi.height(), spans.size(), ry,
+        method = fft_ns() < 0.85 * nc * spans_cost_ns(roi.width(), roi.height(), spans.size(), ry,
                                                     spans_mirror_in_y(spans))
                      ? BlurMethod::Fft
                      : BlurMethod::Spans;
     if (k.shape == KernelShape::Gaussian && method == BlurMethod::Exact && !weights.is_identity())
-        method = fft_ns < 0.85 * nc * separable_cost_ns(roi.width(), roi.height(), 2 * rx + 1, 2 * ry + 1)
+        method = fft_ns() < 0.85 * nc * separable_cost_ns(roi.width(), roi.height(), 2 * rx + 1, 2 * ry + 1)
                      ? BlurMethod::Fft
                      : BlurMethod::Separable;
-    if (method == BlurMethod::Fft && !std::isfinite(fft_ns)) {
+    if (opts.method == BlurMethod::Fft && !std::isfinite(fft_ns())) {  // chosen, it is finite
         dst.errorfmt("blur: method=fft takes kernels under 8192 px across; this one reaches {}x{}",
                      2 * rx + 1, 2 * ry + 1);
         return false;
