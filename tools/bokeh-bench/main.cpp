@@ -1,7 +1,8 @@
 // bokeh-bench — speed and accuracy of OpenBokeh's methods, side by side with peers.
 //
 // Each case is timed in this process on a 1920x1080 RGBA float frame of the built-in
-// "lights" scene (one warm-up, then the median of --reps runs), and its error is measured
+// "lights" scene (one warm-up, then the median of --reps runs, the cases' runs interleaved
+// in shuffled rounds: timing.h), and its error is measured
 // against the brute-force reference with the same kernel on a 240x135 crop (brute force
 // on the whole frame would take minutes for large kernels). Error: RMSE in linear light
 // and PSNR after the fixed tone map x / (1 + x) per channel (peak 1), stated in the CSV.
@@ -217,32 +218,36 @@ int main(int argc, char* argv[])
         std::printf("(GEGL not built in: the gegl:lens-blur peer is left out)\n");
     }
 
-    std::printf("%-9s %-32s %6s %10s %12s %10s\n", "task", "method", "size", "median ms",
-                "RMSE", "PSNR dB");
+    // Per case: how a run on the frame is timed, and its error on the crop, measured once.
+    std::vector<std::function<void()>> runs;
+    std::vector<int> nreps;
+    std::vector<bokeh::ImageError> errors;
     for (const Case& c : cases) {
-        const int n = c.reps > 0 ? c.reps : reps;
-        double ms;
         OIIO::ImageBuf result_small;
         if (c.peer == "gegl") {
-            auto run = [&](const OIIO::ImageBuf& in, OIIO::ImageBuf& out) {
+            auto run = [threads, size = c.size](const OIIO::ImageBuf& in, OIIO::ImageBuf& out) {
                 out.reset(in.spec());
                 std::string err;
                 if (!bokeh_bench::gegl_lens_blur(static_cast<const float*>(in.localpixels()),
                                                  in.spec().width, in.spec().height,
-                                                 0.5f * float(c.size - 1), threads,
+                                                 0.5f * float(size - 1), threads,
                                                  static_cast<float*>(out.localpixels()), &err)) {
                     std::fprintf(stderr, "bokeh-bench: GEGL: %s\n", err.c_str());
                     std::exit(1);
                 }
             };
-            OIIO::ImageBuf out;
-            ms = median_ms([&] { run(frame, out); }, n);
+            runs.push_back([run, &frame] {
+                OIIO::ImageBuf out;
+                run(frame, out);
+            });
             run(small, result_small);
             result_small.set_origin(small.spec().x, small.spec().y);
         } else if (c.peer == "oiio") {
             const OIIO::ImageBuf k = IBA::make_kernel("disk", float(c.size), float(c.size));
-            OIIO::ImageBuf out;
-            ms = median_ms([&] { IBA::convolve(out, frame, k, true, {}, threads); }, n);
+            runs.push_back([k, &frame, threads] {
+                OIIO::ImageBuf out;
+                IBA::convolve(out, frame, k, true, {}, threads);
+            });
             IBA::convolve(result_small, small, k, true, {}, threads);
         } else if (c.method.rfind("FFT (image", 0) == 0) {
             // The exact kernel handed over as an image, as a user's aperture image would be.
@@ -256,25 +261,39 @@ int main(int argc, char* argv[])
                     const float v = float(kw.at(dx, dy));
                     kimg.setpixel(dx, dy, &v, 1);
                 }
-            OIIO::ImageBuf out;
-            ms = median_ms([&] { bokeh::convolve_image(out, frame, kimg, c.options, {}, threads); }, n);
+            runs.push_back([kimg, opts = c.options, &frame, threads] {
+                OIIO::ImageBuf out;
+                bokeh::convolve_image(out, frame, kimg, opts, {}, threads);
+            });
             bokeh::convolve_image(result_small, small, kimg, c.options, {}, threads);
         } else {
-            OIIO::ImageBuf out;
-            ms = median_ms([&] { bokeh::blur(out, frame, c.kernel, c.options, {}, threads); }, n);
+            runs.push_back([k = c.kernel, opts = c.options, &frame, threads] {
+                OIIO::ImageBuf out;
+                bokeh::blur(out, frame, k, opts, {}, threads);
+            });
             bokeh::blur(result_small, small, c.kernel, c.options, {}, threads);
         }
+        nreps.push_back(c.reps > 0 ? c.reps : reps);
         OIIO::ImageBuf ref;
         bokeh::convolve_reference(ref, small, bokeh::kernel_weights(c.kernel), {}, {}, threads);
         bokeh::ImageError e;
         std::string err;
         bokeh::compare(e, result_small, ref, err, {}, threads);
-        const double rmse = e.rmse_linear, psnr = e.psnr_db;
+        errors.push_back(e);
+    }
+    std::printf("timing %zu cases in interleaved rounds ...\n", runs.size());
+    std::fflush(stdout);
+    const std::vector<double> ms = bokeh_bench::interleaved_medians_ms(runs, nreps);
+
+    std::printf("%-9s %-32s %6s %10s %12s %10s\n", "task", "method", "size", "median ms",
+                "RMSE", "PSNR dB");
+    for (size_t i = 0; i < cases.size(); ++i) {
+        const Case& c = cases[i];
+        const double rmse = errors[i].rmse_linear, psnr = errors[i].psnr_db;
         std::printf("%-9s %-32s %6.0f %10.2f %12.3g %10.1f\n", c.task.c_str(), c.method.c_str(),
-                    c.size, ms, rmse, psnr);
-        std::fflush(stdout);
+                    c.size, ms[i], rmse, psnr);
         rows.push_back(format("{},{},{},{},{},{:.3f},{},{:.6g},{:.2f}", c.task, c.method, c.peer,
-                              c.size, threads, ms, n, rmse, psnr));
+                              c.size, threads, ms[i], nreps[i], rmse, psnr));
     }
     return write_csv(csv, rows);
 }
