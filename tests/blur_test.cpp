@@ -891,11 +891,15 @@ TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIri
         float iris;
         BlurMethod same_as;
         KernelShape shape = KernelShape::Disk;
+        int blades        = 5;
     };
     for (const Case& c : { Case{ 63.0f, 0.0f, BlurMethod::Reduced }, Case{ 40.0f, 0.0f, BlurMethod::Reduced },
                            Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.05f, BlurMethod::Exact },
                            Case{ 40.0f, 0.0f, BlurMethod::Bands, KernelShape::Polygon },
                            Case{ 50.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon },
+                           // The hexagon: reduced from 45 px too, the parallelograms below.
+                           Case{ 45.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon, 6 },
+                           Case{ 40.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6 },
                            Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Gaussian },
                            Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Polygon } }) {
         SCOPED_TRACE(c.size);
@@ -903,7 +907,7 @@ TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIri
         SCOPED_TRACE(int(c.shape));
         Kernel k;
         k.shape     = c.shape;
-        k.blades    = 5;
+        k.blades    = c.blades;
         k.width_px  = c.size;
         k.height_px = c.size;
         BlurOptions fast, named;

@@ -37,9 +37,10 @@ enum class BlurMethod {
                      ///< disk and polygon: row spans or FFT tiles; whichever the cost model
                      ///< says is cheaper (on the project's machine at 1080p: FFT from
                      ///< ~120 px for a disk, sigma ~7 for a Gaussian)
-    Fast,            ///< the shape's fast approximation: Gaussian -> three boxes,
-                     ///< hexagon -> parallelograms, disk and polygon -> reduced where
-                     ///< its automatic factor exceeds 1, bands below; in iris mode, Exact
+    Fast,            ///< the shape's fast approximation: Gaussian -> three boxes; disk
+                     ///< and polygon (hexagon too) -> reduced where its automatic factor
+                     ///< exceeds 1, below that the hexagon -> parallelograms, others ->
+                     ///< bands; in iris mode, Exact
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
