@@ -188,6 +188,10 @@ int main(int argc, char* argv[])
         bokeh::Kernel flat = kernel(S::Polygon, d);
         flat.rotation_deg  = 30.0f;
         ours("hexagon", "3 parallelograms (flat top)", d, flat, M::Parallelograms);
+        // Any other rotation: four passes over planes, one of them gathered down columns.
+        bokeh::Kernel turned = kernel(S::Polygon, d);
+        turned.rotation_deg  = 7.0f;
+        ours("hexagon", "3 parallelograms (7 degrees)", d, turned, M::Parallelograms);
         ours("hexagon", "reduced 1/N (bilinear)", d, kernel(S::Polygon, d), M::Reduced);
         bokeh::Kernel g = kernel(S::Gaussian, d);
         ours("gaussian", "separable (exact)", d, g, M::Separable);
