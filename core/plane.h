@@ -207,6 +207,9 @@ int hexagon_reach(const Kernel& k, bool along_x);
 /// Whether the hexagon of `k` takes the fused sweep (its third segment along the rows of
 /// the working frame: rotations by multiples of 30 degrees).
 bool hexagon_sweeps(const Kernel& k);
+/// Predicted single-thread time in ns of one channel of the parallelograms over a w x h
+/// output, in spans_cost_ns's units, so the two compare (blur_approx.cpp's cost model).
+double parallelograms_cost_ns(const Kernel& k, int w, int h);
 /// The fused sweep straight from `in` into `dst` over roi (no padded plane, no copy out);
 /// rx, ry as hexagon_reach.
 bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,

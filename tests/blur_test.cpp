@@ -892,14 +892,20 @@ TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIri
         BlurMethod same_as;
         KernelShape shape = KernelShape::Disk;
         int blades        = 5;
+        float rotation    = 0.0f;
     };
     for (const Case& c : { Case{ 63.0f, 0.0f, BlurMethod::Reduced }, Case{ 40.0f, 0.0f, BlurMethod::Reduced },
                            Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.05f, BlurMethod::Exact },
                            Case{ 40.0f, 0.0f, BlurMethod::Bands, KernelShape::Polygon },
                            Case{ 50.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon },
-                           // The hexagon: reduced from 45 px too, the parallelograms below.
+                           // The hexagon: reduced from 45 px too; below, the parallelograms
+                           // or, where the cost models say they cost less, the exact spans
+                           // (small hexagons; rotations off 30 degrees, the four passes).
                            Case{ 45.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon, 6 },
                            Case{ 40.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6 },
+                           Case{ 15.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6 },
+                           Case{ 23.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 7.0f },
+                           Case{ 40.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6, 7.0f },
                            Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Gaussian },
                            Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Polygon } }) {
         SCOPED_TRACE(c.size);
@@ -907,8 +913,9 @@ TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIri
         SCOPED_TRACE(int(c.shape));
         Kernel k;
         k.shape     = c.shape;
-        k.blades    = c.blades;
-        k.width_px  = c.size;
+        k.blades       = c.blades;
+        k.rotation_deg = c.rotation;
+        k.width_px     = c.size;
         k.height_px = c.size;
         BlurOptions fast, named;
         fast.method  = BlurMethod::Fast;

@@ -377,7 +377,7 @@ TEST(Cli, BlurMethodsAndConvolve)
         "{0} --blur:kernel=disk 9 -o {1}/exact.exr "
         "{0} --blur:kernel=disk:method=bands:bands=4 9 -o {1}/bands.exr "
         "{0} --blur:kernel=disk:method=taps 9 -o {1}/taps.exr "
-        "{0} --blur:kernel=hex:method=fast 9 -o {1}/hex.exr "
+        "{0} --blur:kernel=hex:method=parallelograms 9 -o {1}/hex.exr "
         "{0} --blur:kernel=disk:method=reduced:reduction=2 9 -o {1}/reduced.exr "
         "{0} --blur:kernel=disk:iris=2 9 -o {1}/iris.exr "
         "{0} --blur:kernel=disk:method=spans 9 -o {1}/spans.exr "

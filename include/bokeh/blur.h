@@ -39,8 +39,9 @@ enum class BlurMethod {
                      ///< ~120 px for a disk, sigma ~7 for a Gaussian)
     Fast,            ///< the shape's fast approximation: Gaussian -> three boxes; disk
                      ///< and polygon (hexagon too) -> reduced where its automatic factor
-                     ///< exceeds 1, below that the hexagon -> parallelograms, others ->
-                     ///< bands; in iris mode, Exact
+                     ///< exceeds 1; below that, others -> bands, the hexagon ->
+                     ///< parallelograms or Exact, whichever the cost models say is
+                     ///< cheaper; in iris mode, Exact
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
