@@ -58,6 +58,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <optional>
 #include <memory>
 #include <tuple>
 
@@ -813,15 +814,13 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         // The hexagon too takes the reduction from 45 px: 40.9-42.2 dB from 45 to 63 px at
         // rotations 0, 30 and 7 degrees, and 41 ms at 45 px (1080p RGBA, 2 threads) against
         // the parallelograms' 36 (flat-topped), 60 (upright) and 132 (7 degrees, four
-        // passes); 27 against 35 / 55 at 63 px (session 9, docs/benchmarks.md). Below, the
-        // parallelograms, or the exact blur where it costs less (blur() decides, by the
-        // cost models, once it has the kernel's spans).
+        // passes); 27 against 35 / 55 at 63 px (session 9, docs/benchmarks.md).
         m = opts.iris != 0.0f ? BlurMethod::Exact
             : gaussian        ? BlurMethod::ThreeBoxes
             : shape && k.edge == KernelEdge::Antialiased && reduction_factor(k) > 1.0
                 ? BlurMethod::Reduced
-            : is_hexagon(k)           ? BlurMethod::Parallelograms
-            : shape && k.hole == 0.0f ? BlurMethod::Bands
+            : is_hexagon(k)           ? BlurMethod::Parallelograms  // or Exact: see blur()
+            : shape && k.hole == 0.0f ? BlurMethod::Bands           // or Exact: see blur()
                                       : BlurMethod::Exact;  // box: running sums are the fast method
         return true;
     case BlurMethod::ThreeBoxes: return named(gaussian, "method=boxes3 is for the gaussian kernel");
@@ -884,28 +883,35 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (method == BlurMethod::Reduced)
         return blur_reduced(dst, in, k, opts, roi, nthreads);
 
+    // method=fast below the reduction weighs its approximation (the parallelograms for a
+    // hexagon, the bands for other shapes) against the exact row spans by the cost models,
+    // and takes the exact blur where it costs less: small kernels (15 px: a disk's spans
+    // 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
+    // flat-topped and 54 upright) and hexagons at rotations off 30 degrees, whose four
+    // passes also fall under 40 dB at 15-23 px (36.8-39.7 dB; session 9).
+    std::optional<KernelWeights> exact_weights;
+    if (opts.method == BlurMethod::Fast
+        && (method == BlurMethod::Parallelograms || method == BlurMethod::Bands)) {
+        exact_weights = kernel_weights(k, nthreads);
+        const std::vector<Span> s = kernel_spans(reflected(*exact_weights));
+        const int w = in.roi().width(), h = in.roi().height();
+        const double approx_ns = method == BlurMethod::Parallelograms
+                                     ? parallelograms_cost_ns(k, w, h)
+                                     : bands_cost_ns(w, h, opts.bands);
+        if (spans_cost_ns(w, h, s.size(), exact_weights->ry, spans_mirror_in_y(s)) < approx_ns)
+            method = BlurMethod::Exact;
+    }
     // The weights the method computes with (the effective ones for the approximations
     // that have them) and how far the method reads around an output pixel.
     // The parallelograms read no weights, only whether the kernel is a point (the
     // identity); the exact weights of a large polygon (supersampled) cost tens of ms.
-    // method=fast below the reduction weighs the parallelograms against the exact blur:
-    // the exact weights first, the cheaper by the cost models after.
-    const bool fast_hexagon = opts.method == BlurMethod::Fast && method == BlurMethod::Parallelograms;
-    const bool no_weights   = method == BlurMethod::Parallelograms && !fast_hexagon
+    const bool no_weights = method == BlurMethod::Parallelograms && !exact_weights
                             && std::min(k.width_px, k.height_px) >= 2.0f;
     const KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
                                   : method == BlurMethod::Bands        ? banded_weights(k, opts.bands, nthreads)
                                   : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
+                                  : exact_weights                      ? *exact_weights
                                                                        : kernel_weights(k, nthreads);
-    if (fast_hexagon && !weights.is_identity()) {
-        // The exact row spans cost less for small hexagons (15 px: 26-29 ms against the
-        // parallelograms' 33 flat-topped, 54 upright) and at rotations off 30 degrees,
-        // whose four passes also fall under 40 dB at 15 px (36.8; session 9).
-        const std::vector<Span> s = kernel_spans(reflected(weights));
-        const int w = in.roi().width(), h = in.roi().height();
-        if (spans_cost_ns(w, h, s.size(), weights.ry, spans_mirror_in_y(s)) < parallelograms_cost_ns(k, w, h))
-            method = BlurMethod::Exact;
-    }
     int rx = weights.rx, ry = weights.ry;
     std::vector<double> box3x, box3y;
     if (method == BlurMethod::ThreeBoxes) {

@@ -191,6 +191,9 @@ bool spans_mirror_in_y(const std::vector<Span>& spans);
 /// w x h output with taps_x and taps_y taps (blur.cpp's cost model).
 double separable_cost_ns(int w, int h, int taps_x, int taps_y);
 
+/// Predicted single-thread time in ns of one channel of convolve_bands_direct over a w x h
+/// output with `bands` bands per half kernel, in spans_cost_ns's units (blur_approx.cpp).
+double bands_cost_ns(int w, int h, int bands);
 /// A banded kernel (rows in runs of equal rows) straight from the source into `dst` over
 /// `roi` by running sums down the rows (blur_approx.cpp): cost independent of its size.
 bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,

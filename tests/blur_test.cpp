@@ -882,8 +882,10 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
 TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIris)
 {
     // Fast is the reduced buffer where the automatic reduction exceeds 1 (37.5 px and up)
-    // and the bands below it; in iris mode, where every approximation measured under 40 dB,
-    // the exact method: the same pixels as asking for that method.
+    // and below it the bands (the parallelograms for a hexagon), or the exact method where
+    // the cost models say it is cheaper (small kernels); in iris mode, where every
+    // approximation measured under 40 dB, the exact method: the same pixels as asking for
+    // that method.
     const OIIO::ImageBuf src = test_image(200, 150);
     // A polygon (reduced to 30 px, not 25) from 45 px.
     struct Case {
@@ -896,6 +898,8 @@ TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIri
     };
     for (const Case& c : { Case{ 63.0f, 0.0f, BlurMethod::Reduced }, Case{ 40.0f, 0.0f, BlurMethod::Reduced },
                            Case{ 31.0f, 0.0f, BlurMethod::Bands }, Case{ 63.0f, 0.05f, BlurMethod::Exact },
+                           Case{ 15.0f, 0.0f, BlurMethod::Exact },
+                           Case{ 15.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon },
                            Case{ 40.0f, 0.0f, BlurMethod::Bands, KernelShape::Polygon },
                            Case{ 50.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon },
                            // The hexagon: reduced from 45 px too; below, the parallelograms

@@ -37,11 +37,11 @@ enum class BlurMethod {
                      ///< disk and polygon: row spans or FFT tiles; whichever the cost model
                      ///< says is cheaper (on the project's machine at 1080p: FFT from
                      ///< ~120 px for a disk, sigma ~7 for a Gaussian)
-    Fast,            ///< the shape's fast approximation: Gaussian -> three boxes; disk
+    Fast,            ///< the cheapest method at >= 40 dB: Gaussian -> three boxes; disk
                      ///< and polygon (hexagon too) -> reduced where its automatic factor
-                     ///< exceeds 1; below that, others -> bands, the hexagon ->
-                     ///< parallelograms or Exact, whichever the cost models say is
-                     ///< cheaper; in iris mode, Exact
+                     ///< exceeds 1; below that, bands (the hexagon: parallelograms) or
+                     ///< Exact, whichever the cost models say is cheaper; in iris mode,
+                     ///< Exact
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms

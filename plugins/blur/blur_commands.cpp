@@ -107,10 +107,10 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps", "reduced", "spans", "fft", "separable" },
                            "exact: disk/polygon by spans or fft, gaussian separable or fft, whichever is cheaper; "
-                           "fast: the cheapest approximation measured at >= 40 dB "
+                           "fast: the cheapest method measured at >= 40 dB "
                            "(gaussian: boxes3; disk/polygon/hex: reduced from 37.5/45 px, "
-                           "below that bands, hex: parallelograms or exact by cost; with iris: "
-                           "exact); "
+                           "below that bands (hex: parallelograms) or exact, whichever costs "
+                           "less; with iris: exact); "
                            "taps: the seed's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
                            "bilinearly; reference: brute force"),
