@@ -25,18 +25,22 @@ inline double median_ms(const std::function<void()>& fn, int reps)
     return t[t.size() / 2];
 }
 
-// The medians of many cases timed in interleaved rounds: each case warmed up once, then
-// every round runs each case still short of its reps[i] runs once, in an order shuffled
-// per round (fixed seed, so runs repeat). This machine has slow phases of minutes (the
-// same call seen 30 % slower, and once 4x, for a while): one case after another, a phase
-// falls on some cases and not others and skews their ratios (a box at 255 px against one
-// at 15); interleaved, it falls on every case alike.
+// The medians of many cases timed in interleaved rounds: every round runs each case still
+// short of its reps[i] timed runs once, in an order shuffled per round (fixed seed, so runs
+// repeat), each timed run right after an untimed one of the same case (its warm-up: caches
+// and allocations as the back-to-back runs of median_ms have them), or, for the cases with
+// warm[i] false (the slow peers), after one warm-up at the start. This machine has slow
+// phases of minutes (the same call 30 % slower, once 4x, for a while): one case after
+// another, a phase falls on some cases and not others and skews their ratios (a box at
+// 255 px against one at 15); interleaved, it falls on every case alike.
 inline std::vector<double> interleaved_medians_ms(const std::vector<std::function<void()>>& fns,
-                                                  const std::vector<int>& reps)
+                                                  const std::vector<int>& reps,
+                                                  const std::vector<bool>& warm)
 {
     const size_t n = fns.size();
-    for (const auto& fn : fns)
-        fn();  // warm-up
+    for (size_t i = 0; i < n; ++i)
+        if (!warm[i])
+            fns[i]();  // the one warm-up
     std::vector<std::vector<double>> t(n);
     const int rounds = reps.empty() ? 0 : *std::max_element(reps.begin(), reps.end());
     std::vector<size_t> order(n);
@@ -47,6 +51,8 @@ inline std::vector<double> interleaved_medians_ms(const std::vector<std::functio
         for (size_t i : order) {
             if (r >= reps[i])
                 continue;
+            if (warm[i])
+                fns[i]();
             OIIO::Timer timer;
             fns[i]();
             t[i].push_back(timer() * 1e3);
