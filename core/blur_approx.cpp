@@ -37,9 +37,14 @@
 // source ImageBuf directly (the upright hexagon's lines are its columns, gathered once
 // each into a ring) and writes `dst` directly: no padded or transposed copies. Measured
 // A/B against the four passes at 15-255 px (1080p RGBA, two threads): 0.56-0.68 of their
-// time upright, 0.42-0.53 flat-topped. The flat-topped sweep is bound by its arithmetic
-// (four sheared lines, three windows in double and three unshears per row); the upright
-// one's strided column reads and writes cost as much again (docs/benchmarks.md).
+// time upright, 0.42-0.53 flat-topped. Known limit: 32-45 ms flat-topped, 50-77 upright
+// (1080p RGBA, two threads), over the 25. Each steep window's step costs ~6 ms
+// and the row pass with the output ~7; the upright sweep's column gather and scatter ~20
+// more. Float sums, a fused step, L1-sized blocks, narrower chunks, aligned buffers and
+// block transposes each changed the time by 11 % or less (session 9, docs/benchmarks.md),
+// so the steps are bound neither by their instruction count nor by cache capacity alone;
+// an upright sweep without transposing (flat windows) lost 5-8 dB to the sampling of
+// flat lines by rows.
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
 // (boundaries by dynamic programming, least squares on the row areas), each band's rows
