@@ -895,10 +895,12 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         exact_weights = kernel_weights(k, nthreads);
         const std::vector<Span> s = kernel_spans(reflected(*exact_weights));
         const int w = in.roi().width(), h = in.roi().height();
+        // A kernel not symmetric in y takes twice the bands (banded_weights).
+        const bool mirrored    = spans_mirror_in_y(s);
         const double approx_ns = method == BlurMethod::Parallelograms
                                      ? parallelograms_cost_ns(k, w, h)
-                                     : bands_cost_ns(w, h, opts.bands);
-        if (spans_cost_ns(w, h, s.size(), exact_weights->ry, spans_mirror_in_y(s)) < approx_ns)
+                                     : bands_cost_ns(w, h, mirrored ? opts.bands : 2 * opts.bands);
+        if (spans_cost_ns(w, h, s.size(), exact_weights->ry, mirrored) < approx_ns)
             method = BlurMethod::Exact;
     }
     // The weights the method computes with (the effective ones for the approximations

@@ -47,7 +47,8 @@
 // flat lines by rows.
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
-// (boundaries by dynamic programming, least squares on the row areas), each band's rows
+// (boundaries by dynamic programming, least squares on the row areas; over the lower half,
+// mirrored, for a kernel symmetric in y, else over all rows), each band's rows
 // replaced by one interval of the same mean area and centre, anti-aliased at its ends;
 // the bands are rectangles, so the cost depends on the band count, not the kernel size.
 // Changed for speed (issue 3): outside iris mode (convolve_bands_direct) each task walks
@@ -744,8 +745,9 @@ namespace detail {
 
 // Flat in the size, nearly linear in the band count: measured (1080p RGBA, two threads,
 // session 9) 33-35 ms with 4 bands and 41-48 with 8 at 15-37 px, i.e. 5.5 + 0.67 ns a
-// pixel and channel per band on one thread; spans_cost_ns reads a disk's spans right
-// (1.0-1.06 of measured at 15 and 63 px), so the two compare as they are.
+// pixel and channel per band on one thread (a pentagon's 16 bands over all its rows: 62-70
+// ms at 23-44 px, 15 ns); spans_cost_ns reads a disk's spans right (1.0-1.06 of measured
+// at 15 and 63 px), so the two compare as they are.
 double bands_cost_ns(int w, int h, int bands)
 {
     return double(w) * double(h) * (5.5 + 0.67 * double(bands));
@@ -899,18 +901,26 @@ KernelWeights banded_weights(const Kernel& k, int bands, int nthreads)
     const KernelWeights exact = kernel_weights(k, nthreads);
     if (exact.is_identity() || bands < 1)
         return exact;
-    // Row areas and centres, rows 0..ry of the lower half (the kernel is symmetric in y
-    // for every shape here: the band split is mirrored).
-    const int n = exact.ry + 1;
-    std::vector<double> area(static_cast<size_t>(n)), centre(static_cast<size_t>(n));
+    // A kernel symmetric in y (a disk, a polygon with an even number of blades) is split
+    // over rows 0..ry of its lower half and the split mirrored; any other (a pentagon) over
+    // all its rows -ry..ry, with twice the bands. (Before, every kernel was mirrored: a
+    // pentagon's upper half became its lower half's mirror image, 28-32 dB against the exact
+    // pentagon at 23-44 px, a heptagon 33-38; session 9.)
     double peak = 0.0;
     for (double v : exact.w)
         peak = std::max(peak, v);
+    bool mirrored = true;
+    for (int r = 1; r <= exact.ry && mirrored; ++r)
+        for (int dx = -exact.rx; dx <= exact.rx && mirrored; ++dx)
+            mirrored = std::abs(exact.at(dx, r) - exact.at(dx, -r)) <= 1e-12 * peak;
+    const int row0 = mirrored ? 0 : -exact.ry;  // band row r is kernel row row0 + r
+    const int n    = exact.ry + 1 - row0;
+    std::vector<double> area(static_cast<size_t>(n)), centre(static_cast<size_t>(n));
     for (int r = 0; r < n; ++r) {
         double a = 0.0, c = 0.0;
         for (int dx = -exact.rx; dx <= exact.rx; ++dx) {
-            a += exact.at(dx, r);
-            c += dx * exact.at(dx, r);
+            a += exact.at(dx, row0 + r);
+            c += dx * exact.at(dx, row0 + r);
         }
         area[size_t(r)]   = a;
         centre[size_t(r)] = a > 0.0 ? c / a : 0.0;
@@ -926,7 +936,7 @@ KernelWeights banded_weights(const Kernel& k, int bands, int nthreads)
         const double s = s1[size_t(j)] - s1[size_t(i)];
         return (s2[size_t(j)] - s2[size_t(i)]) - s * s / (j - i);
     };
-    const int nb = std::min(bands, n);
+    const int nb = std::min(mirrored ? bands : 2 * bands, n);
     const double inf = std::numeric_limits<double>::infinity();
     std::vector<std::vector<double>> best(size_t(nb) + 1, std::vector<double>(size_t(n) + 1, inf));
     std::vector<std::vector<int>> cut(size_t(nb) + 1, std::vector<int>(size_t(n) + 1, 0));
@@ -966,9 +976,9 @@ KernelWeights banded_weights(const Kernel& k, int bands, int nthreads)
         const IntervalWeights iw = interval_weights(mean_centre - 0.5 * len, mean_centre + 0.5 * len);
         for (int r = i; r < j; ++r)
             for (int sign : { 1, -1 }) {
-                if (sign < 0 && r == 0)
+                if (sign < 0 && (r == 0 || !mirrored))
                     continue;
-                const int dy = sign * r;
+                const int dy = sign * (row0 + r);
                 for (size_t q = 0; q < iw.w.size(); ++q) {
                     const int dx = iw.first + int(q);
                     if (std::abs(dx) <= out.rx)

@@ -192,7 +192,8 @@ bool spans_mirror_in_y(const std::vector<Span>& spans);
 double separable_cost_ns(int w, int h, int taps_x, int taps_y);
 
 /// Predicted single-thread time in ns of one channel of convolve_bands_direct over a w x h
-/// output with `bands` bands per half kernel, in spans_cost_ns's units (blur_approx.cpp).
+/// output with `bands` bands over the kernel's height (a kernel symmetric in y: the bands per
+/// half kernel), in spans_cost_ns's units (blur_approx.cpp).
 double bands_cost_ns(int w, int h, int bands);
 /// A banded kernel (rows in runs of equal rows) straight from the source into `dst` over
 /// `roi` by running sums down the rows (blur_approx.cpp): cost independent of its size.

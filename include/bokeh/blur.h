@@ -74,7 +74,8 @@ struct BlurOptions {
     Border border     = Border::Black;
     bool grow         = false;  ///< enlarge the data window by the kernel radius
     BlurMethod method = BlurMethod::Auto;
-    int bands         = 8;      ///< Bands: horizontal bands per half kernel (1..64)
+    int bands         = 8;      ///< Bands: horizontal bands per half kernel (1..64; a kernel
+                                ///< not symmetric in y, a pentagon: twice that over its height)
     /// Iris mode (SEEDS.md section 3): average exp(iris * x) and return log(mean) / iris,
     /// so bright values dominate the average as in a real lens; 0 = a plain average.
     /// Applies to every channel but alpha and depth (Z); iris * (max - min) must stay
