@@ -58,8 +58,8 @@
 #include <cmath>
 #include <limits>
 #include <map>
-#include <optional>
 #include <memory>
+#include <optional>
 #include <tuple>
 
 #include <OpenImageIO/imagebufalgo.h>
