@@ -889,8 +889,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
     // flat-topped and 54 upright) and hexagons at rotations off 30 degrees, whose four
     // passes also fall under 40 dB at 15-23 px (36.8-39.7 dB; session 9).
+    // (Only up to 64 px across: the spans' cost grows with the size and is past every
+    // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     std::optional<KernelWeights> exact_weights;
-    if (opts.method == BlurMethod::Fast
+    if (opts.method == BlurMethod::Fast && std::max(k.width_px, k.height_px) <= 64.0f
         && (method == BlurMethod::Parallelograms || method == BlurMethod::Bands)) {
         exact_weights = kernel_weights(k, nthreads);
         const std::vector<Span> s = kernel_spans(reflected(*exact_weights));
