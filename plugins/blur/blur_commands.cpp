@@ -114,7 +114,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "taps: the seed's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
                            "bilinearly; reference: brute force"),
-        OptionSpec::Int("bands", 8, 1, 64, "method=bands: bands per half kernel"),
+        OptionSpec::Int("bands", 8, 1, 64,
+                        "method=bands: bands per half kernel (a kernel not symmetric in y, a "
+                        "pentagon: twice that over its height)"),
         OptionSpec::Float("reduction", 0.0, 0.0, 16.0,
                           "method=reduced: the factor N, 1..16 (0: the kernel's narrower side "
                           "over 25, a polygon's over 30, at most 8; 1 below 1.5)"),
