@@ -897,11 +897,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         exact_weights = kernel_weights(k, nthreads);
         const std::vector<Span> s = kernel_spans(reflected(*exact_weights));
         const int w = in.roi().width(), h = in.roi().height();
-        // A kernel not symmetric in y takes twice the bands (banded_weights).
         const bool mirrored    = spans_mirror_in_y(s);
         const double approx_ns = method == BlurMethod::Parallelograms
                                      ? parallelograms_cost_ns(k, w, h)
-                                     : bands_cost_ns(w, h, mirrored ? opts.bands : 2 * opts.bands);
+                                     : bands_cost_ns(w, h, opts.bands, mirrored);
         if (spans_cost_ns(w, h, s.size(), exact_weights->ry, mirrored) < approx_ns)
             method = BlurMethod::Exact;
     }
@@ -912,6 +911,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     const bool no_weights = method == BlurMethod::Parallelograms && !exact_weights
                             && std::min(k.width_px, k.height_px) >= 2.0f;
     const KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
+                                  : method == BlurMethod::Bands && exact_weights
+                                      ? banded_from(*exact_weights, opts.bands)
                                   : method == BlurMethod::Bands        ? banded_weights(k, opts.bands, nthreads)
                                   : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
                                   : exact_weights                      ? *exact_weights

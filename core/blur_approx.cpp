@@ -748,9 +748,10 @@ namespace detail {
 // pixel and channel per band on one thread (a pentagon's 16 bands over all its rows: 62-70
 // ms at 23-44 px, 15 ns); spans_cost_ns reads a disk's spans right (1.0-1.06 of measured
 // at 15 and 63 px), so the two compare as they are.
-double bands_cost_ns(int w, int h, int bands)
+double bands_cost_ns(int w, int h, int bands, bool mirrored)
 {
-    return double(w) * double(h) * (5.5 + 0.67 * double(bands));
+    const int split = mirrored ? bands : 2 * bands;  // as banded_from splits
+    return double(w) * double(h) * (5.5 + 0.67 * double(split));
 }
 
 bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
@@ -898,7 +899,13 @@ double reduction_factor(const Kernel& k)
 
 KernelWeights banded_weights(const Kernel& k, int bands, int nthreads)
 {
-    const KernelWeights exact = kernel_weights(k, nthreads);
+    return detail::banded_from(kernel_weights(k, nthreads), bands);
+}
+
+namespace detail {
+
+KernelWeights banded_from(const KernelWeights& exact, int bands)
+{
     if (exact.is_identity() || bands < 1)
         return exact;
     // A kernel symmetric in y (a disk, a polygon with an even number of blades) is split
@@ -993,6 +1000,8 @@ KernelWeights banded_weights(const Kernel& k, int bands, int nthreads)
         v /= sum;
     return out;
 }
+
+}  // namespace detail
 
 KernelWeights bilinear_tap_weights(const Kernel& k, int* fetches)
 {

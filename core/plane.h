@@ -191,10 +191,12 @@ bool spans_mirror_in_y(const std::vector<Span>& spans);
 /// w x h output with taps_x and taps_y taps (blur.cpp's cost model).
 double separable_cost_ns(int w, int h, int taps_x, int taps_y);
 
+/// banded_weights (blur.h) from the kernel's exact weights.
+KernelWeights banded_from(const KernelWeights& exact, int bands);
 /// Predicted single-thread time in ns of one channel of convolve_bands_direct over a w x h
-/// output with `bands` bands over the kernel's height (a kernel symmetric in y: the bands per
-/// half kernel), in spans_cost_ns's units (blur_approx.cpp).
-double bands_cost_ns(int w, int h, int bands);
+/// output with `bands` bands per half kernel (twice that over the height unless the kernel
+/// is `mirrored` in y, as banded_from splits it), in spans_cost_ns's units (blur_approx.cpp).
+double bands_cost_ns(int w, int h, int bands, bool mirrored);
 /// A banded kernel (rows in runs of equal rows) straight from the source into `dst` over
 /// `roi` by running sums down the rows (blur_approx.cpp): cost independent of its size.
 bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,

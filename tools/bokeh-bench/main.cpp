@@ -40,7 +40,6 @@
 
 using OIIO::Strutil::fmt::format;
 namespace IBA = OIIO::ImageBufAlgo;
-using bokeh_bench::median_ms;
 
 namespace {
 

@@ -1,5 +1,5 @@
-// timing.h — how every bokeh-bench task times a case: one warm-up, then the median of
-// `reps` runs, in milliseconds.
+// timing.h — how bokeh-bench times its cases: median_ms, one warm-up then the median of
+// `reps` runs; interleaved_medians_ms, many cases in shuffled rounds (milliseconds).
 #pragma once
 
 #include <algorithm>
@@ -11,19 +11,6 @@
 #include <OpenImageIO/timer.h>
 
 namespace bokeh_bench {
-
-inline double median_ms(const std::function<void()>& fn, int reps)
-{
-    fn();  // warm-up
-    std::vector<double> t;
-    for (int i = 0; i < reps; ++i) {
-        OIIO::Timer timer;
-        fn();
-        t.push_back(timer() * 1e3);
-    }
-    std::sort(t.begin(), t.end());
-    return t[t.size() / 2];
-}
 
 // The medians of many cases timed in interleaved rounds: every round runs each case still
 // short of its reps[i] timed runs once, in an order shuffled per round (fixed seed, so runs
@@ -65,6 +52,12 @@ inline std::vector<double> interleaved_medians_ms(const std::vector<std::functio
             medians[i] = t[i][t[i].size() / 2];
     }
     return medians;
+}
+
+// One case: one warm-up, then the median of `reps` runs.
+inline double median_ms(const std::function<void()>& fn, int reps)
+{
+    return interleaved_medians_ms({ fn }, { reps }, { false })[0];
 }
 
 }  // namespace bokeh_bench
