@@ -60,6 +60,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <tuple>
 
 #include <OpenImageIO/imagebufalgo.h>
@@ -489,17 +490,24 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 }
 
 // Single-thread time in ns of convolve_spans_direct over a w x h output, per channel:
-// per span and pixel 0.15 ns plus 0.0008 ns per kernel row (the tile's prefix ring
-// outgrows L2 from ~90 px), plus ~2 for the prefix sums and the copy out. Fitted to
-// anti-aliased disks at 1080p on the project's machine, 2.6 spans per kernel row
-// (ns per span: 0.146 at 15 px, 0.19 at 63, 0.23 at 127, 0.37 at 255), before the
-// kernels mirrored in y took convolve_symmetric_spans, whose span term is ~0.7 of that
-// (0.75-0.79x the whole time at 15-63 px, 0.65x at 127, A/B). Compared with
-// fft_convolve_cost_ns to pick the exact method.
-double spans_cost_ns(int w, int h, size_t nspans, int ry, bool mirrored)
+// 0.10 ns per span and pixel (two prefix loads and a multiply-add) and 0.29 per kernel
+// row and pixel (the row's accumulators loaded and stored, its prefix row found), both
+// 0.7 of that for a kernel mirrored in y (convolve_symmetric_spans shares each span's sum
+// between two output rows: 0.65-0.79x the time, A/B, session 8), plus 0.75 for the prefix
+// sums and the copy out. Fitted (least relative squares) to 44 timings at 1080p RGBA on
+// two threads, session 10: disks 15-191 px, hexagons at 0, 30 and 7 degrees, pentagons,
+// a curved octagon, 2:1 and 1:2 ellipses and a catadioptric disk; it reads them within
+// 0.84-1.21 of measured. The model before charged spans alone (0.15 ns each, growing
+// with the rows): it read a hexagon's spans up to 1.30x low and large or holed kernels
+// up to 1.7x high (a hexagon has ~2.2 spans per row against a disk's 2.6, a holed disk 5).
+double spans_cost_ns(int w, int h, const std::vector<Span>& spans)
 {
-    const double per_span = (mirrored ? 0.7 : 1.0) * (0.15 + 0.0008 * (2 * ry + 1));
-    return double(w) * double(h) * (double(nspans) * per_span + 2.0);
+    std::set<int> rows;
+    for (const Span& s : spans)
+        rows.insert(s.dy);
+    const double shared = spans_mirror_in_y(spans) ? 0.7 : 1.0;
+    return double(w) * double(h)
+           * (shared * (0.10 * double(spans.size()) + 0.29 * double(rows.size())) + 0.75);
 }
 
 // Single-thread time in ns of the separable convolution over a w x h output, per channel:
@@ -887,8 +895,11 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // hexagon, the bands for other shapes) against the exact row spans by the cost models,
     // and takes the exact blur where it costs less: small kernels (15 px: a disk's spans
     // 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
-    // flat-topped and 54 upright) and hexagons at rotations off 30 degrees, whose four
-    // passes also fall under 40 dB at 15-23 px (36.8-39.7 dB; session 9).
+    // flat-topped and 54 upright) and hexagons at rotations off 30 degrees up to the
+    // reduction (their four passes: 130 ms at 35 px against the spans' 107, and under 40
+    // dB at 15-23 px, 36.8-39.7; sessions 9, 10). With the spans model of session 10 the
+    // crossings fall at ~27 px for a disk (8 bands), ~33 for a pentagon, ~29 for an
+    // octagon, ~23 for the flat-topped hexagon and ~33 for the upright one.
     // (Only up to 64 px across: the spans' cost grows with the size and is past every
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     std::optional<KernelWeights> exact_weights;
@@ -901,7 +912,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         const double approx_ns = method == BlurMethod::Parallelograms
                                      ? parallelograms_cost_ns(k, w, h)
                                      : bands_cost_ns(w, h, opts.bands, mirrored);
-        if (spans_cost_ns(w, h, s.size(), exact_weights->ry, mirrored) < approx_ns)
+        if (spans_cost_ns(w, h, s) < approx_ns)
             method = BlurMethod::Exact;
     }
     // The weights the method computes with (the effective ones for the approximations
@@ -935,14 +946,16 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // A disk or polygon, exactly: row spans or FFT tiles, whichever the cost models say is
     // cheaper. In iris mode too: against the brute force (disk 19 px, 0.003 .. 500, k x
     // range = 29.9) both err by 2.2e-4 at most, the transform spreading its brightest
-    // exp(k x)'s rounding over its tile as the spans do along their rows. The FFT must
-    // promise to be 15 % cheaper: its wall time measured 15-25 % above its model at
-    // 63-255 px (its kernel's transform runs on one thread; large tiles contend for L3),
-    // and with the margin the two methods crossed where they were measured to, ~90 px,
-    // before the mirrored spans (convolve_symmetric_spans) moved the crossing to ~120 px.
-    // A Gaussian: the separable convolution or FFT tiles, by the same rule (at 1080p the
-    // FFT from sigma ~7: 0.72x the separable's time at sigma 7.75, 0.47x at 15.75, 0.25x
-    // at 63.75, A/B).
+    // exp(k x)'s rounding over its tile as the spans do along their rows. The FFT is taken
+    // when its model is under 1.2 times the spans': at 95-191 px its wall time measured
+    // 0.69-0.85 of its model, at 15-63 px 0.85-1.0, against the spans model's 0.84-1.21
+    // (session 10, 44 timings, two threads); of the factors 0.85-1.25 tried, 1.2 lost the
+    // least time by its wrong picks over those timings (33 ms in all: a 63 px pentagon
+    // by FFT at 1.11-1.17x the spans' time; 0.85, the margin before, lost 876 ms, 1.0
+    // lost 427). A disk crosses between 95 and 127 px (measured FFT/spans 1.05 and 0.77).
+    // A Gaussian: the separable convolution or FFT tiles when the FFT's model promises
+    // to be 15 % cheaper (at 1080p the FFT from sigma ~7: 0.72x the separable's time at
+    // sigma 7.75, 0.47x at 15.75, 0.25x at 63.75, A/B).
     const int nc = in.nchannels();
     auto fft_ns      = [&] { return fft_convolve_cost_ns(roi.width(), roi.height(), nc, rx, ry); };
     const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
@@ -952,8 +965,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
                                         ? kernel_spans(reflected(weights))
                                         : std::vector<Span>{};
     if (shape && method == BlurMethod::Exact && !weights.is_identity())
-        method = fft_ns() < 0.85 * nc * spans_cost_ns(roi.width(), roi.height(), spans.size(), ry,
-                                                    spans_mirror_in_y(spans))
+        method = fft_ns() < 1.2 * nc * spans_cost_ns(roi.width(), roi.height(), spans)
                      ? BlurMethod::Fft
                      : BlurMethod::Spans;
     if (k.shape == KernelShape::Gaussian && method == BlurMethod::Exact && !weights.is_identity())

@@ -179,9 +179,8 @@ Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
                    const std::vector<int>& kernel_of, int nthreads);
 
 /// Predicted single-thread time in ns of one channel of convolve_spans_direct over a
-/// w x h output with `nspans` spans over 2 ry + 1 rows, `mirrored` as spans_mirror_in_y
-/// (blur.cpp's cost model).
-double spans_cost_ns(int w, int h, size_t nspans, int ry, bool mirrored);
+/// w x h output with the kernel's `spans` (blur.cpp's cost model).
+double spans_cost_ns(int w, int h, const std::vector<Span>& spans);
 /// Whether kernel rows dy and -dy have the same spans (a disk; a polygon symmetric about
 /// its horizontal axis): convolve_spans_direct then shares each span sum between two
 /// output rows.
