@@ -862,8 +862,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         dst.errorfmt("blur: {}", err);
         return false;
     }
-    if (opts.bands < 1 || opts.bands > 64) {
-        dst.errorfmt("blur: bands {} is outside 1..64", opts.bands);
+    if (opts.bands < 0 || opts.bands > 64) {
+        dst.errorfmt("blur: bands {} is outside 0..64 (0: the method's choice)", opts.bands);
         return false;
     }
     if (!std::isfinite(opts.iris) || std::abs(opts.iris) > 1000.0f) {
@@ -897,21 +897,26 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
     // flat-topped and 54 upright) and hexagons at rotations off 30 degrees up to the
     // reduction (their four passes: 130 ms at 35 px against the spans' 107, and under 40
-    // dB at 15-23 px, 36.8-39.7; sessions 9, 10). With the spans model of session 10 the
-    // crossings fall at ~27 px for a disk (8 bands), ~33 for a pentagon, ~29 for an
-    // octagon, ~23 for the flat-topped hexagon and ~33 for the upright one.
+    // dB at 15-23 px, 36.8-39.7; sessions 9, 10). With the spans model and the band counts
+    // of session 10 the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
+    // ~23 for an octagon, ~23 for the flat-topped hexagon and ~33 for the upright one.
     // (Only up to 64 px across: the spans' cost grows with the size and is past every
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
+    // Its bands, unless the user named a count: the fewest within its accuracy bound
+    // (fast_band_count; 8 bands measured 41-48 ms at 15-37 px, 4 bands 33-35, session 9).
     std::optional<KernelWeights> exact_weights;
+    int bands = opts.bands > 0 ? opts.bands : 8;
     if (opts.method == BlurMethod::Fast && std::max(k.width_px, k.height_px) <= 64.0f
         && (method == BlurMethod::Parallelograms || method == BlurMethod::Bands)) {
         exact_weights = kernel_weights(k, nthreads);
+        if (method == BlurMethod::Bands && opts.bands == 0)
+            bands = fast_band_count(*exact_weights, std::max(k.width_px, k.height_px));
         const std::vector<Span> s = kernel_spans(reflected(*exact_weights));
         const int w = in.roi().width(), h = in.roi().height();
         const bool mirrored    = spans_mirror_in_y(s);
         const double approx_ns = method == BlurMethod::Parallelograms
                                      ? parallelograms_cost_ns(k, w, h)
-                                     : bands_cost_ns(w, h, opts.bands, mirrored);
+                                     : bands_cost_ns(w, h, bands, mirrored);
         if (spans_cost_ns(w, h, s) < approx_ns)
             method = BlurMethod::Exact;
     }
@@ -923,8 +928,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
                             && std::min(k.width_px, k.height_px) >= 2.0f;
     const KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
                                   : method == BlurMethod::Bands && exact_weights
-                                      ? banded_from(*exact_weights, opts.bands)
-                                  : method == BlurMethod::Bands        ? banded_weights(k, opts.bands, nthreads)
+                                      ? banded_from(*exact_weights, bands)
+                                  : method == BlurMethod::Bands        ? banded_weights(k, bands, nthreads)
                                   : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
                                   : exact_weights                      ? *exact_weights
                                                                        : kernel_weights(k, nthreads);

@@ -192,6 +192,9 @@ double separable_cost_ns(int w, int h, int taps_x, int taps_y);
 
 /// banded_weights (blur.h) from the kernel's exact weights.
 KernelWeights banded_from(const KernelWeights& exact, int bands);
+/// method=fast's band count for a kernel `size_px` across with these exact weights: the
+/// fewest bands, 3..8, whose kernel stays within its accuracy bound (blur_approx.cpp).
+int fast_band_count(const KernelWeights& exact, double size_px);
 /// Predicted single-thread time in ns of one channel of convolve_bands_direct over a w x h
 /// output with `bands` bands per half kernel (twice that over the height unless the kernel
 /// is `mirrored` in y, as banded_from splits it), in spans_cost_ns's units (blur_approx.cpp).

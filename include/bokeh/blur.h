@@ -40,8 +40,9 @@ enum class BlurMethod {
     Fast,            ///< the cheapest method at >= 40 dB: Gaussian -> three boxes; disk
                      ///< and polygon (hexagon too) -> reduced where its automatic factor
                      ///< exceeds 1; below that, bands (the hexagon: parallelograms) or
-                     ///< Exact, whichever the cost models say is cheaper; in iris mode,
-                     ///< Exact
+                     ///< Exact, whichever the cost models say is cheaper, with the fewest
+                     ///< bands within its accuracy bound unless BlurOptions::bands is set;
+                     ///< in iris mode, Exact
     Reference,       ///< brute-force 2-D convolution (slow; tests and charts)
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
@@ -74,8 +75,10 @@ struct BlurOptions {
     Border border     = Border::Black;
     bool grow         = false;  ///< enlarge the data window by the kernel radius
     BlurMethod method = BlurMethod::Auto;
-    int bands         = 8;      ///< Bands: horizontal bands per half kernel (1..64; a kernel
-                                ///< not symmetric in y, a pentagon: twice that over its height)
+    int bands         = 0;      ///< Bands: horizontal bands per half kernel (1..64; a kernel
+                                ///< not symmetric in y, a pentagon: twice that over its
+                                ///< height); 0: the method's choice (Bands: 8; Fast: the
+                                ///< fewest, 3..8, within its accuracy bound, fast_band_count)
     /// Iris mode (SEEDS.md section 3): average exp(iris * x) and return log(mean) / iris,
     /// so bright values dominate the average as in a real lens; 0 = a plain average.
     /// Applies to every channel but alpha and depth (Z); iris * (max - min) must stay

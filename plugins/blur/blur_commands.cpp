@@ -110,13 +110,14 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "fast: the cheapest method measured at >= 40 dB "
                            "(gaussian: boxes3; disk/polygon/hex: reduced from 37.5/45 px, "
                            "below that bands (hex: parallelograms) or exact, whichever costs "
-                           "less; with iris: exact); "
+                           "less, with the fewest bands that keep 40 dB; with iris: exact); "
                            "taps: the seed's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
                            "bilinearly; reference: brute force"),
-        OptionSpec::Int("bands", 8, 1, 64,
-                        "method=bands: bands per half kernel (a kernel not symmetric in y, a "
-                        "pentagon: twice that over its height)"),
+        OptionSpec::Int("bands", 0, 0, 64,
+                        "method=bands or fast: bands per half kernel (a kernel not symmetric "
+                        "in y, a pentagon: twice that over its height); 0: the method's choice "
+                        "(bands: 8; fast: the fewest, 3..8, within its accuracy bound)"),
         OptionSpec::Float("reduction", 0.0, 0.0, 16.0,
                           "method=reduced: the factor N, 1..16 (0: the kernel's narrower side "
                           "over 25, a polygon's over 30, at most 8; 1 below 1.5)"),
