@@ -145,6 +145,37 @@ void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border bor
     source_line(src, false, sx, y0, y1, border, out);
 }
 
+void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Border border,
+                    float* const* out)
+{
+    const OIIO::ROI data = src.roi();
+    const int nc         = src.nchannels();
+    const size_t ncs     = size_t(nc);
+    const int in0 = std::clamp(data.ybegin, y0, y1), in1 = std::clamp(data.yend, in0, y1);
+    auto rows = [&](auto pixel_floats) {  // a fixed pixel size: one vector move per pixel
+        constexpr size_t kNc = decltype(pixel_floats)::value;
+        const size_t step    = kNc ? kNc : ncs;
+        const size_t pitch = size_t(src.scanline_stride()) / sizeof(float);
+        const float* p     = in1 > in0 ? static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin)) : nullptr;
+        for (int y = in0; y < in1; ++y, p += pitch) {
+            const size_t at = size_t(y - y0) * step;
+            for (int i = 0; i < n; ++i)
+                std::memcpy(out[i] + at, p + size_t(i) * step, step * sizeof(float));
+        }
+    };
+    switch (nc) {
+    case 1: rows(std::integral_constant<size_t, 1>()); break;
+    case 3: rows(std::integral_constant<size_t, 3>()); break;
+    case 4: rows(std::integral_constant<size_t, 4>()); break;
+    default: rows(std::integral_constant<size_t, 0>());
+    }
+    // The rows past the data window, by the border rule.
+    for (int i = 0; i < n; ++i) {
+        source_line(src, false, sx + i, y0, in0, border, out[i]);
+        source_line(src, false, sx + i, in1, y1, border, out[i] + size_t(in1 - y0) * ncs);
+    }
+}
+
 namespace {
 
 // A fixed pixel size: one vector move per pixel, not a call.
