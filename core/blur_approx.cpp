@@ -37,14 +37,16 @@
 // source ImageBuf directly (the upright hexagon's lines are its columns, gathered once
 // each into a ring) and writes `dst` directly: no padded or transposed copies. Measured
 // A/B against the four passes at 15-255 px (1080p RGBA, two threads): 0.56-0.68 of their
-// time upright, 0.42-0.53 flat-topped. Known limit: 32-45 ms flat-topped, 50-77 upright
-// (1080p RGBA, two threads), over the 25. Each steep window's step costs ~6 ms
-// and the row pass with the output ~7; the upright sweep's column gather and scatter ~20
-// more. Float sums, a fused step, L1-sized blocks, narrower chunks, aligned buffers and
-// block transposes each changed the time by 11 % or less (session 9, docs/benchmarks.md),
-// so the steps are bound neither by their instruction count nor by cache capacity alone;
-// an upright sweep without transposing (flat windows) lost 5-8 dB to the sampling of
-// flat lines by rows.
+// time upright, 0.42-0.53 flat-topped. The upright sweep reads the source's columns and
+// writes the destination's 16 at a time (kColumnBatch; one at a time a 1920 px frame's
+// column falls in 2 of L1's 64 cache sets): 0.79-0.92x its time before (session 10).
+// Known limit: 30-44 ms flat-topped, 43-58 upright (1080p RGBA, two threads), over the
+// issue's 25. Each steep window's step costs ~6 ms and the row pass with the output ~7;
+// the window slides (double sums, each value converted in and out) take ~30 % of the
+// sweep's time, the shears' and unshears' three-tap reads ~25 %. Float sums, a fused
+// step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
+// or less (session 9, docs/benchmarks.md); an upright sweep without transposing (flat
+// windows) lost 5-8 dB to the sampling of flat lines by rows.
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
 // (boundaries by dynamic programming, least squares on the row areas; over the lower half,
@@ -1175,16 +1177,17 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
 
 bool hexagon_sweeps(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]); }
 
-// Flat in the size, by path: measured at 15-63 px (1080p RGBA, two threads, session 9)
-// 33-35 ms flat-topped (the sweep as given), 54-59 upright (the sweep transposed) and
-// 103-140 at 7 degrees (four passes), i.e. 8, 13 and 30 ns a pixel and channel on one
-// thread. spans_cost_ns reads a hexagon's spans within 0.84-1.18 of measured at 31-63 px
-// (session 10), so the two models compare as they are. (Until its row term, they were
-// read up to 1.39x low, and this model was divided by 1.3 to match.)
+// Flat in the size, by path: measured at 15-63 px (1080p RGBA, two threads) 31-35 ms
+// flat-topped (the sweep as given), 43-48 upright (the sweep transposed, its columns read
+// and written in batches; session 10) and 103-140 at 7 degrees (four passes; session 9),
+// i.e. 8, 11 and 30 ns a pixel and channel on one thread. spans_cost_ns reads a hexagon's
+// spans within 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare
+// as they are. (Until its row term, they were read up to 1.39x low, and this model was
+// divided by 1.3 to match.)
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
     const double ns = !hexagon_sweeps(k)      ? 30.0
-                      : hexagon_transposed(k) ? 13.0
+                      : hexagon_transposed(k) ? 11.0
                                               : 8.0;
     return double(w) * double(h) * ns;
 }
