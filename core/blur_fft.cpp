@@ -16,9 +16,9 @@
 // on one thread. Tiles cost ~14 ns per transformed point at 256 x 256 and more as they
 // grow (tile_cost_ns); the tiling is chosen per call by that model, and blur.cpp compares
 // the result (fft_convolve_cost_ns) with the other exact method's model. At 1080p the FFT
-// takes a disk from about 120 px across (against the row spans of a kernel mirrored in y,
-// in the session 8 bench run: 0.87x their time at 127 px, 0.82x at 255, 1.35x at 63) and a
-// Gaussian from sigma ~7.
+// takes a disk from about 99 px across (against the row spans of a kernel mirrored in y,
+// session 10: 0.77x their time at 127 px, 1.05x at 95, 1.39x at 63; its wall time measured
+// 0.69-0.85 of this model at 95-191 px, 0.85-1.0 at 15-63) and a Gaussian from sigma ~7.
 //
 // Double precision throughout: float transforms leave noise of ~1e-7 of a tile's largest
 // value everywhere, so a 1e6 highlight would put ~0.1 into the black around it; in double

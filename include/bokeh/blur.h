@@ -36,7 +36,7 @@ enum class BlurMethod {
     Exact,           ///< box: running sums; Gaussian: separable convolution or FFT tiles;
                      ///< disk and polygon: row spans or FFT tiles; whichever the cost model
                      ///< says is cheaper (on the project's machine at 1080p: FFT from
-                     ///< ~120 px for a disk, sigma ~7 for a Gaussian)
+                     ///< ~100 px for a disk, sigma ~7 for a Gaussian)
     Fast,            ///< the cheapest method at >= 40 dB: Gaussian -> three boxes; disk
                      ///< and polygon (hexagon too) -> reduced where its automatic factor
                      ///< exceeds 1; below that, bands (the hexagon: parallelograms) or
