@@ -957,7 +957,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // (session 10, 44 timings, two threads); of the factors 0.85-1.25 tried, 1.2 lost the
     // least time by its wrong picks over those timings (33 ms in all: a 63 px pentagon
     // by FFT at 1.11-1.17x the spans' time; 0.85, the margin before, lost 876 ms, 1.0
-    // lost 427). A disk crosses between 95 and 127 px (measured FFT/spans 1.05 and 0.77).
+    // lost 427). A disk crosses at ~99 px (measured FFT / spans: 1.05 at 95 px, 0.77 at 127).
     // A Gaussian: the separable convolution or FFT tiles when the FFT's model promises
     // to be 15 % cheaper (at 1080p the FFT from sigma ~7: 0.72x the separable's time at
     // sigma 7.75, 0.47x at 15.75, 0.25x at 63.75, A/B).

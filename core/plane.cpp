@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <type_traits>
 
 #if defined(__linux__)
 #    include <sys/mman.h>
@@ -140,11 +141,6 @@ void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border
     source_line(src, true, sy, x0, x1, border, out);
 }
 
-void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border border, float* out)
-{
-    source_line(src, false, sx, y0, y1, border, out);
-}
-
 void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Border border,
                     float* const* out)
 {
@@ -155,8 +151,10 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
     auto rows = [&](auto pixel_floats) {  // a fixed pixel size: one vector move per pixel
         constexpr size_t kNc = decltype(pixel_floats)::value;
         const size_t step    = kNc ? kNc : ncs;
+        if (in1 <= in0)
+            return;
         const size_t pitch = size_t(src.scanline_stride()) / sizeof(float);
-        const float* p     = in1 > in0 ? static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin)) : nullptr;
+        const float* p     = static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin));
         for (int y = in0; y < in1; ++y, p += pitch) {
             const size_t at = size_t(y - y0) * step;
             for (int i = 0; i < n; ++i)

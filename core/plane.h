@@ -76,12 +76,10 @@ Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int
 /// fused methods call it per tile so no padded copy of the whole frame is made.
 void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border, float* out);
 
-/// Source column `sx` (inside the data window) over rows [y0, y1), filled past the data
-/// window by the border rule, into out[0 .. (y1 - y0) nc): a column of the transpose.
-void source_column(const OIIO::ImageBuf& src, int sx, int y0, int y1, Border border, float* out);
-/// Source columns sx .. sx + n - 1 (inside the data window), each as source_column into
-/// out[i]: a row's n pixels are read at once, for a transposing reader that takes several
-/// lines at a time (a column alone re-reads each cache line for each of its pixels).
+/// Source columns sx .. sx + n - 1 (inside the data window) over rows [y0, y1), filled
+/// past the data window by the border rule, column i into out[i][0 .. (y1 - y0) nc):
+/// columns of the transpose. A row's n pixels are read at once (a column alone re-reads
+/// each cache line for each of its pixels).
 void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Border border,
                     float* const* out);
 /// Columns a transposing reader or writer takes at once (source_columns): 16 RGBA float
