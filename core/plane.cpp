@@ -141,6 +141,23 @@ void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border
     source_line(src, true, sy, x0, x1, border, out);
 }
 
+namespace {
+
+// f(std::integral_constant<size_t, N>) with N = nc for the common pixel sizes (1, 3, 4
+// floats), so a pixel moves as one fixed-size copy, not a call; N = 0 for the others.
+template<class F>
+void by_pixel_size(int nc, F&& f)
+{
+    switch (nc) {
+    case 1: f(std::integral_constant<size_t, 1>()); break;
+    case 3: f(std::integral_constant<size_t, 3>()); break;
+    case 4: f(std::integral_constant<size_t, 4>()); break;
+    default: f(std::integral_constant<size_t, 0>());
+    }
+}
+
+}  // namespace
+
 void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Border border,
                     float* const* out)
 {
@@ -148,25 +165,18 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
     const int nc         = src.nchannels();
     const size_t ncs     = size_t(nc);
     const int in0 = std::clamp(data.ybegin, y0, y1), in1 = std::clamp(data.yend, in0, y1);
-    auto rows = [&](auto pixel_floats) {  // a fixed pixel size: one vector move per pixel
-        constexpr size_t kNc = decltype(pixel_floats)::value;
-        const size_t step    = kNc ? kNc : ncs;
-        if (in1 <= in0)
-            return;
-        const size_t pitch = size_t(src.scanline_stride()) / sizeof(float);
-        const float* p     = static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin));
-        for (int y = in0; y < in1; ++y, p += pitch) {
-            const size_t at = size_t(y - y0) * step;
-            for (int i = 0; i < n; ++i)
-                std::memcpy(out[i] + at, p + size_t(i) * step, step * sizeof(float));
-        }
-    };
-    switch (nc) {
-    case 1: rows(std::integral_constant<size_t, 1>()); break;
-    case 3: rows(std::integral_constant<size_t, 3>()); break;
-    case 4: rows(std::integral_constant<size_t, 4>()); break;
-    default: rows(std::integral_constant<size_t, 0>());
-    }
+    if (in1 > in0)  // the rows inside the data window: a row's n pixels at once
+        by_pixel_size(nc, [&](auto pixel_floats) {
+            constexpr size_t kNc = decltype(pixel_floats)::value;
+            const size_t step    = kNc ? kNc : ncs;
+            const size_t pitch   = size_t(src.scanline_stride()) / sizeof(float);
+            const float* p       = static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin));
+            for (int y = in0; y < in1; ++y, p += pitch) {
+                const size_t at = size_t(y - y0) * step;
+                for (int i = 0; i < n; ++i)
+                    std::memcpy(out[i] + at, p + size_t(i) * step, step * sizeof(float));
+            }
+        });
     // The rows past the data window, by the border rule.
     for (int i = 0; i < n; ++i) {
         source_line(src, false, sx + i, y0, in0, border, out[i]);
@@ -174,28 +184,14 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
     }
 }
 
-namespace {
-
-// A fixed pixel size: one vector move per pixel, not a call.
-template<int NC>
-void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count)
-{
-    for (int i = 0; i < count; ++i)
-        std::memcpy(dst + size_t(i) * dst_step, src + size_t(i) * src_step, NC * sizeof(float));
-}
-
-}  // namespace
-
 void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count, int nc)
 {
-    switch (nc) {
-    case 1: copy_pixels<1>(dst, dst_step, src, src_step, count); return;
-    case 3: copy_pixels<3>(dst, dst_step, src, src_step, count); return;
-    case 4: copy_pixels<4>(dst, dst_step, src, src_step, count); return;
-    default:
+    by_pixel_size(nc, [&](auto pixel_floats) {
+        constexpr size_t kNc = decltype(pixel_floats)::value;
+        const size_t step    = kNc ? kNc : size_t(nc);
         for (int i = 0; i < count; ++i)
-            std::copy_n(src + size_t(i) * src_step, nc, dst + size_t(i) * dst_step);
-    }
+            std::memcpy(dst + size_t(i) * dst_step, src + size_t(i) * src_step, step * sizeof(float));
+    });
 }
 
 Plane pad(const OIIO::ImageBuf& src, const OIIO::ROI& region, Border border, int nthreads,
