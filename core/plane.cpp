@@ -347,34 +347,34 @@ bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* wh
 
 // Four channels: four pixels at a time, their sums within the block formed off the chain,
 // so the running sum (one vector add per block, not per pixel) is the only dependency
-// carried from block to block. Other channel counts go through memory.
+// carried from block to block. Written with vector types: the same steps written per
+// channel were compiled scalar in every clone (generic tuning; GCC 12), 2x slower in
+// isolation and 18 % of the fused hexagon sweep's time (session 11). Other channel counts
+// go through memory.
 BOKEH_HOT void row_prefix(double* p, const float* v, size_t npx, int nc)
 {
     if (nc == 4) {
-        double run[4] = { 0.0, 0.0, 0.0, 0.0 };
-        p[0] = p[1] = p[2] = p[3] = 0.0;
-        size_t x = 0;
+        using Pixel  = float __attribute__((vector_size(16), aligned(4), may_alias));
+        using Pixeld = double __attribute__((vector_size(32), aligned(8), may_alias));
+        using Sum    = double __attribute__((vector_size(32)));
+        const auto* in = reinterpret_cast<const Pixel*>(v);
+        auto* out      = reinterpret_cast<Pixeld*>(p);
+        Sum run        = { 0.0, 0.0, 0.0, 0.0 };
+        out[0]         = run;
+        size_t x       = 0;
         for (; x + 4 <= npx; x += 4) {
-            const float* q = v + 4 * x;
-            double* o      = p + 4 * (x + 1);
-            double s0[4], s1[4], s2[4], s3[4];
-            for (int c = 0; c < 4; ++c) {
-                s0[c] = double(q[c]);
-                s1[c] = s0[c] + double(q[4 + c]);
-                s2[c] = s1[c] + double(q[8 + c]);
-                s3[c] = s2[c] + double(q[12 + c]);
-            }
-            for (int c = 0; c < 4; ++c) {
-                o[c]      = run[c] + s0[c];
-                o[4 + c]  = run[c] + s1[c];
-                o[8 + c]  = run[c] + s2[c];
-                o[12 + c] = run[c] + s3[c];
-                run[c] += s3[c];
-            }
+            const Sum s0 = __builtin_convertvector(in[x], Sum);
+            const Sum s1 = s0 + __builtin_convertvector(in[x + 1], Sum);
+            const Sum s2 = s1 + __builtin_convertvector(in[x + 2], Sum);
+            const Sum s3 = s2 + __builtin_convertvector(in[x + 3], Sum);
+            out[x + 1] = run + s0;
+            out[x + 2] = run + s1;
+            out[x + 3] = run + s2;
+            out[x + 4] = run + s3;
+            run += s3;
         }
         for (; x < npx; ++x)
-            for (int c = 0; c < 4; ++c)
-                p[4 * (x + 1) + c] = run[c] += double(v[4 * x + c]);
+            out[x + 1] = run += __builtin_convertvector(in[x], Sum);
         return;
     }
     const size_t ncs = size_t(nc);
