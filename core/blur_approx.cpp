@@ -31,21 +31,24 @@
 // passes, the padding and, upright, the transposing copies).
 // Fused (issue 3): when the third segment runs along the rows of the working frame (the
 // upright and the flat-topped hexagon, every rotation by a multiple of 30 degrees), one
-// sweep down the rows does all four passes (hexagon_sweep): the two steep segments' windows
-// on the source, a ring of B's rows for seg_a B, and S summed along its row; same
-// arithmetic, so equal to float rounding. Outside iris mode (hexagon_direct) it reads the
+// sweep down the rows makes the hexagon (hexagon_sweep), the rhombi grouped so that each
+// steep segment runs once: two windows on the source and on a ring of rows, and two sums
+// along the rows (row prefix sums, the cheaper pass), where the four passes take three
+// steep windows. Outside iris mode (hexagon_direct) it reads the
 // source ImageBuf directly (the upright hexagon's lines are its columns, gathered once
 // each into a ring) and writes `dst` directly: no padded or transposed copies. Measured
 // A/B against the four passes at 15-255 px (1080p RGBA, two threads): 0.56-0.68 of their
-// time upright, 0.42-0.53 flat-topped. The upright sweep reads the source's columns and
+// time upright, 0.42-0.53 flat-topped (session 9, with three windows). The upright sweep reads the source's columns and
 // writes the destination's 16 at a time (kColumnBatch; one at a time a 1920 px frame's
 // column falls in 2 of L1's 64 cache sets): 0.79-0.92x its time before (session 10).
-// Known limit: 30-44 ms flat-topped, 43-58 upright (1080p RGBA, two threads), over the
-// issue's 25. Each steep window's step costs ~6 ms and the row pass with the output ~7;
-// the window slides (double sums, each value converted in and out) take ~30 % of the
-// sweep's time, the shears' and unshears' three-tap reads ~25 %. Float sums, a fused
+// Known limit: 23-37 ms flat-topped, 32-52 upright (1080p RGBA, two threads, session 11),
+// over the issue's 25 and growing ~1.35x from 15 to 255 px (wider chunk margins, rings out
+// of L2). The window slides (double sums, each value converted in and out) take ~20 % of
+// the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row sums ~25 %;
+// upright, the column gathers and scatters ~22 %. Float sums, a fused
 // step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
-// or less (session 9, docs/benchmarks.md); an upright sweep without transposing (flat
+// or less (session 9, docs/benchmarks.md); so did row sums in L1-sized tiles and rings on
+// huge pages (session 11); an upright sweep without transposing (flat
 // windows) lost 5-8 dB to the sampling of flat lines by rows.
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
@@ -520,27 +523,36 @@ struct SweepIO {
 };
 
 // The hexagon in one sweep down the rows, when its third segment c runs along the rows
-// (the upright hexagon in the transposed frame, the flat-topped one as given):
-// out = (seg_c S + seg_a B) / 3 with B = seg_b in and S = seg_a in + B, the sum of the four
-// passes of hexagon_parallelograms with the same arithmetic, but each row of B made once and
-// kept in a ring of the rows seg_a B still reads, and each row of S summed along the row
-// at once for seg_c: each source line is read once (a ring keeps the lines the windows
-// still read) and each output row written once, no middle planes.
+// (the upright hexagon in the transposed frame, the flat-topped one as given). The three
+// rhombi grouped so that the steep segments each run once:
+// out = (seg_a X + seg_c T) / 3 with T = seg_b in and X = seg_c in + T, i.e.
+// rhombus(a, c) + rhombus(a, b) + rhombus(c, b). A steep segment is a window with a shear
+// and an unshear; a segment along the rows is a row's prefix sums, the cheaper pass, so two
+// windows and two row passes, where hexagon_parallelograms' grouping
+// ((seg_c (seg_a in + B) + seg_a B) / 3) takes three windows and one row pass (session 11:
+// A/B 0.91-0.95 of that sweep's time at 15-255 px, 1080p RGBA, two threads). seg_a and
+// seg_c commute exactly (every step of a steep window is along the rows or sums down the
+// columns), so the two groupings differ only by float rounding. Each row of T is made once, summed along the row at
+// once into X, and kept in a ring until seg_c T reads it; X's rows are kept in a ring of
+// those seg_a still reads. Each source line is read once (a ring keeps the lines seg_b
+// still reads) and each output row written once, no middle planes.
 // Columns run in two or four fixed chunks (by the kernel and the image, never the thread
-// count), each over the columns its outputs read; the windows' sums restart per chunk but
-// add the same values in the same order, so only seg_c's row prefix sums depend on where a
+// count), each over the columns its outputs read; the window's sums restart per chunk but
+// add the same values in the same order, so only the row prefix sums depend on where a
 // chunk starts (float rounding).
 void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double ax, double ay,
                    double bx, double by, double cx, int nthreads)
 {
     const size_t ncs = size_t(nc);
-    // seg_c along the rows: out(x) reads S(x - i), i in [fc, lc].
+    // seg_c along the rows: an output x reads its row at x - i, i in [fc, lc].
     const SegmentWeights seg_c(cx);
     const int fc = seg_c.first, lc = seg_c.last;
-    // seg_a of B reads B over [x - la, x + ha) around an output x (grown_by); a steep
-    // segment's window reads its lines within the segment's width and three taps more.
+    // seg_a reads X over [x - la, x + ha) around an output x (grown_by); seg_b reads the
+    // source within its segment's width and three taps more.
     const int la = int(std::ceil(std::max(0.0, ax))) + 3, ha = int(std::ceil(std::max(0.0, -ax))) + 3;
-    const int reach_in = int(std::ceil(std::max(std::abs(ax), std::abs(bx)))) + 4;
+    const int reach_b = int(std::ceil(std::abs(bx))) + 4;
+    // seg_a reads X's rows up to `lead` ahead of the output row.
+    const int lead = std::max(0, -SegmentWeights(ay).first);
     const int margin = (lc - fc) + la + ha;
     const int width  = out_region.x1 - out_region.x0;
     const int nchunks = std::clamp(width / std::max(128, 3 * margin), 2, 4) / 2 * 2;
@@ -550,25 +562,33 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         if (X1 <= X0)
             return;
         const int Y0 = out_region.y0, Y1 = out_region.y1;
-        // S over [s0, s1) (zero outside the frame), B over [b0, b1): S's columns and
-        // seg_a's; the source lines over [i0, i1), the windows on them in its coordinates.
-        const int s0 = X0 - lc, s1 = X1 - fc, sa = std::max(0, s0), sb = std::min(io.w, s1);
-        const int b0 = std::max(0, std::min(sa, X0 - la)), b1 = std::min(io.w, std::max(sb, X1 + ha));
-        const int i0 = std::max(0, b0 - reach_in), i1 = std::min(io.w, b1 + reach_in), ni = i1 - i0;
-        SteepWindow seg_a(ax, ay, nc, ni, sa - i0, sb - i0, 0, Y0, Y1);
-        // seg_a of B reads B's rows up to `lead` ahead of the output row.
-        const int lead = std::max(0, -seg_a.first);
-        const int b_end = Y1 + lead;
-        SteepWindow seg_b(bx, by, nc, ni, b0 - i0, b1 - i0, 0, std::numeric_limits<int>::min(), b_end);
-        SteepWindow seg_ab(ax, ay, nc, b1 - b0, X0 - b0, X1 - b0, seg_b.start(), Y0, Y1);
-        // B's rows from y - last to y + lead, the source lines from the oldest the windows
-        // read to the newest, each in a ring.
-        const int nring = std::max(seg_ab.last, 0) + lead + 2;
-        const size_t nb = size_t(b1 - b0) * ncs;
-        std::vector<float> ring(size_t(nring) * nb);
-        auto b_row = [&](int r) { return ring.data() + size_t(((r % nring) + nring) % nring) * nb; };
-        const int lines_lo = std::min(lead - seg_b.last, -seg_a.last);
-        const int lines_hi = std::max(lead - seg_b.first, -seg_a.first);
+        // X over [xa, xb) (zero outside the frame); seg_c of T reads T over
+        // [X0 - lc, X1 - fc), so T's rows span [t0, t1), made over [ta, tb) inside the frame
+        // and zero elsewhere; seg_c of the source row reads it over [u0, u1); the source
+        // lines over [i0, i1).
+        const int xa = std::max(0, X0 - la), xb = std::min(io.w, X1 + ha);
+        const int t0 = std::min(xa, X0 - lc), t1 = std::max(xb, X1 - fc);
+        const int ta = std::max(0, t0), tb = std::min(io.w, t1);
+        const int u0 = xa - lc, u1 = xb - fc;
+        const int i0 = std::max(0, std::min(ta - reach_b, u0));
+        const int i1 = std::min(io.w, std::max(tb + reach_b, u1)), ni = i1 - i0;
+        const int x_end = Y1 + lead;  // X's and T's rows end here
+        SteepWindow seg_b(bx, by, nc, ni, ta - i0, tb - i0, 0, std::numeric_limits<int>::min(), x_end);
+        // X's rows before x_lo are zero: the source's before 0, T's before seg_b's start.
+        const int x_lo = std::min(0, seg_b.start());
+        SteepWindow seg_a(ax, ay, nc, xb - xa, X0 - xa, X1 - xa, x_lo, Y0, Y1);
+        // T's rows from y to y + lead, X's from y - last to y + lead, each in a ring.
+        const size_t nt_px = size_t(t1 - t0) * ncs, nx_px = size_t(xb - xa) * ncs;
+        const int nt = lead + 2, nx = std::max(seg_a.last, 0) + lead + 2;
+        std::vector<float> t_ring(size_t(nt + 1) * nt_px, 0.0f), x_ring(size_t(nx) * nx_px);
+        const float* t_zero = t_ring.data() + size_t(nt) * nt_px;
+        auto t_slot = [&](int r) { return t_ring.data() + size_t(((r % nt) + nt) % nt) * nt_px; };
+        auto t_row  = [&](int r) -> const float* {
+            return r >= seg_b.start() && r < x_end ? t_slot(r) : t_zero;
+        };
+        auto x_slot = [&](int r) { return x_ring.data() + size_t(((r % nx) + nx) % nx) * nx_px; };
+        // Source lines from the oldest seg_b reads to the newest.
+        const int lines_lo = lead - seg_b.last, lines_hi = lead - seg_b.first;
         // A missing line comes with the batch - 1 after it, so the ring holds that many more.
         const int batch  = std::max(1, io.batch);
         const int nlines = lines_hi - lines_lo + 2 + batch;
@@ -593,34 +613,50 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
             }
             return line_ptr[slot_of(r)];
         };
+        // The source row over [u0, u1) as seg_c reads it: in place when inside the frame,
+        // else copied inside a zero row.
+        const bool u_inside = u0 >= 0 && u1 <= io.w;
+        std::vector<float> u_row(size_t(u1 - u0) * ncs, 0.0f);
+        const int ua = std::max(0, u0), ub = std::min(io.w, u1);
+        auto source_for_c = [&](int r) -> const float* {
+            const float* line = in_line(r);
+            if (u_inside && line)
+                return line + size_t(u0 - i0) * ncs;
+            float* o = u_row.data() + size_t(ua - u0) * ncs;
+            if (line)
+                std::copy_n(line + size_t(ua - i0) * ncs, size_t(ub - ua) * ncs, o);
+            else
+                std::fill_n(o, size_t(ub - ua) * ncs, 0.0f);
+            return u_row.data();
+        };
         // Output rows for `store`, a batch at a time.
         const size_t no = size_t(X1 - X0) * ncs;
-        std::vector<float> s_row(size_t(s1 - s0) * ncs, 0.0f), ab_row(no), o_rows(size_t(batch) * no);
-        std::vector<double> prefix(size_t(s1 - s0 + 1) * ncs);
-        const int y_first = std::min({ seg_b.start() - lead, seg_a.start(), seg_ab.start() });
-        for (int y = y_first; y < Y1; ++y) {
-            const int yb = y + lead;  // the row of B made at this step
-            if (yb >= seg_b.start() && yb < b_end) {
-                seg_b.step(yb, in_line(yb - seg_b.first), in_line(yb - seg_b.last));
-                seg_b.read(yb, b_row(yb), nullptr, 1.0f);
+        std::vector<float> ab_row(no), o_rows(size_t(batch) * no);
+        std::vector<double> prefix(size_t(std::max(u1 - u0, t1 - t0) + 1) * ncs);
+        const int y_first = std::min(seg_b.start(), x_lo) - lead;
+        for (int y = std::min(y_first, seg_a.start()); y < Y1; ++y) {
+            const int r = y + lead;  // the row of T and X made at this step
+            if (r >= seg_b.start() && r < x_end) {
+                seg_b.step(r, in_line(r - seg_b.first), in_line(r - seg_b.last));
+                seg_b.read(r, t_slot(r) + size_t(ta - t0) * ncs, nullptr, 1.0f);
             }
-            auto b_line = [&](int r) -> const float* {
-                return r >= seg_b.start() && r <= yb && r < b_end ? b_row(r) : nullptr;
+            if (r >= x_lo && r < x_end)
+                segment_row(x_slot(r), source_for_c(r), prefix.data(), size_t(u1 - u0), nc, seg_c,
+                            0, t_row(r) + size_t(xa - t0) * ncs, 1.0f, nx_px);
+            auto x_line = [&](int q) -> const float* {
+                return q >= x_lo && q <= r && q < x_end ? x_slot(q) : nullptr;
             };
             if (y >= seg_a.start())
-                seg_a.step(y, in_line(y - seg_a.first), in_line(y - seg_a.last));
-            if (y >= seg_ab.start())
-                seg_ab.step(y, b_line(y - seg_ab.first), b_line(y - seg_ab.last));
+                seg_a.step(y, x_line(y - seg_a.first), x_line(y - seg_a.last));
             if (y < Y0)
                 continue;
-            const float* b_here = b_line(y);
-            seg_a.read(y, s_row.data() + size_t(sa - s0) * ncs,
-                       b_here ? b_here + size_t(sa - b0) * ncs : nullptr, 1.0f);
-            seg_ab.read(y, ab_row.data(), nullptr, 1.0f);
+            seg_a.read(y, ab_row.data(), nullptr, 1.0f);
             float* o       = io.out_row(y, X0, X1);
             const int held = (y - Y0) % batch;  // rows held for `store` before this one
-            segment_row(o ? o : o_rows.data() + size_t(held) * no, s_row.data(), prefix.data(),
-                        size_t(s1 - s0), nc, seg_c, 0, ab_row.data(), float(1.0 / 3.0), no);
+            segment_row(o ? o : o_rows.data() + size_t(held) * no,
+                        t_row(y) + size_t(X0 - lc - t0) * ncs, prefix.data(),
+                        size_t((X1 - fc) - (X0 - lc)), nc, seg_c, 0, ab_row.data(),
+                        float(1.0 / 3.0), no);
             if (!o && (held == batch - 1 || y == Y1 - 1))
                 io.store(y - held, held + 1, X0, X1, o_rows.data());
         }
@@ -1141,7 +1177,8 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
     const Dir a = d[0], b = d[1], c = d[2];
 
     // hexagon = (rhombus(a, b) + rhombus(b, c) + rhombus(c, a)) / 3
-    //         = (seg_c (seg_a + seg_b) + seg_a seg_b) / 3; two planes besides `in`, each
+    //         = (seg_c (seg_a + seg_b) + seg_a seg_b) / 3 (one pass of c, here the
+    // costliest: hexagon_sweep, where c runs along the rows, groups them the other way); two planes besides `in`, each
     // reused once its values are used up (a fresh 1080p plane costs its page faults).
     // Each pass computes only what the later ones read, back from the output region (the
     // plane less its margins): without that the passes would cover the whole padded
@@ -1177,18 +1214,21 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
 
 bool hexagon_sweeps(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]); }
 
-// Flat in the size, by path: measured at 15-63 px (1080p RGBA, two threads) 31-35 ms
-// flat-topped (the sweep as given), 43-48 upright (the sweep transposed, its columns read
-// and written in batches; session 10) and 103-140 at 7 degrees (four passes; session 9),
-// i.e. 8, 11 and 30 ns a pixel and channel on one thread. spans_cost_ns reads a hexagon's
+// Flat in the size, by path: measured at 15-63 px (1080p RGBA, two threads) 23-28 ms
+// flat-topped (the sweep as given), 32-41 upright (the sweep transposed, its columns read
+// and written in batches; session 11) and 103-140 at 7 degrees (four passes; session 9),
+// i.e. 6, 9 and 30 ns a pixel and channel on one thread. With these, `fast` takes the
+// sweep over the exact spans from 17 px flat-topped and 23 px upright, where spot timings
+// crossed (session 11: flat-topped, spans 31.7 ms at 17 px and 33.8 at 19, the sweep
+// 30.5 at 21; upright, spans 42.2 at 23 px, the sweep 41.6 at 27). spans_cost_ns reads a hexagon's
 // spans within 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare
 // as they are. (Until its row term, they were read up to 1.39x low, and this model was
 // divided by 1.3 to match.)
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
     const double ns = !hexagon_sweeps(k)      ? 30.0
-                      : hexagon_transposed(k) ? 11.0
-                                              : 8.0;
+                      : hexagon_transposed(k) ? 9.0
+                                              : 6.0;
     return double(w) * double(h) * ns;
 }
 
