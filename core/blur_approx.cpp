@@ -228,15 +228,18 @@ void shifted_row(float* g, const float* row, int lo, int hi, int nc, int u0, int
         edge(u);
 }
 
-// The window moved by one row: s (the inner rows' sum) += enter - leave, then
-// h = wf newest + inner s + wl oldest (the fractional ends), in double.
+// The window moved by one row: s (the inner rows' sum) += enter - leave, in double (no
+// drift), then h = inner s + wf newest + wl oldest (the fractional ends), in float: the
+// two ends need no double, and converting them cost ~3 % of the sweep (session 11, with
+// band_row's the same: A/B 0.89-0.98x).
 BOKEH_HOT void slide_window(double* s, float* h, const float* newest, const float* enter,
                             const float* leave, const float* oldest, double wf, double inner,
                             double wl, size_t n)
 {
+    const float wf_f = float(wf), wl_f = float(wl);
     for (size_t i = 0; i < n; ++i) {
         s[i] += double(enter[i]) - double(leave[i]);
-        h[i] = float(wf * newest[i] + inner * s[i] + wl * oldest[i]);
+        h[i] = float(inner * s[i]) + wf_f * newest[i] + wl_f * oldest[i];
     }
 }
 
@@ -455,14 +458,16 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
 }
 
 // o[i] = (wf newest[i] + wl oldest[i] + inner (p1[i] - p0[i]) + add[i]) * scale: a
-// segment along a row from its two end pixels and the prefix sums of the ones between.
+// segment along a row from its two end pixels and the prefix sums of the ones between
+// (the difference of the sums in double, the rest in float, as slide_window).
 BOKEH_HOT void band_row(float* o, const float* newest, const float* oldest, const double* p1,
                         const double* p0, const float* add, double wf, double inner, double wl,
                         float scale, size_t n)
 {
+    const float wf_f = float(wf), wl_f = float(wl);
     for (size_t i = 0; i < n; ++i) {
-        const double v = wf * newest[i] + wl * oldest[i] + inner * (p1[i] - p0[i]);
-        o[i] = (float(v) + (add ? add[i] : 0.0f)) * scale;
+        const float v = float(inner * (p1[i] - p0[i])) + wf_f * newest[i] + wl_f * oldest[i];
+        o[i] = (v + (add ? add[i] : 0.0f)) * scale;
     }
 }
 
