@@ -230,8 +230,8 @@ void shifted_row(float* g, const float* row, int lo, int hi, int nc, int u0, int
 
 // The window moved by one row: s (the inner rows' sum) += enter - leave, in double (no
 // drift), then h = inner s + wf newest + wl oldest (the fractional ends), in float: the
-// two ends need no double, and converting them cost ~3 % of the sweep (session 11, with
-// band_row's the same: A/B 0.89-0.98x).
+// two ends need no double, and their conversions are saved (session 11, with band_row's
+// the same: A/B 0.89-0.98x of the sweep's time).
 BOKEH_HOT void slide_window(double* s, float* h, const float* newest, const float* enter,
                             const float* leave, const float* oldest, double wf, double inner,
                             double wl, size_t n)
