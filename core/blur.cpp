@@ -256,10 +256,12 @@ constexpr int kBoxStrip = 256;
 // deterministic since it does not depend on the thread count.
 // Four pixels per step: their window changes (entering minus leaving) and the partial
 // sums of those are formed off the running sum's chain, which then carries one add per
-// four pixels instead of one per pixel; the channels vectorise (box_row_running is
-// multiversioned). Measured A/B in one process against one pixel per step, compiled for
-// baseline x86-64: RGBA box 15-21 % faster at 15-255 px, the Gaussian by three boxes 18 %,
-// one channel 8-16 %; RGB within the noise (+-5 %), its three-wide vectors fit badly.
+// four pixels instead of one per pixel (box_row_running is multiversioned). Measured A/B
+// in one process against one pixel per step, compiled for baseline x86-64: RGBA box
+// 15-21 % faster at 15-255 px, the Gaussian by three boxes 18 %, one channel 8-16 %; RGB
+// within the noise (+-5 %). (The channels were meant to vectorise; for four they did not,
+// see box_row_running_rgba, and the one- and three-channel clones are scalar too, left so:
+// the figures are RGBA.)
 template<int NC, bool Ends>
 inline __attribute__((always_inline)) void box_row_running_body(float* out, const float* v,
                                                                 int npx, int radius, int full,
@@ -331,7 +333,8 @@ inline __attribute__((always_inline)) void box_row_running_rgba(float* out, cons
     int x = 0;
     for (; x + 4 <= npx; x += 4) {
         for (int k = 0; k < 4; ++k)
-            d[k] = __builtin_convertvector(add[x + k], Sum) - __builtin_convertvector(sub[x + k], Sum);
+            d[k] = __builtin_convertvector(add[x + k], Sum)
+                   - __builtin_convertvector(sub[x + k], Sum);
         q[0] = Sum{};
         q[1] = d[0];
         q[2] = q[1] + d[1];
@@ -339,7 +342,8 @@ inline __attribute__((always_inline)) void box_row_running_rgba(float* out, cons
         for (int k = 0; k < 4; ++k) {
             Sum r = inner * (s + q[k]);
             if (Ends)
-                r += end * (__builtin_convertvector(p[x + k], Sum) + __builtin_convertvector(hi[x + k], Sum));
+                r += end * (__builtin_convertvector(p[x + k], Sum)
+                            + __builtin_convertvector(hi[x + k], Sum));
             o[x + k] = __builtin_convertvector(r, Pixel);
         }
         s += q[3] + d[3];

@@ -32,24 +32,25 @@
 // Fused (issue 3): when the third segment runs along the rows of the working frame (the
 // upright and the flat-topped hexagon, every rotation by a multiple of 30 degrees), one
 // sweep down the rows makes the hexagon (hexagon_sweep), the rhombi grouped so that each
-// steep segment runs once: two windows on the source and on a ring of rows, and two sums
+// steep segment runs once: two windows, on the source and on a ring of rows, and two sums
 // along the rows (row prefix sums, the cheaper pass), where the four passes take three
-// steep windows. Outside iris mode (hexagon_direct) it reads the
-// source ImageBuf directly (the upright hexagon's lines are its columns, gathered once
-// each into a ring) and writes `dst` directly: no padded or transposed copies. Measured
-// A/B against the four passes at 15-255 px (1080p RGBA, two threads): 0.56-0.68 of their
-// time upright, 0.42-0.53 flat-topped (session 9, with three windows). The upright sweep reads the source's columns and
-// writes the destination's 16 at a time (kColumnBatch; one at a time a 1920 px frame's
-// column falls in 2 of L1's 64 cache sets): 0.79-0.92x its time before (session 10).
+// steep windows. Outside iris mode (hexagon_direct) it reads the source ImageBuf directly
+// (the upright hexagon's lines are its columns, gathered once each into a ring) and
+// writes `dst` directly: no padded or transposed copies. Measured A/B against the four
+// passes at 15-255 px (1080p RGBA, two threads): 0.56-0.68 of their time upright,
+// 0.42-0.53 flat-topped (session 9, with three windows). The upright sweep reads the
+// source's columns and writes the destination's 16 at a time (kColumnBatch; one at a time
+// a 1920 px frame's column falls in 2 of L1's 64 cache sets): 0.79-0.92x its time before
+// (session 10).
 // Known limit: 23-37 ms flat-topped, 32-52 upright (1080p RGBA, two threads, session 11),
-// over the issue's 25 and growing ~1.35x from 15 to 255 px (wider chunk margins, rings out
-// of L2). The window slides (double sums, each value converted in and out) take ~20 % of
-// the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row sums ~25 %;
-// upright, the column gathers and scatters ~22 %. Float sums, a fused
+// over the issue's 25 and growing 1.3-1.5x from 15 to 255 px (wider chunk margins, rings
+// out of L2, the oldest source rows read from L3). The window slides (double running sums)
+// take ~20 % of the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row
+// sums ~25 %; upright, the column gathers and scatters ~22 % more. Float sums, a fused
 // step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
 // or less (session 9, docs/benchmarks.md); so did row sums in L1-sized tiles and rings on
-// huge pages (session 11); an upright sweep without transposing (flat
-// windows) lost 5-8 dB to the sampling of flat lines by rows.
+// huge pages (session 11); an upright sweep without transposing (flat windows) lost 5-8 dB
+// to the sampling of flat lines by rows.
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
 // (boundaries by dynamic programming, least squares on the row areas; over the lower half,
@@ -528,21 +529,22 @@ struct SweepIO {
 };
 
 // The hexagon in one sweep down the rows, when its third segment c runs along the rows
-// (the upright hexagon in the transposed frame, the flat-topped one as given). The three
-// rhombi grouped so that the steep segments each run once:
+// (the upright hexagon in the transposed frame, the flat-topped one as given), the three
+// rhombi grouped so that each steep segment runs once:
 // out = (seg_a X + seg_c T) / 3 with T = seg_b in and X = seg_c in + T, i.e.
 // rhombus(a, c) + rhombus(a, b) + rhombus(c, b). A steep segment is a window with a shear
-// and an unshear; a segment along the rows is a row's prefix sums, the cheaper pass, so two
+// and an unshear; a segment along the rows is a row's prefix sums, the cheaper pass: two
 // windows and two row passes, where hexagon_parallelograms' grouping
 // ((seg_c (seg_a in + B) + seg_a B) / 3) takes three windows and one row pass (session 11:
 // A/B 0.91-0.95 of that sweep's time at 15-255 px, 1080p RGBA, two threads). seg_a and
-// seg_c commute exactly (every step of a steep window is along the rows or sums down the
-// columns), so the two groupings differ only by float rounding. Each row of T is made once, summed along the row at
-// once into X, and kept in a ring until seg_c T reads it; X's rows are kept in a ring of
-// those seg_a still reads. Each source line is read once (a ring keeps the lines seg_b
-// still reads) and each output row written once, no middle planes.
+// seg_c commute exactly (every step of a steep window runs along the rows or sums down
+// the columns), so the two groupings differ only by float rounding.
+// Each row of T is made once, summed along the row at once into X, and kept in a ring
+// until seg_c T reads it; X's rows are kept in a ring of those seg_a still reads. Each
+// source line is read once (a ring keeps the lines seg_b still reads) and each output
+// row written once, no middle planes.
 // Columns run in two or four fixed chunks (by the kernel and the image, never the thread
-// count), each over the columns its outputs read; the window's sums restart per chunk but
+// count), each over the columns its outputs read; the windows' sums restart per chunk but
 // add the same values in the same order, so only the row prefix sums depend on where a
 // chunk starts (float rounding).
 void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double ax, double ay,
@@ -578,7 +580,8 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         const int i0 = std::max(0, std::min(ta - reach_b, u0));
         const int i1 = std::min(io.w, std::max(tb + reach_b, u1)), ni = i1 - i0;
         const int x_end = Y1 + lead;  // X's and T's rows end here
-        SteepWindow seg_b(bx, by, nc, ni, ta - i0, tb - i0, 0, std::numeric_limits<int>::min(), x_end);
+        SteepWindow seg_b(bx, by, nc, ni, ta - i0, tb - i0, 0, std::numeric_limits<int>::min(),
+                          x_end);
         // X's rows before x_lo are zero: the source's before 0, T's before seg_b's start.
         const int x_lo = std::min(0, seg_b.start());
         SteepWindow seg_a(ax, ay, nc, xb - xa, X0 - xa, X1 - xa, x_lo, Y0, Y1);
@@ -1182,9 +1185,10 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
     const Dir a = d[0], b = d[1], c = d[2];
 
     // hexagon = (rhombus(a, b) + rhombus(b, c) + rhombus(c, a)) / 3
-    //         = (seg_c (seg_a + seg_b) + seg_a seg_b) / 3 (one pass of c, here the
-    // costliest: hexagon_sweep, where c runs along the rows, groups them the other way); two planes besides `in`, each
-    // reused once its values are used up (a fresh 1080p plane costs its page faults).
+    //         = (seg_c (seg_a + seg_b) + seg_a seg_b) / 3: one pass of c, here the
+    // costliest (hexagon_sweep, where c runs along the rows, groups them the other way).
+    // Two planes besides `in`, each reused once its values are used up (a fresh 1080p
+    // plane costs its page faults).
     // Each pass computes only what the later ones read, back from the output region (the
     // plane less its margins): without that the passes would cover the whole padded
     // plane, which grows with the kernel (1.37x the pixels at 255 px).
