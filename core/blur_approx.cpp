@@ -1298,8 +1298,12 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
         io.store           = [&](int y, int n, int x0, int x1, const float* rows) {
             const size_t row_len = size_t(x1 - x0) * ncs;
             float* d = static_cast<float*>(dst.pixeladdr(region.xbegin + y, region.ybegin + x0));
-            for (int x = x0; x < x1; ++x, d += pitch)
+            const size_t bytes = size_t(n) * ncs * sizeof(float);
+            for (int x = x0; x < x1; ++x, d += pitch) {
+                if (x + kPrefetchRows < x1)
+                    prefetch_lines(d + kPrefetchRows * pitch, bytes, true);
                 copy_pixels(d, ncs, rows + size_t(x - x0) * ncs, row_len, n, nc);
+            }
         };
     }
     hexagon_sweep(io, nc, out_region, a.x, a.y, b.x, b.y, c.x, nthreads);

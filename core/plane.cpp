@@ -171,7 +171,10 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
             const size_t step    = kNc ? kNc : ncs;
             const size_t pitch   = size_t(src.scanline_stride()) / sizeof(float);
             const float* p       = static_cast<const float*>(src.pixeladdr(sx, in0, data.zbegin));
+            const size_t bytes = size_t(n) * step * sizeof(float);
             for (int y = in0; y < in1; ++y, p += pitch) {
+                if (y + kPrefetchRows < in1)
+                    prefetch_lines(p + kPrefetchRows * pitch, bytes);
                 const size_t at = size_t(y - y0) * step;
                 for (int i = 0; i < n; ++i)
                     std::memcpy(out[i] + at, p + size_t(i) * step, step * sizeof(float));

@@ -87,6 +87,20 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
 /// RGBA, interleaved in one process (session 10): 63 ms one at a time, 52 by 4, 48 by 8,
 /// 45.5 by 16, 47 by 32.
 constexpr int kColumnBatch = 16;
+/// How many rows ahead a transposing reader or writer asks for its next batch's cache
+/// lines (__builtin_prefetch): its rows are a frame's pitch apart, a new page each, where
+/// the hardware's stream prefetch does not follow. Upright hexagon, 1080p RGBA, A/B
+/// (session 11): 0.94-0.99x with the reads' prefetch, 0.93-0.95x more with the writes'
+/// (8, 16 and 32 rows ahead measured alike).
+constexpr int kPrefetchRows = 8;
+
+/// __builtin_prefetch of the `bytes` from p, a cache line at a time (`write`: for writing).
+inline void prefetch_lines(const void* p, size_t bytes, bool write = false)
+{
+    const char* c = static_cast<const char*>(p);
+    for (size_t b = 0; b < bytes; b += 64)
+        write ? __builtin_prefetch(c + b, 1) : __builtin_prefetch(c + b, 0);
+}
 
 /// Source row `sy` over columns [x0, x1): read in place where they lie inside the data
 /// window, else filled into `buf` by source_row().
