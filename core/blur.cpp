@@ -306,21 +306,19 @@ inline __attribute__((always_inline)) void box_row_running_body(float* out, cons
         }
 }
 
-// The same for four channels in vector types, one pixel a vector: the per-channel form
-// above was compiled scalar in every clone for four channels (generic tuning; GCC 12), as
-// row_prefix was (plane.cpp). Same sums in the same order, so the same bits.
+// The same for four channels in vector types (PixelRgba, plane.h), one pixel a vector:
+// the per-channel form above was compiled scalar in every clone for four channels, as
+// row_prefix was. Same sums in the same order, so the same bits.
 template<bool Ends>
 inline __attribute__((always_inline)) void box_row_running_rgba(float* out, const float* v,
                                                                 int npx, int radius, int full,
                                                                 double inner, double end)
 {
-    using Pixel   = float __attribute__((vector_size(16), aligned(4), may_alias));
-    using Sum     = double __attribute__((vector_size(32)));
+    using Pixel   = PixelRgba;
+    using Sum     = SumRgba;
     const auto* p = reinterpret_cast<const Pixel*>(v);
     auto* o       = reinterpret_cast<Pixel*>(out);
-    // (Conversions written out, not in a helper: a function taking or returning these
-    // vectors has another ABI in the baseline clone, which GCC warns of.)
-    Sum part[4] = {};
+    Sum part[4]   = {};
     const int a = radius - full, e = radius + full + 1;
     for (int i = a; i < e; ++i)
         part[(i - a) & 3] += __builtin_convertvector(p[i], Sum);

@@ -528,6 +528,9 @@ struct SweepIO {
     std::function<void(int y, int n, int x0, int x1, const float* rows)> store;
 };
 
+// Slot of row r (any sign) in a ring of n rows.
+size_t ring_slot(int r, int n) { return size_t(((r % n) + n) % n); }
+
 // The hexagon in one sweep down the rows, when its third segment c runs along the rows
 // (the upright hexagon in the transposed frame, the flat-topped one as given), the three
 // rhombi grouped so that each steep segment runs once:
@@ -590,11 +593,11 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         const int nt = lead + 2, nx = std::max(seg_a.last, 0) + lead + 2;
         std::vector<float> t_ring(size_t(nt + 1) * nt_px, 0.0f), x_ring(size_t(nx) * nx_px);
         const float* t_zero = t_ring.data() + size_t(nt) * nt_px;
-        auto t_slot = [&](int r) { return t_ring.data() + size_t(((r % nt) + nt) % nt) * nt_px; };
+        auto t_slot = [&](int r) { return t_ring.data() + ring_slot(r, nt) * nt_px; };
         auto t_row  = [&](int r) -> const float* {
             return r >= seg_b.start() && r < x_end ? t_slot(r) : t_zero;
         };
-        auto x_slot = [&](int r) { return x_ring.data() + size_t(((r % nx) + nx) % nx) * nx_px; };
+        auto x_slot = [&](int r) { return x_ring.data() + ring_slot(r, nx) * nx_px; };
         // Source lines from the oldest seg_b reads to the newest.
         const int lines_lo = lead - seg_b.last, lines_hi = lead - seg_b.first;
         // A missing line comes with the batch - 1 after it, so the ring holds that many more.
@@ -605,7 +608,7 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         std::vector<int> line_tag(size_t(nlines), std::numeric_limits<int>::min());
         std::vector<float*> fetch_bufs(static_cast<size_t>(batch));
         std::vector<const float*> fetched(static_cast<size_t>(batch));
-        auto slot_of = [&](int r) { return size_t(((r % nlines) + nlines) % nlines); };
+        auto slot_of = [&](int r) { return ring_slot(r, nlines); };
         auto in_line = [&](int r) -> const float* {
             if (r < 0 || r >= io.h)
                 return nullptr;

@@ -350,18 +350,16 @@ bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* wh
 
 // Four channels: four pixels at a time, their sums within the block formed off the chain,
 // so the running sum (one vector add per block, not per pixel) is the only dependency
-// carried from block to block. Written with vector types: the same steps written per
-// channel were compiled scalar in every clone (generic tuning; GCC 12), 2x slower in
-// isolation and 18 % of the fused hexagon sweep's time (session 11). Other channel counts
-// go through memory.
+// carried from block to block. Written with vector types (PixelRgba, plane.h): the same
+// steps written per channel were compiled scalar in every clone, 2x slower in isolation
+// and 18 % of the fused hexagon sweep's time (session 11). Other channel counts go
+// through memory.
 BOKEH_HOT void row_prefix(double* p, const float* v, size_t npx, int nc)
 {
     if (nc == 4) {
-        using Pixel  = float __attribute__((vector_size(16), aligned(4), may_alias));
-        using Pixeld = double __attribute__((vector_size(32), aligned(8), may_alias));
-        using Sum    = double __attribute__((vector_size(32)));
-        const auto* in = reinterpret_cast<const Pixel*>(v);
-        auto* out      = reinterpret_cast<Pixeld*>(p);
+        using Sum      = SumRgba;
+        const auto* in = reinterpret_cast<const PixelRgba*>(v);
+        auto* out      = reinterpret_cast<SumRgbaInMem*>(p);
         Sum run        = { 0.0, 0.0, 0.0, 0.0 };
         out[0]         = run;
         size_t x       = 0;

@@ -45,6 +45,16 @@ void prefer_huge_pages(void* p, size_t bytes);
 /// dst.reset(spec) with its pixels uninitialised and on huge pages (prefer_huge_pages).
 void reset_uninitialised(OIIO::ImageBuf& dst, const OIIO::ImageSpec& spec);
 
+/// One RGBA pixel as a vector (GCC vector extensions), for loops over four channels that
+/// the compiler's per-channel (SLP) vectorisation left scalar in every clone (generic
+/// tuning, GCC 12; row_prefix, the box's running row): a pixel in memory (any float
+/// alignment), its sums in double, and those in memory. Conversions between them are
+/// written out with __builtin_convertvector where used: a helper taking or returning
+/// these vectors would have another ABI in the baseline clone (GCC warns of it).
+using PixelRgba    = float __attribute__((vector_size(16), aligned(4), may_alias));
+using SumRgba      = double __attribute__((vector_size(32)));
+using SumRgbaInMem = double __attribute__((vector_size(32), aligned(8), may_alias));
+
 /// A contiguous interleaved float image. Its pixels start uninitialised: every method
 /// writes each output value, and pad() writes the black ones itself.
 struct Plane {
