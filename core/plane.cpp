@@ -253,6 +253,21 @@ const float* bordered_row_view(const OIIO::ImageBuf& src, int y, int x0, int x1,
     return sy == kOutside ? nullptr : source_row_view(src, sy, x0, x1, border, buf);
 }
 
+RowSpan bordered_row_span(const OIIO::ImageBuf& src, int y, int x0, int x1, Border border,
+                          float* buf)
+{
+    const OIIO::ROI data = src.roi();
+    const int sy         = border_index(y, data.ybegin, data.yend, border);
+    if (sy == kOutside)
+        return {};
+    if (border != Border::Black)
+        return { source_row_view(src, sy, x0, x1, border, buf), 0, x1 - x0 };
+    const int c0 = std::max(x0, data.xbegin), c1 = std::min(x1, data.xend);
+    if (c1 <= c0)
+        return {};
+    return { static_cast<const float*>(src.pixeladdr(c0, sy, data.zbegin)), c0 - x0, c1 - x0 };
+}
+
 void prefer_huge_pages(void* p, size_t bytes)
 {
 #if defined(__linux__) && defined(MADV_HUGEPAGE)

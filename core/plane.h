@@ -122,6 +122,20 @@ const float* source_row_view(const OIIO::ImageBuf& src, int sy, int x0, int x1, 
 const float* bordered_row_view(const OIIO::ImageBuf& src, int y, int x0, int x1, Border border,
                                float* buf);
 
+/// A padded row over [x0, x1) whose pixels [lo, hi) are at p (p[0] is pixel x0 + lo) and
+/// the rest black; p is null when the whole row is black.
+struct RowSpan {
+    const float* p = nullptr;
+    int lo = 0, hi = 0;
+};
+
+/// Padded source row `y` over [x0, x1) as bordered_row_view(), but under Border::Black
+/// never copied: the black pixels are left out of the span ([lo, hi)), so a reader that
+/// takes them as zero reads the source in place. Other borders fill `buf` (lo = 0,
+/// hi = x1 - x0) where the row reaches past the data window.
+RowSpan bordered_row_span(const OIIO::ImageBuf& src, int y, int x0, int x1, Border border,
+                          float* buf);
+
 /// `dst` reset to float pixels (uninitialised) over `roi`, with `src`'s metadata.
 void prepare_destination(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ROI& roi);
 

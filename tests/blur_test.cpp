@@ -248,12 +248,14 @@ TEST(Blur, TranslationEquivariance)
 TEST(Blur, WideImagesMatchTheBruteForceReferenceStripByStrip)
 {
     // Wider than several of the fused methods' column strips (box: 256 or 512 columns): inner
-    // strips read the source in place, edge strips by the border rule; 1, 2 (prefix-sum
+    // strips read the source in place, edge strips by the border rule (black: in place too,
+    // the running sum reading zeros past the data window); 1, 2 (prefix-sum
     // fallback), 3 and 4 channels; fractional sizes; an explicit ROI reaching past the data.
     const OIIO::ImageBuf rgba = test_image(700, 29, -11, 5);
     std::vector<Kernel> ks;
     for (auto [w, h] : { std::pair{ 7.0f, 7.0f }, { 6.5f, 4.2f }, { 41.3f, 9.0f }, { 1.0f, 13.6f },
-                         { 101.5f, 9.0f } }) {  // the last: radius >= 48, 512-column strips
+                         { 101.5f, 9.0f },    // radius >= 48: 512-column strips
+                         { 1201.5f, 1.0f } }) {  // wider than the frame: both ends black at once
         Kernel k;
         k.shape     = KernelShape::Box;
         k.width_px  = w;
