@@ -255,9 +255,9 @@ constexpr int kBoxStrip = 256;
 // twice. The row comes as a RowSpan: pixels outside [lo, hi) are black and are read from
 // a zero run instead, so a strip at the frame's edge reads the source in place (copying
 // its rows into a padded buffer took ~5 % of the box's time at 255 px).
-// The row is walked in stretches over which each of the four streams the step reads (the
-// pixel entering, the one leaving, the two fractional ends) lies wholly inside the span or
-// wholly outside it: at most nine stretches, one for a strip inside the frame.
+// The row is walked in stretches (for_span_stretches) over which each of the four streams
+// the step reads (the pixel entering, the one leaving, the two fractional ends) lies
+// wholly inside the span or wholly outside it: one stretch for a strip inside the frame.
 // Four pixels per step: their window changes (entering minus leaving) and the partial
 // sums of those are formed off the running sum's chain, which then carries one add per
 // four pixels instead of one per pixel (box_row_running is multiversioned). Measured A/B
@@ -299,28 +299,12 @@ inline __attribute__((always_inline)) void box_row_stretches(const RowSpan& v, c
         for (int c = 0; c < NC; ++c)
             s[c] = (part[0][c] + part[1][c]) + (part[2][c] + part[3][c]);
     }
-    // Stream k reads padded pixel x + offset[k]: inside the span for x in
-    // [lo - offset, hi - offset).
+    // Stream k reads padded pixel x + offset[k] for output x.
     const int offset[4] = { e, a, 0, 2 * radius };
-    const int nstreams  = ends ? 4 : 2;
-    int cut[10], ncut = 0;
-    cut[ncut++] = 0;
-    cut[ncut++] = npx;
-    for (int k = 0; k < nstreams; ++k) {
-        cut[ncut++] = std::clamp(v.lo - offset[k], 0, npx);
-        cut[ncut++] = std::clamp(v.hi - offset[k], 0, npx);
-    }
-    std::sort(cut, cut + ncut);
-    for (int j = 0; j + 1 < ncut; ++j) {
-        const int x0 = cut[j], count = cut[j + 1] - x0;
-        if (count == 0)
-            continue;
-        auto at = [&](int k) {
-            const int i = x0 + offset[k];
-            return i >= v.lo && i < v.hi ? v.p + size_t(i - v.lo) * NC : zero;
-        };
-        stretch(x0, BoxStreams{ at(0), at(1), at(2), at(3) }, count, s);
-    }
+    for_span_stretches<4>(v, offset, ends ? 4 : 2, npx, [&](int x0, int x1) __attribute__((always_inline)) {
+        auto at = [&](int k) { return span_pixel(v, x0 + offset[k], NC, zero); };
+        stretch(x0, BoxStreams{ at(0), at(1), at(2), at(3) }, x1 - x0, s);
+    });
 }
 
 // A stretch for four channels in vector types (PixelRgba, plane.h), one pixel a vector:

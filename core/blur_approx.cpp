@@ -188,13 +188,13 @@ BOKEH_HOT void taps_row(float* o, const float* p, const float* add, float w0, fl
             o[i] = (w0 * p[i] + w1 * p[i + stride] + w2 * p[i + 2 * stride]) * scale;
 }
 
-// Columns u in [u0, u1) of `row` (zero outside its columns [lo, hi)) read at u + shift:
-// the taps `t` of the shift (Taps(shift): reads from column u + t.first). `identity`: no
-// shift.
-void shifted_row(float* g, const float* row, int lo, int hi, int nc, int u0, int u1, const Taps& t,
-                 bool identity)
+// Columns u in [u0, u1) of `row` (zero outside its span [lo, hi); all zero without
+// pixels) read at u + shift: the taps `t` of the shift (Taps(shift): reads from column
+// u + t.first). `identity`: no shift.
+void shifted_row(float* g, const RowSpan& row, int nc, int u0, int u1, const Taps& t, bool identity)
 {
     const size_t ncs = size_t(nc);
+    const int lo = row.p ? row.lo : 0, hi = row.p ? row.hi : 0;
     const int reach  = identity ? 0 : 2;  // taps past the first
     const int first  = identity ? t.first + 1 : t.first;
     // [z0, z1): columns with a tap inside [lo, hi) (u + first + reach >= lo, u + first < hi);
@@ -212,14 +212,14 @@ void shifted_row(float* g, const float* row, int lo, int hi, int nc, int u0, int
                 continue;
             const float wj = identity ? 1.0f : t.w[j];
             for (int c = 0; c < nc; ++c)
-                o[c] += wj * row[size_t(x) * ncs + size_t(c)];
+                o[c] += wj * row.p[size_t(x - lo) * ncs + size_t(c)];
         }
     };
     for (int u = z0; u < a; ++u)
         edge(u);
     if (b > a) {
         float* o = g + size_t(a - u0) * ncs;
-        const float* p = row + size_t(a + first) * ncs;
+        const float* p = row.p + size_t(a + first - lo) * ncs;
         if (identity)
             std::copy_n(p, size_t(b - a) * ncs, o);
         else
@@ -305,8 +305,9 @@ public:
     int first = 0, last = 0;
     int start() const { return start_; }
 
-    // The window moved to row y: `newest` is input line y - first, `oldest` line y - last.
-    void step(int y, const float* newest, const float* oldest)
+    // The window moved to row y: `newest` is input line y - first, `oldest` line y - last
+    // (spans over the lines' columns [0, n_in)).
+    void step(int y, const RowSpan& newest, const RowSpan& oldest)
     {
         // Active: the columns read at this step and the next last - first + 1, whose windows
         // are filling. The range drifts by under a column per step; a column joins with an
@@ -326,7 +327,7 @@ public:
         // by at most one, and there this line is its previous one.
         const int na = std::max(g0_, a - 1), nb = std::min(g1_, b + 1);
         const float* gn = zero_.data();
-        if (newest && nb > na) {
+        if (newest.p && nb > na) {
             g_row(newest, y - first, na, nb, newest_.data());
             gn = newest_.data();
         }
@@ -334,7 +335,7 @@ public:
         const float* enter = inner_rows ? prev_ : zero_.data();
         if (mb > ma) {
             const float* go = zero_.data();
-            if (oldest && span > 0) {
+            if (oldest.p && span > 0) {
                 g_row(oldest, y - last, ma, mb, oldest_.data());
                 go = oldest_.data();
             }
@@ -375,10 +376,10 @@ private:
     int tap_first(int r) const { return shear_ ? Taps(m_ * r).first : -1; }
     int back_first(int y) const { return shear_ ? Taps(-m_ * y).first : -1; }
     // G row r over columns [a, b), into buf at its own offsets.
-    void g_row(const float* line, int r, int a, int b, float* buf) const
+    void g_row(const RowSpan& line, int r, int a, int b, float* buf) const
     {
-        shifted_row(buf + size_t(a - g0_) * size_t(nc_), line, 0, n_in_, nc_, a, b,
-                    Taps(m_ * r, !shear_), !shear_);
+        shifted_row(buf + size_t(a - g0_) * size_t(nc_), line, nc_, a, b, Taps(m_ * r, !shear_),
+                    !shear_);
     }
 
     int nc_, n_in_, x0_, x1_, read0_, ye_;
@@ -430,13 +431,13 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
         std::vector<float> newest(columns ? size_t(n_in) * ncs : 0), oldest(newest.size()),
             line_out(columns ? n : 0), line_add(columns && add ? n : 0);
         // Line r of `in` over [i0, i1): in place along a row, gathered down a column.
-        auto line = [&](int r, std::vector<float>& buf) -> const float* {
+        auto line = [&](int r, std::vector<float>& buf) -> RowSpan {
             if (r < valid.y0 || r >= valid.y1 || n_in == 0)
-                return nullptr;
+                return {};
             if (!columns)
-                return at(in, r, i0);
+                return { at(in, r, i0), 0, n_in };
             copy_pixels(buf.data(), ncs, at(in, r, i0), along, n_in, nc);
-            return buf.data();
+            return { buf.data(), 0, n_in };
         };
         for (int y = std::min(win.start(), region.y0); y < region.y1; ++y) {
             if (y >= win.start())
@@ -473,16 +474,30 @@ BOKEH_HOT void band_row(float* o, const float* newest, const float* oldest, cons
 }
 
 // o = (seg(row) + add) * scale over n values, for a segment along a row of npx pixels,
-// zero-padded as far as the outputs read: the row's prefix sums (double) into `prefix`, and
-// output pixel 0 reads the row's pixels from `oldest` (its i = last) on.
-void segment_row(float* o, const float* row, double* prefix, size_t npx, int nc,
-                 const SegmentWeights& s, size_t oldest, const float* add, float scale, size_t n)
+// black outside its span (none read past npx): output pixel x reads the row's pixels from
+// x (the oldest, its i = last) to x + last - first (the newest). The row's prefix sums
+// (double) go into `prefix` (npx + 1 pixels: 0 before the span, its total after it), and
+// the end pixels outside the span are read from `zero` (n values of 0), so a row clipped
+// by the frame is read in place (for_span_stretches).
+void segment_row(float* o, const RowSpan& row, double* prefix, int npx, int nc,
+                 const SegmentWeights& s, const float* add, float scale, size_t n,
+                 const float* zero)
 {
-    const size_t ncs = size_t(nc), newest = oldest + size_t(s.last - s.first);
-    row_prefix(prefix, row, npx, nc);
+    const size_t ncs = size_t(nc);
+    const int lo = row.p ? row.lo : 0, hi = row.p ? row.hi : 0;
+    std::fill_n(prefix, size_t(lo) * ncs, 0.0);
+    row_prefix(prefix + size_t(lo) * ncs, row.p ? row.p : zero, size_t(hi - lo), nc);
+    for (size_t i = size_t(hi + 1) * ncs, e = size_t(npx + 1) * ncs; i < e; ++i)
+        prefix[i] = prefix[i - ncs];
     // The pixels between the two ends: prefix sums to before the newest, less to the oldest.
-    band_row(o, row + newest * ncs, row + oldest * ncs, prefix + newest * ncs,
-             prefix + (oldest + 1) * ncs, add, s.newest, s.inner, s.oldest, scale, n);
+    const int offset[2] = { s.last - s.first, 0 };  // the newest, the oldest
+    for_span_stretches<2>(row, offset, 2, int(n / ncs), [&](int x0, int x1) {
+        const size_t k = size_t(x0) * ncs;
+        band_row(o + k, span_pixel(row, x0 + offset[0], ncs, zero),
+                 span_pixel(row, x0 + offset[1], ncs, zero), prefix + k + size_t(offset[0]) * ncs,
+                 prefix + k + ncs, add ? add + k : nullptr, s.newest, s.inner, s.oldest, scale,
+                 size_t(x1 - x0) * ncs);
+    });
 }
 
 // out = (seg(in) + add) * scale over `region`, `in` read as zero outside `valid`, for any
@@ -516,14 +531,14 @@ Region hull(const Region& a, const Region& b)
 
 
 // Where the fused sweep reads and writes, in its working frame of w x h pixels: `lines`
-// gives lines r .. r + n - 1 over columns [c0, c1) (lines[i] a view, or filled into
-// bufs[i]; null when all zero), `out_row` where output row y goes over [x0, x1), or null
+// gives lines r .. r + n - 1 over columns [c0, c1) (lines[i] a view or filled into
+// bufs[i], its span relative to c0; no pixels when all black), `out_row` where output row y goes over [x0, x1), or null
 // to hand the rows to `store`, up to `batch` at once (y .. y + n - 1, one after another).
 // A batch of more than one line suits a source read down its columns (hexagon_direct).
 struct SweepIO {
     int w = 0, h = 0;
     int batch = 1;
-    std::function<void(int r, int n, int c0, int c1, float* const* bufs, const float** lines)> lines;
+    std::function<void(int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines)> lines;
     std::function<float*(int y, int x0, int x1)> out_row;
     std::function<void(int y, int n, int x0, int x1, const float* rows)> store;
 };
@@ -591,54 +606,51 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         // T's rows from y to y + lead, X's from y - last to y + lead, each in a ring.
         const size_t nt_px = size_t(t1 - t0) * ncs, nx_px = size_t(xb - xa) * ncs;
         const int nt = lead + 2, nx = std::max(seg_a.last, 0) + lead + 2;
-        std::vector<float> t_ring(size_t(nt + 1) * nt_px, 0.0f), x_ring(size_t(nx) * nx_px);
+        // T's ring starts black (its columns outside [ta, tb) stay so); X's rows and the
+        // lines are written whole before they are read, so those start uninitialised.
+        std::vector<float> t_ring(size_t(nt + 1) * nt_px, 0.0f);
+        Plane x_ring(xb - xa, nx, nc);
         const float* t_zero = t_ring.data() + size_t(nt) * nt_px;
         auto t_slot = [&](int r) { return t_ring.data() + ring_slot(r, nt) * nt_px; };
         auto t_row  = [&](int r) -> const float* {
             return r >= seg_b.start() && r < x_end ? t_slot(r) : t_zero;
         };
-        auto x_slot = [&](int r) { return x_ring.data() + ring_slot(r, nx) * nx_px; };
+        auto x_slot = [&](int r) { return x_ring.row(int(ring_slot(r, nx))); };
         // Source lines from the oldest seg_b reads to the newest.
         const int lines_lo = lead - seg_b.last, lines_hi = lead - seg_b.first;
         // A missing line comes with the batch - 1 after it, so the ring holds that many more.
         const int batch  = std::max(1, io.batch);
         const int nlines = lines_hi - lines_lo + 2 + batch;
-        std::vector<float> line_store(size_t(nlines) * size_t(ni) * ncs);
-        std::vector<const float*> line_ptr(size_t(nlines), nullptr);
+        Plane line_store(ni, nlines, nc);
+        std::vector<RowSpan> line_span(static_cast<size_t>(nlines));
         std::vector<int> line_tag(size_t(nlines), std::numeric_limits<int>::min());
         std::vector<float*> fetch_bufs(static_cast<size_t>(batch));
-        std::vector<const float*> fetched(static_cast<size_t>(batch));
+        std::vector<RowSpan> fetched(static_cast<size_t>(batch));
         auto slot_of = [&](int r) { return ring_slot(r, nlines); };
-        auto in_line = [&](int r) -> const float* {
+        auto in_line = [&](int r) -> RowSpan {
             if (r < 0 || r >= io.h)
-                return nullptr;
+                return {};
             if (line_tag[slot_of(r)] != r) {
                 const int n = std::min(batch, io.h - r);
                 for (int i = 0; i < n; ++i)
-                    fetch_bufs[size_t(i)] = line_store.data() + slot_of(r + i) * size_t(ni) * ncs;
+                    fetch_bufs[size_t(i)] = line_store.row(int(slot_of(r + i)));
                 io.lines(r, n, i0, i1, fetch_bufs.data(), fetched.data());
                 for (int i = 0; i < n; ++i) {
                     line_tag[slot_of(r + i)] = r + i;
-                    line_ptr[slot_of(r + i)] = fetched[size_t(i)];
+                    line_span[slot_of(r + i)] = fetched[size_t(i)];
                 }
             }
-            return line_ptr[slot_of(r)];
+            return line_span[slot_of(r)];
         };
-        // The source row over [u0, u1) as seg_c reads it: in place when inside the frame,
-        // else copied inside a zero row.
-        const bool u_inside = u0 >= 0 && u1 <= io.w;
-        std::vector<float> u_row(size_t(u1 - u0) * ncs, 0.0f);
-        const int ua = std::max(0, u0), ub = std::min(io.w, u1);
-        auto source_for_c = [&](int r) -> const float* {
-            const float* line = in_line(r);
-            if (u_inside && line)
-                return line + size_t(u0 - i0) * ncs;
-            float* o = u_row.data() + size_t(ua - u0) * ncs;
-            if (line)
-                std::copy_n(line + size_t(ua - i0) * ncs, size_t(ub - ua) * ncs, o);
-            else
-                std::fill_n(o, size_t(ub - ua) * ncs, 0.0f);
-            return u_row.data();
+        // The source row over [u0, u1) as seg_c reads it (its span moved from [i0, i1)).
+        auto source_for_c = [&](int r) -> RowSpan {
+            RowSpan line = in_line(r);
+            if (!line.p)
+                return {};
+            const int lo = std::max(line.lo + i0, u0), hi = std::min(line.hi + i0, u1);
+            if (hi <= lo)
+                return {};
+            return { line.p + size_t(lo - i0 - line.lo) * ncs, lo - u0, hi - u0 };
         };
         // Output rows for `store`, a batch at a time.
         const size_t no = size_t(X1 - X0) * ncs;
@@ -652,10 +664,12 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
                 seg_b.read(r, t_slot(r) + size_t(ta - t0) * ncs, nullptr, 1.0f);
             }
             if (r >= x_lo && r < x_end)
-                segment_row(x_slot(r), source_for_c(r), prefix.data(), size_t(u1 - u0), nc, seg_c,
-                            0, t_row(r) + size_t(xa - t0) * ncs, 1.0f, nx_px);
-            auto x_line = [&](int q) -> const float* {
-                return q >= x_lo && q <= r && q < x_end ? x_slot(q) : nullptr;
+                segment_row(x_slot(r), source_for_c(r), prefix.data(), u1 - u0, nc, seg_c,
+                            t_row(r) + size_t(xa - t0) * ncs, 1.0f, nx_px, t_zero);
+            auto x_line = [&](int q) -> RowSpan {
+                if (q >= x_lo && q <= r && q < x_end)
+                    return { x_slot(q), 0, xb - xa };
+                return {};
             };
             if (y >= seg_a.start())
                 seg_a.step(y, x_line(y - seg_a.first), x_line(y - seg_a.last));
@@ -664,10 +678,10 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
             seg_a.read(y, ab_row.data(), nullptr, 1.0f);
             float* o       = io.out_row(y, X0, X1);
             const int held = (y - Y0) % batch;  // rows held for `store` before this one
+            const int nt_read = (X1 - fc) - (X0 - lc);
             segment_row(o ? o : o_rows.data() + size_t(held) * no,
-                        t_row(y) + size_t(X0 - lc - t0) * ncs, prefix.data(),
-                        size_t((X1 - fc) - (X0 - lc)), nc, seg_c, 0, ab_row.data(),
-                        float(1.0 / 3.0), no);
+                        RowSpan{ t_row(y) + size_t(X0 - lc - t0) * ncs, 0, nt_read }, prefix.data(),
+                        nt_read, nc, seg_c, ab_row.data(), float(1.0 / 3.0), no, t_zero);
             if (!o && (held == batch - 1 || y == Y1 - 1))
                 io.store(y - held, held + 1, X0, X1, o_rows.data());
         }
@@ -1204,9 +1218,9 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
         SweepIO io;
         io.w    = w;
         io.h    = h;
-        io.lines = [&](int r, int n, int c0, int, float* const*, const float** lines) {
+        io.lines = [&](int r, int n, int c0, int c1, float* const*, RowSpan* lines) {
             for (int i = 0; i < n; ++i)
-                lines[i] = in.row(r + i) + size_t(c0) * ncs;
+                lines[i] = { in.row(r + i) + size_t(c0) * ncs, 0, c1 - c0 };
         };
         io.out_row = [&](int y, int x0, int) { return out.row(y) + size_t(x0) * ncs; };
         hexagon_sweep(io, in.nc, out_region, a.x, a.y, b.x, b.y, c.x, nthreads);
@@ -1262,9 +1276,9 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
     io.h = t ? region.width() : region.height();
     const Region out_region{ t ? ry : rx, t ? rx : ry, io.w - (t ? ry : rx), io.h - (t ? rx : ry) };
     if (!t) {
-        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, const float** lines) {
+        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
             for (int i = 0; i < n; ++i)
-                lines[i] = bordered_row_view(in, region.ybegin + r + i, region.xbegin + c0,
+                lines[i] = bordered_row_span(in, region.ybegin + r + i, region.xbegin + c0,
                                              region.xbegin + c1, border, bufs[i]);
         };
         io.out_row = [&](int y, int x0, int) {
@@ -1280,11 +1294,11 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
         // 1920, and a bare column-at-a-time transpose 6.6 ms against 14.7. Batched, A/B
         // against one at a time: 0.79-0.86x at 15-63 px, 0.89-0.92x at 127-255 (session 10).
         io.batch = kColumnBatch;
-        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, const float** lines) {
+        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
             for (int i = 0; i < n;) {
                 const int sx = border_index(region.xbegin + r + i, data.xbegin, data.xend, border);
                 if (sx == kOutside) {
-                    lines[i++] = nullptr;
+                    lines[i++] = {};
                     continue;
                 }
                 int run = 1;  // the source columns adjacent to sx, in order
@@ -1293,7 +1307,7 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
                     ++run;
                 source_columns(in, sx, run, region.ybegin + c0, region.ybegin + c1, border, bufs + i);
                 for (int j = 0; j < run; ++j, ++i)
-                    lines[i] = bufs[i];
+                    lines[i] = { bufs[i], 0, c1 - c0 };
             }
         };
         io.out_row = [](int, int, int) -> float* { return nullptr; };

@@ -129,6 +129,36 @@ struct RowSpan {
     int lo = 0, hi = 0;
 };
 
+/// Pixel i of the span's row (i in [lo, hi)), or `zero` (a run of black pixels) outside.
+inline const float* span_pixel(const RowSpan& row, int i, size_t ncs, const float* zero)
+{
+    return row.p && i >= row.lo && i < row.hi ? row.p + size_t(i - row.lo) * ncs : zero;
+}
+
+/// Calls f(x0, x1) for the stretches of outputs [0, n) over which each of the readers,
+/// reader k reading pixel x + offset[k] of the span's row for output x, stays wholly
+/// inside the span or wholly outside it (at most 2 nreaders + 1 stretches; one when the
+/// span covers every read). A row clipped by the frame is then read in place, its black
+/// pixels from a zero run (span_pixel), with no padded copy.
+template<int MaxReaders, class F>
+inline __attribute__((always_inline)) void for_span_stretches(const RowSpan& row,
+                                                              const int* offset, int nreaders,
+                                                              int n, F&& f)
+{
+    const int lo = row.p ? row.lo : 0, hi = row.p ? row.hi : 0;
+    int cut[2 * MaxReaders + 2], ncut = 0;
+    cut[ncut++] = 0;
+    cut[ncut++] = n;
+    for (int k = 0; k < nreaders; ++k) {
+        cut[ncut++] = std::clamp(lo - offset[k], 0, n);
+        cut[ncut++] = std::clamp(hi - offset[k], 0, n);
+    }
+    std::sort(cut, cut + ncut);
+    for (int j = 0; j + 1 < ncut; ++j)
+        if (cut[j + 1] > cut[j])
+            f(cut[j], cut[j + 1]);
+}
+
 /// Padded source row `y` over [x0, x1) as bordered_row_view(), but under Border::Black
 /// never copied: the black pixels are left out of the span ([lo, hi)), so a reader that
 /// takes them as zero reads the source in place. Other borders fill `buf` (lo = 0,
