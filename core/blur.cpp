@@ -238,9 +238,10 @@ double* aligned64(double* p)
 // The box straight from the source ImageBuf into `dst` (no padded plane, no middle plane,
 // no copy out). Each task owns a strip of kBoxStrip output columns (twice that for wide
 // boxes) and walks down it: the horizontal pass reads one source row of the strip plus
-// the box's reach (in place, or by the border rule into a small buffer), slides a double
-// running sum along it and keeps the result in a ring of the last 2 ry + 2 rows (1 MiB at
-// 256 columns and ry = 127: in L2; the ring is read twice per row, as it is written); the vertical
+// the box's reach (in place; under the clamp and mirror borders an edge strip's row is
+// filled into a small buffer by the border rule), slides a double running sum along it
+// and keeps the result in a ring of the last 2 ry + 2 rows (2 MiB at 512 columns and
+// ry = 127; black rows are not stored, but read from one zero row); the vertical
 // running sum (double) over that ring is written straight into `dst`. The source and
 // `dst` are each touched once, so the cost is one read and one write of the frame plus
 // the arithmetic, whatever the size. Prefix sums start afresh at every strip, so they

@@ -35,16 +35,18 @@
 // steep segment runs once: two windows, on the source and on a ring of rows, and two sums
 // along the rows (row prefix sums, the cheaper pass), where the four passes take three
 // steep windows. Outside iris mode (hexagon_direct) it reads the source ImageBuf directly
-// (the upright hexagon's lines are its columns, gathered once each into a ring) and
-// writes `dst` directly: no padded or transposed copies. Measured A/B against the four
+// (the upright hexagon's lines are its columns, gathered once each into a ring; the
+// flat-topped one's rows in place, under the black border also where the chunk reaches
+// past the data window: RowSpan, the black read from a zero run) and writes `dst`
+// directly: no padded or transposed copies. Measured A/B against the four
 // passes at 15-255 px (1080p RGBA, two threads): 0.56-0.68 of their time upright,
 // 0.42-0.53 flat-topped (session 9, with three windows). The upright sweep reads the
 // source's columns and writes the destination's 16 at a time (kColumnBatch; one at a time
 // a 1920 px frame's column falls in 2 of L1's 64 cache sets): 0.79-0.92x its time before
 // (session 10).
-// Known limit: 23-37 ms flat-topped, 32-52 upright (1080p RGBA, two threads, session 11),
-// over the 25 and growing 1.3-1.5x from 15 to 255 px (wider chunk margins, rings
-// out of L2, the oldest source rows read from L3). The window slides (double running sums)
+// Known limit: 24-34 ms flat-topped, 33-52 upright (1080p RGBA, two threads, session 12),
+// over the 25 and growing 1.4-1.6x from 15 to 255 px (wider chunk margins; T's and
+// X's rings, ~4 MB a chunk at 255 px, out of L2; the oldest source rows read from L3). The window slides (double running sums)
 // take ~20 % of the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row
 // sums ~25 %; upright, the column gathers and scatters ~22 % more. Float sums, a fused
 // step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
