@@ -17,8 +17,9 @@
 // against the exact hexagon.
 // Changed for speed (issue 3): a steep segment's shear moves whole rows, so its pass is
 // one sweep down the rows per chunk of columns (a SteepWindow, the one the fused sweep
-// uses; its own strip sweep before measured 2-8 % faster, A/B, at rotations 7-20), the
-// rows entering and leaving the window recomputed from the source (not stored), nothing
+// uses; its own strip sweep before measured 2-8 % faster, A/B, at rotations 7-20), each
+// sheared row made once, when it enters the window, and kept in a ring until it leaves
+// (session 12: 0.87-0.94x of the time of shearing the leaving row again), nothing
 // transposed; the passes run in the
 // frame (as given, or transposed when the plane is padded, see blur.cpp) where two of the
 // three directions are steep, and the third, at rotations other than multiples of 30
@@ -262,6 +263,9 @@ struct Region {
     int x0, y0, x1, y1;
 };
 
+// Slot of row r (any sign) in a ring of n rows.
+size_t ring_slot(int r, int n) { return size_t(((r % n) + n) % n); }
+
 // One steep segment's window, for the four passes (segment_sweep) and the fused sweep
 // (hexagon_sweep): one output row per step. Input lines are valid
 // over columns [0, n_in) (zero outside; a null line is all zero); outputs are wanted over
@@ -272,6 +276,14 @@ struct Region {
 // works only on the columns read in the next few steps (the window's span), a range that
 // drifts by under a column per step: a column joins with an empty sum and is never read
 // before its window has filled, and one that leaves is never read again (see step()).
+// G's rows are kept in a ring of the window's last - first + 1 rows: G row r depends on r
+// alone, so the row leaving the window is the one made when it entered (a column that
+// takes a row away was active when that row was made, see step()), and only the newest
+// input line is read and sheared per step. Before (sessions 9-11) the leaving line was
+// read and sheared again, not stored: a third of the three-tap passes, and for the fused
+// sweep a ring of X's rows and the oldest source rows read back from L3. A/B (1080p RGBA,
+// 15-255 px, session 12): 0.87-0.94x two threads, 0.91-0.94x one; float rounding apart
+// (1.2e-7: a column's shear is a vector or a scalar tap by where the call's range falls).
 class SteepWindow {
 public:
     // Input lines before `line0` are all zero; steps run from start() to ye.
@@ -297,25 +309,26 @@ public:
                          x1 + back_first(ye - 1) + 3 });
         const size_t n = size_t(g1_ - g0_) * size_t(nc);
         zero_.assign(n, 0.0f);
-        newest_.assign(n, 0.0f);
-        older_.assign(n, 0.0f);
-        oldest_.assign(n, 0.0f);
         h_.assign(n, 0.0f);
         sum_.assign(n, 0.0);
-        prev_ = zero_.data();
+        // Uninitialised: a row is read only over the columns it was made for.
+        nring_  = last - first + 1;
+        g_ring_ = Plane(g1_ - g0_, nring_, nc);
+        g_tag_.assign(size_t(nring_), std::numeric_limits<int>::min());
     }
     int first = 0, last = 0;
     int start() const { return start_; }
 
-    // The window moved to row y: `newest` is input line y - first, `oldest` line y - last
-    // (spans over the lines' columns [0, n_in)).
-    void step(int y, const RowSpan& newest, const RowSpan& oldest)
+    // The window moved to row y: `newest` is input line y - first (a span over the lines'
+    // columns [0, n_in)).
+    void step(int y, const RowSpan& newest)
     {
         // Active: the columns read at this step and the next last - first + 1, whose windows
         // are filling. The range drifts by under a column per step; a column joins with an
         // empty sum (all columns at the first step, whose earlier lines are zero) and,
         // until the first line it added is the one leaving, takes nothing away ("young":
-        // no read reaches it before then).
+        // no read reaches it before then). So a column that takes G row y - last away was
+        // in the newest line's columns when that row was made, and the ring holds it there.
         const int span = last - first;
         const int y_far = std::min(std::max(y, read0_) + span + 1, ye_ - 1);
         const int f_now = back_first(std::max(y, read0_)), f_far = back_first(y_far);
@@ -328,19 +341,18 @@ public:
         // The newest line over one column more each side: the next step's range moves
         // by at most one, and there this line is its previous one.
         const int na = std::max(g0_, a - 1), nb = std::min(g1_, b + 1);
-        const float* gn = zero_.data();
+        const int rn = y - first;
+        const size_t slot = ring_slot(rn, nring_);
+        g_tag_[slot] = std::numeric_limits<int>::min();
         if (newest.p && nb > na) {
-            g_row(newest, y - first, na, nb, newest_.data());
-            gn = newest_.data();
+            g_row(newest, rn, na, nb, g_ring_.row(int(slot)));
+            g_tag_[slot] = rn;
         }
+        const float* gn = g_of(rn);
         const bool inner_rows = span >= 2;
-        const float* enter = inner_rows ? prev_ : zero_.data();
+        const float* enter = inner_rows ? g_of(rn - 1) : zero_.data();
         if (mb > ma) {
-            const float* go = zero_.data();
-            if (oldest.p && span > 0) {
-                g_row(oldest, y - last, ma, mb, oldest_.data());
-                go = oldest_.data();
-            }
+            const float* go = span > 0 ? g_of(y - last) : zero_.data();
             const size_t k = size_t(ma - g0_) * size_t(nc_);
             slide_window(sum_.data() + k, h_.data() + k, gn + k, enter + k,
                          (inner_rows ? go : zero_.data()) + k, go + k, wf_, inner_, wl_,
@@ -355,12 +367,6 @@ public:
         };
         young(a, std::min(ma, b));
         young(std::max(mb, a), b);
-        if (gn == newest_.data()) {  // the newest line becomes the previous one
-            std::swap(newest_, older_);
-            prev_ = older_.data();
-        } else {
-            prev_ = zero_.data();
-        }
     }
 
     // o = (row y of the segment over [x0, x1) + add) * scale; add may be null.
@@ -375,6 +381,12 @@ public:
     }
 
 private:
+    // G row r from the ring, or zero where its line was black (or before the start).
+    const float* g_of(int r) const
+    {
+        const size_t slot = ring_slot(r, nring_);
+        return g_tag_[slot] == r ? g_ring_.row(int(slot)) : zero_.data();
+    }
     int tap_first(int r) const { return shear_ ? Taps(m_ * r).first : -1; }
     int back_first(int y) const { return shear_ ? Taps(-m_ * y).first : -1; }
     // G row r over columns [a, b), into buf at its own offsets.
@@ -387,10 +399,11 @@ private:
     int nc_, n_in_, x0_, x1_, read0_, ye_;
     bool shear_  = false;
     double m_    = 0.0, wf_ = 0.0, inner_ = 0.0, wl_ = 0.0;
-    int g0_ = 0, g1_ = 0, start_ = 0;
-    std::vector<float> zero_, newest_, older_, oldest_, h_;
+    int g0_ = 0, g1_ = 0, start_ = 0, nring_ = 1;
+    std::vector<float> zero_, h_;
     std::vector<double> sum_;
-    const float* prev_ = nullptr;
+    Plane g_ring_;
+    std::vector<int> g_tag_;  // the G row each ring slot holds (min(): none)
 };
 
 // out = (seg(in) + add) * scale, where seg(in)(p) = mean over t in [0, 1] of in(p - t e),
@@ -430,7 +443,7 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
         // Lines before valid.y0 are zero; outputs before the window's start read zero.
         SteepWindow win(ex, ey, nc, n_in, X0 - i0, X1 - i0, valid.y0, region.y0, region.y1);
         const size_t n = size_t(X1 - X0) * ncs;
-        std::vector<float> newest(columns ? size_t(n_in) * ncs : 0), oldest(newest.size()),
+        std::vector<float> newest(columns ? size_t(n_in) * ncs : 0),
             line_out(columns ? n : 0), line_add(columns && add ? n : 0);
         // Line r of `in` over [i0, i1): in place along a row, gathered down a column.
         auto line = [&](int r, std::vector<float>& buf) -> RowSpan {
@@ -443,7 +456,7 @@ void segment_sweep(const Plane& in, const Region& valid, Plane& out, const Regio
         };
         for (int y = std::min(win.start(), region.y0); y < region.y1; ++y) {
             if (y >= win.start())
-                win.step(y, line(y - sw.first, newest), line(y - sw.last, oldest));
+                win.step(y, line(y - sw.first, newest));
             if (y < region.y0)
                 continue;
             const float* a = nullptr;
@@ -545,9 +558,6 @@ struct SweepIO {
     std::function<void(int y, int n, int x0, int x1, const float* rows)> store;
 };
 
-// Slot of row r (any sign) in a ring of n rows.
-size_t ring_slot(int r, int n) { return size_t(((r % n) + n) % n); }
-
 // The hexagon in one sweep down the rows, when its third segment c runs along the rows
 // (the upright hexagon in the transposed frame, the flat-topped one as given), the three
 // rhombi grouped so that each steep segment runs once:
@@ -605,9 +615,10 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         // X's rows before x_lo are zero: the source's before 0, T's before seg_b's start.
         const int x_lo = std::min(0, seg_b.start());
         SteepWindow seg_a(ax, ay, nc, xb - xa, X0 - xa, X1 - xa, x_lo, Y0, Y1);
-        // T's rows from y to y + lead, X's from y - last to y + lead, each in a ring.
+        // T's rows from y to y + lead in a ring; X's row of this step (seg_a keeps the G
+        // rows it needs).
         const size_t nt_px = size_t(t1 - t0) * ncs, nx_px = size_t(xb - xa) * ncs;
-        const int nt = lead + 2, nx = std::max(seg_a.last, 0) + lead + 2;
+        const int nt = lead + 2, nx = 2;
         // T's ring starts black (its columns outside [ta, tb) stay so); X's rows and the
         // lines are written whole before they are read, so those start uninitialised.
         std::vector<float> t_ring(size_t(nt + 1) * nt_px, 0.0f);
@@ -618,8 +629,8 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
             return r >= seg_b.start() && r < x_end ? t_slot(r) : t_zero;
         };
         auto x_slot = [&](int r) { return x_ring.row(int(ring_slot(r, nx))); };
-        // Source lines from the oldest seg_b reads to the newest.
-        const int lines_lo = lead - seg_b.last, lines_hi = lead - seg_b.first;
+        // Source lines from seg_c's (row r) to seg_b's newest (r - first).
+        const int lines_lo = lead, lines_hi = lead - seg_b.first;
         // A missing line comes with the batch - 1 after it, so the ring holds that many more.
         const int batch  = std::max(1, io.batch);
         const int nlines = lines_hi - lines_lo + 2 + batch;
@@ -662,7 +673,7 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         for (int y = std::min(y_first, seg_a.start()); y < Y1; ++y) {
             const int r = y + lead;  // the row of T and X made at this step
             if (r >= seg_b.start() && r < x_end) {
-                seg_b.step(r, in_line(r - seg_b.first), in_line(r - seg_b.last));
+                seg_b.step(r, in_line(r - seg_b.first));
                 seg_b.read(r, t_slot(r) + size_t(ta - t0) * ncs, nullptr, 1.0f);
             }
             if (r >= x_lo && r < x_end)
@@ -674,7 +685,7 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
                 return {};
             };
             if (y >= seg_a.start())
-                seg_a.step(y, x_line(y - seg_a.first), x_line(y - seg_a.last));
+                seg_a.step(y, x_line(y - seg_a.first));
             if (y < Y0)
                 continue;
             seg_a.read(y, ab_row.data(), nullptr, 1.0f);
