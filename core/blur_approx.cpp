@@ -45,9 +45,10 @@
 // source's columns and writes the destination's 16 at a time (kColumnBatch; one at a time
 // a 1920 px frame's column falls in 2 of L1's 64 cache sets): 0.79-0.92x its time before
 // (session 10).
-// Known limit: 24-34 ms flat-topped, 33-52 upright (1080p RGBA, two threads, session 12),
-// over the 25 and growing 1.4-1.6x from 15 to 255 px (wider chunk margins; T's and
-// X's rings, ~4 MB a chunk at 255 px, out of L2; the oldest source rows read from L3). The window slides (double running sums)
+// Known limit: 20-33 ms flat-topped, 28-39 upright (1080p RGBA, two threads, session 12),
+// over the 25 from 127 px flat-topped (15 px upright) and growing 1.4-1.6x from 15
+// to 255 px (wider chunk margins; T's ring and the windows' rings of sheared rows, ~6 MB a
+// chunk at 255 px, out of L2, the two chunks sharing the L3's bandwidth). The window slides (double running sums)
 // take ~20 % of the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row
 // sums ~25 %; upright, the column gathers and scatters ~22 % more. Float sums, a fused
 // step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
