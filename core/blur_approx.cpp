@@ -1254,21 +1254,22 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
 
 bool hexagon_sweeps(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]); }
 
-// Flat in the size, by path: measured at 15-63 px (1080p RGBA, two threads) 23-28 ms
-// flat-topped (the sweep as given), 32-41 upright (the sweep transposed, its columns read
-// and written in batches; session 11) and 103-140 at 7 degrees (four passes; session 9),
-// i.e. 6, 9 and 30 ns a pixel and channel on one thread. With these, `fast` takes the
-// sweep over the exact spans from 17 px flat-topped and 23 px upright, where spot timings
-// crossed (session 11: flat-topped, spans 31.7 ms at 17 px and 33.8 at 19, the sweep
-// 30.5 at 21; upright, spans 42.2 at 23 px, the sweep 41.6 at 27). spans_cost_ns reads a hexagon's
+// Flat in the size, by path: measured at 15-63 px (1080p RGBA, two threads) 20-24 ms
+// flat-topped (the sweep as given), 28-32 upright (the sweep transposed, its columns read
+// and written in batches; session 12) and 87-91 at 7 degrees (four passes), i.e. about
+// 5, 7.5 and 30 ns a pixel and channel on one thread. With these, `fast` takes the sweep
+// over the exact spans from 13 px flat-topped and 19 px upright, where spot timings
+// crossed (session 12, 9 runs each: flat-topped, spans 22.1-24.0 ms at 13 px and the sweep
+// 23.0-25.5, at 15 px 25.8 against 21.8; upright, 36.9 against 37.3 at 17 px, 31.1
+// against 28.5 at 19). spans_cost_ns reads a hexagon's
 // spans within 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare
 // as they are. (Until its row term, they were read up to 1.39x low, and this model was
 // divided by 1.3 to match.)
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
     const double ns = !hexagon_sweeps(k)      ? 30.0
-                      : hexagon_transposed(k) ? 9.0
-                                              : 6.0;
+                      : hexagon_transposed(k) ? 7.5
+                                              : 5.0;
     return double(w) * double(h) * ns;
 }
 
