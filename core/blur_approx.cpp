@@ -503,8 +503,9 @@ void segment_row(float* o, const RowSpan& row, double* prefix, int npx, int nc,
     const int lo = row.p ? row.lo : 0, hi = row.p ? row.hi : 0;
     std::fill_n(prefix, size_t(lo) * ncs, 0.0);
     row_prefix(prefix + size_t(lo) * ncs, row.p ? row.p : zero, size_t(hi - lo), nc);
-    for (size_t i = size_t(hi + 1) * ncs, e = size_t(npx + 1) * ncs; i < e; ++i)
-        prefix[i] = prefix[i - ncs];
+    const double* total = prefix + size_t(hi) * ncs;  // a copy per pixel: no chain through memory
+    for (size_t i = size_t(hi + 1) * ncs, e = size_t(npx + 1) * ncs; i < e; i += ncs)
+        std::copy_n(total, ncs, prefix + i);
     // The pixels between the two ends: prefix sums to before the newest, less to the oldest.
     const int offset[2] = { s.last - s.first, 0 };  // the newest, the oldest
     for_span_stretches<2>(row, offset, 2, int(n / ncs), [&](int x0, int x1) {
