@@ -302,10 +302,11 @@ inline __attribute__((always_inline)) void box_row_stretches(const RowSpan& v, c
     }
     // Stream k reads padded pixel x + offset[k] for output x.
     const int offset[4] = { e, a, 0, 2 * radius };
-    for_span_stretches<4>(v, offset, ends ? 4 : 2, npx, [&](int x0, int x1) __attribute__((always_inline)) {
+    auto one = [&](int x0, int x1) __attribute__((always_inline)) {
         auto at = [&](int k) { return span_pixel(v, x0 + offset[k], NC, zero); };
         stretch(x0, BoxStreams{ at(0), at(1), at(2), at(3) }, x1 - x0, s);
-    });
+    };
+    for_span_stretches<4>(v, offset, ends ? 4 : 2, npx, one);
 }
 
 // A stretch for four channels in vector types (PixelRgba, plane.h), one pixel a vector:
@@ -362,37 +363,37 @@ inline __attribute__((always_inline)) void box_stretch(float* out, const BoxStre
 {
     if constexpr (NC == 4) {
         box_stretch_rgba<Ends>(out, st, n, s, inner, end);
-        return;
-    }
-    auto value = [&](double sum, size_t j) __attribute__((always_inline)) {
-        return Ends ? float(inner * sum + end * (double(st.lo[j]) + double(st.hi[j])))
-                    : float(inner * sum);
-    };
-    const float *add = st.add, *sub = st.sub;
-    int x = 0;
-    for (; x + 4 <= n; x += 4) {
-        const size_t i = size_t(x) * NC;
-        double q[4][NC];  // q[k]: the sum k pixels on, less s
-        for (int c = 0; c < NC; ++c) {
-            q[0][c] = 0.0;
-            q[1][c] = double(add[i + c]) - double(sub[i + c]);
-            q[2][c] = q[1][c] + (double(add[i + NC + c]) - double(sub[i + NC + c]));
-            q[3][c] = q[2][c] + (double(add[i + 2 * NC + c]) - double(sub[i + 2 * NC + c]));
-        }
-        for (int k = 0; k < 4; ++k)
+    } else {
+        auto value = [&](double sum, size_t j) __attribute__((always_inline)) {
+            return Ends ? float(inner * sum + end * (double(st.lo[j]) + double(st.hi[j])))
+                        : float(inner * sum);
+        };
+        const float *add = st.add, *sub = st.sub;
+        int x = 0;
+        for (; x + 4 <= n; x += 4) {
+            const size_t i = size_t(x) * NC;
+            double q[4][NC];  // q[k]: the sum k pixels on, less s
             for (int c = 0; c < NC; ++c) {
-                const size_t j = i + size_t(k) * NC + size_t(c);
-                out[j] = value(s[c] + q[k][c], j);
+                q[0][c] = 0.0;
+                q[1][c] = double(add[i + c]) - double(sub[i + c]);
+                q[2][c] = q[1][c] + (double(add[i + NC + c]) - double(sub[i + NC + c]));
+                q[3][c] = q[2][c] + (double(add[i + 2 * NC + c]) - double(sub[i + 2 * NC + c]));
             }
-        for (int c = 0; c < NC; ++c)
-            s[c] += q[3][c] + (double(add[i + 3 * NC + c]) - double(sub[i + 3 * NC + c]));
-    }
-    for (; x < n; ++x)
-        for (int c = 0; c < NC; ++c) {
-            const size_t j = size_t(x) * NC + size_t(c);
-            out[j] = value(s[c], j);
-            s[c] += double(add[j]) - double(sub[j]);
+            for (int k = 0; k < 4; ++k)
+                for (int c = 0; c < NC; ++c) {
+                    const size_t j = i + size_t(k) * NC + size_t(c);
+                    out[j] = value(s[c] + q[k][c], j);
+                }
+            for (int c = 0; c < NC; ++c)
+                s[c] += q[3][c] + (double(add[i + 3 * NC + c]) - double(sub[i + 3 * NC + c]));
         }
+        for (; x < n; ++x)
+            for (int c = 0; c < NC; ++c) {
+                const size_t j = size_t(x) * NC + size_t(c);
+                out[j] = value(s[c], j);
+                s[c] += double(add[j]) - double(sub[j]);
+            }
+    }
 }
 
 // The running box per channel count, each multiversioned; `zero` is npx black pixels.
@@ -453,7 +454,8 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
         auto horizontal = [&](int j) {
             float* o       = rows.row(j % ring);
             const int x0   = roi.xbegin + xs - bx.radius, x1 = roi.xbegin + xe + bx.radius;
-            const RowSpan span = bordered_row_span(in, roi.ybegin - ry + j, x0, x1, border, row.data());
+            const int sy       = roi.ybegin - ry + j;
+            const RowSpan span = bordered_row_span(in, sy, x0, x1, border, row.data());
             slot_black[size_t(j % ring)] = !span.p;
             if (!span.p)
                 return;
@@ -463,7 +465,7 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
                 return;
             const float* v = span.lo == 0 && span.hi == x1 - x0
                                  ? span.p
-                                 : bordered_row_view(in, roi.ybegin - ry + j, x0, x1, border, row.data());
+                                 : bordered_row_view(in, sy, x0, x1, border, row.data());
             row_prefix(prefix.data(), v, nrow / ncs, nc);
             // Output x sums padded [x + radius - full, x + radius + full].
             const double* hi = prefix.data() + size_t(bx.radius + bx.full + 1) * ncs;
@@ -1005,8 +1007,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // reduction (their four passes: 130 ms at 35 px against the spans' 107, and under 40
     // dB at 15-23 px, 36.8-39.7; sessions 9, 10). With the spans model and the band counts
     // of session 10 the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
-    // ~23 for an octagon, ~17 for the flat-topped hexagon and ~23 for the upright one
-    // (session 11, after the sweep's regrouping).
+    // ~23 for an octagon, ~13 for the flat-topped hexagon and ~19 for the upright one
+    // (session 12, parallelograms_cost_ns).
     // (Only up to 64 px across: the spans' cost grows with the size and is past every
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     // Its bands, unless the user named a count: the fewest within its accuracy bound

@@ -48,8 +48,8 @@
 // Known limit: 20-33 ms flat-topped, 28-39 upright (1080p RGBA, two threads, session 12),
 // over the 25 from 127 px flat-topped (15 px upright) and growing 1.4-1.6x from 15
 // to 255 px (wider chunk margins; T's ring and the windows' rings of sheared rows, ~6 MB a
-// chunk at 255 px, out of L2, the two chunks sharing the L3's bandwidth). The window slides (double running sums)
-// take ~20 % of the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row
+// chunk at 255 px, out of L2, the two chunks sharing the L3's bandwidth). The window
+// slides (double running sums) take ~20 % of the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row
 // sums ~25 %; upright, the column gathers and scatters ~22 % more. Float sums, a fused
 // step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
 // or less (session 9, docs/benchmarks.md); so did row sums in L1-sized tiles and rings on
@@ -549,8 +549,8 @@ Region hull(const Region& a, const Region& b)
 
 // Where the fused sweep reads and writes, in its working frame of w x h pixels: `lines`
 // gives lines r .. r + n - 1 over columns [c0, c1) (lines[i] a view or filled into
-// bufs[i], its span relative to c0; no pixels when all black), `out_row` where output row y goes over [x0, x1), or null
-// to hand the rows to `store`, up to `batch` at once (y .. y + n - 1, one after another).
+// bufs[i], its span relative to c0; no pixels when all black), `out_row` where output
+// row y goes over [x0, x1), or null to hand the rows to `store`, up to `batch` at once (y .. y + n - 1, one after another).
 // A batch of more than one line suits a source read down its columns (hexagon_direct).
 struct SweepIO {
     int w = 0, h = 0;
@@ -572,9 +572,9 @@ struct SweepIO {
 // seg_c commute exactly (every step of a steep window runs along the rows or sums down
 // the columns), so the two groupings differ only by float rounding.
 // Each row of T is made once, summed along the row at once into X, and kept in a ring
-// until seg_c T reads it; X's rows are kept in a ring of those seg_a still reads. Each
-// source line is read once (a ring keeps the lines seg_b still reads) and each output
-// row written once, no middle planes.
+// until seg_c T reads it; each row of X is seg_a's newest as it is made (the windows keep
+// their own sheared rows). Each source line is read once (a ring keeps the few lines of
+// a step and of a column batch) and each output row written once, no middle planes.
 // Columns run in two or four fixed chunks (by the kernel and the image, never the thread
 // count), each over the columns its outputs read; the windows' sums restart per chunk but
 // add the same values in the same order, so only the row prefix sums depend on where a
@@ -617,23 +617,21 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         // X's rows before x_lo are zero: the source's before 0, T's before seg_b's start.
         const int x_lo = std::min(0, seg_b.start());
         SteepWindow seg_a(ax, ay, nc, xb - xa, X0 - xa, X1 - xa, x_lo, Y0, Y1);
-        // T's rows from y to y + lead in a ring; X's row of this step (seg_a keeps the G
-        // rows it needs).
+        // T's rows from y to y + lead in a ring; X only as the row of this step, which
+        // seg_a takes as its newest at once (it keeps the sheared rows it needs).
         const size_t nt_px = size_t(t1 - t0) * ncs, nx_px = size_t(xb - xa) * ncs;
-        const int nt = lead + 2, nx = 2;
-        // T's ring starts black (its columns outside [ta, tb) stay so); X's rows and the
-        // lines are written whole before they are read, so those start uninitialised.
-        std::vector<float> t_ring(size_t(nt + 1) * nt_px, 0.0f);
-        Plane x_ring(xb - xa, nx, nc);
+        const int nt = lead + 2;
+        // T's ring starts black (its columns outside [ta, tb) stay so).
+        std::vector<float> t_ring(size_t(nt + 1) * nt_px, 0.0f), x_now(nx_px);
         const float* t_zero = t_ring.data() + size_t(nt) * nt_px;
         auto t_slot = [&](int r) { return t_ring.data() + ring_slot(r, nt) * nt_px; };
         auto t_row  = [&](int r) -> const float* {
             return r >= seg_b.start() && r < x_end ? t_slot(r) : t_zero;
         };
-        auto x_slot = [&](int r) { return x_ring.row(int(ring_slot(r, nx))); };
         // Source lines from seg_c's (row r) to seg_b's newest (r - first).
         const int lines_lo = lead, lines_hi = lead - seg_b.first;
-        // A missing line comes with the batch - 1 after it, so the ring holds that many more.
+        // A missing line comes with the batch - 1 after it, so the ring holds that many more
+        // (written whole before it is read, so uninitialised).
         const int batch  = std::max(1, io.batch);
         const int nlines = lines_hi - lines_lo + 2 + batch;
         Plane line_store(ni, nlines, nc);
@@ -669,6 +667,7 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         };
         // Output rows for `store`, a batch at a time.
         const size_t no = size_t(X1 - X0) * ncs;
+        const int nt_read = (X1 - fc) - (X0 - lc);  // T's pixels seg_c reads for [X0, X1)
         std::vector<float> ab_row(no), o_rows(size_t(batch) * no);
         std::vector<double> prefix(size_t(std::max(u1 - u0, t1 - t0) + 1) * ncs);
         const int y_first = std::min(seg_b.start(), x_lo) - lead;
@@ -678,22 +677,18 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
                 seg_b.step(r, in_line(r - seg_b.first));
                 seg_b.read(r, t_slot(r) + size_t(ta - t0) * ncs, nullptr, 1.0f);
             }
-            if (r >= x_lo && r < x_end)
-                segment_row(x_slot(r), source_for_c(r), prefix.data(), u1 - u0, nc, seg_c,
+            // X's row r, seg_a's newest (y - seg_a.first = y + lead = r).
+            const bool x_made = r >= x_lo && r < x_end;
+            if (x_made)
+                segment_row(x_now.data(), source_for_c(r), prefix.data(), u1 - u0, nc, seg_c,
                             t_row(r) + size_t(xa - t0) * ncs, 1.0f, nx_px, t_zero);
-            auto x_line = [&](int q) -> RowSpan {
-                if (q >= x_lo && q <= r && q < x_end)
-                    return { x_slot(q), 0, xb - xa };
-                return {};
-            };
             if (y >= seg_a.start())
-                seg_a.step(y, x_line(y - seg_a.first));
+                seg_a.step(y, x_made ? RowSpan{ x_now.data(), 0, xb - xa } : RowSpan{});
             if (y < Y0)
                 continue;
             seg_a.read(y, ab_row.data(), nullptr, 1.0f);
             float* o       = io.out_row(y, X0, X1);
             const int held = (y - Y0) % batch;  // rows held for `store` before this one
-            const int nt_read = (X1 - fc) - (X0 - lc);
             segment_row(o ? o : o_rows.data() + size_t(held) * no,
                         RowSpan{ t_row(y) + size_t(X0 - lc - t0) * ncs, 0, nt_read }, prefix.data(),
                         nt_read, nc, seg_c, ab_row.data(), float(1.0 / 3.0), no, t_zero);
