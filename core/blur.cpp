@@ -448,7 +448,7 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
         // black (a row outside the source under the black border) and read as `black`.
         Plane rows(xe - xs, ring, nc);
         std::vector<char> slot_black(size_t(ring), 0);
-        std::vector<float> row(nrow), black(n, 0.0f);
+        std::vector<float> row(nrow), black(n, 0.0f), out_row(n);
         std::vector<double> prefix(nrow + ncs), sum(n, 0.0);
         // Horizontal box of padded row j (source row roi.ybegin - ry + j) into its ring slot.
         auto horizontal = [&](int j) {
@@ -490,10 +490,14 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
             } else {
                 slide(sum.data(), ring_row(centre + by.full), ring_row(centre - 1 - by.full), n);
             }
-            float* out = static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + y));
-            box_out(out, sum.data(), by.inner, ends ? ring_row(centre - by.full - 1) : nullptr,
+            box_out(out_row.data(), sum.data(), by.inner,
+                    ends ? ring_row(centre - by.full - 1) : nullptr,
                     ends ? ring_row(centre + by.full + 1) : nullptr, by.end, n);
+            // Past the caches (session 13: A/B 0.88-0.98x at 15-255 px, 1080p RGBA).
+            stream_floats(static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + y)),
+                          out_row.data(), n);
         }
+        stream_fence();
     });
     return true;
 }

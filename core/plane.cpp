@@ -14,6 +14,10 @@
 #include <limits>
 #include <type_traits>
 
+#if defined(__SSE2__)
+#    include <immintrin.h>
+#endif
+
 #if defined(__linux__)
 #    include <sys/mman.h>
 #endif
@@ -185,6 +189,28 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
         source_line(src, false, sx + i, y0, in0, border, out[i]);
         source_line(src, false, sx + i, in1, y1, border, out[i] + size_t(in1 - y0) * ncs);
     }
+}
+
+void stream_floats(float* dst, const float* src, size_t n)
+{
+#if defined(__SSE2__)
+    size_t i = 0;
+    for (; i < n && (reinterpret_cast<uintptr_t>(dst + i) & 15u); ++i)
+        dst[i] = src[i];
+    for (; i + 4 <= n; i += 4)
+        _mm_stream_ps(dst + i, _mm_loadu_ps(src + i));
+    for (; i < n; ++i)
+        dst[i] = src[i];
+#else
+    std::copy_n(src, n, dst);
+#endif
+}
+
+void stream_fence()
+{
+#if defined(__SSE2__)
+    _mm_sfence();
+#endif
 }
 
 void copy_pixels(float* dst, size_t dst_step, const float* src, size_t src_step, int count, int nc)

@@ -112,6 +112,13 @@ inline void prefetch_lines(const void* p, size_t bytes, bool write = false)
         write ? __builtin_prefetch(c + b, 1) : __builtin_prefetch(c + b, 0);
 }
 
+/// dst[i] = src[i], i < n, written past the caches (non-temporal stores) where dst is
+/// 16-byte aligned: a frame's output is not read again by the writer, so a plain store's
+/// read for ownership is wasted memory traffic. Call stream_fence() before another thread
+/// reads dst.
+void stream_floats(float* dst, const float* src, size_t n);
+void stream_fence();
+
 /// Source row `sy` over columns [x0, x1): read in place where they lie inside the data
 /// window, else filled into `buf` by source_row().
 const float* source_row_view(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border,
