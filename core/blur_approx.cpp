@@ -552,9 +552,13 @@ Region hull(const Region& a, const Region& b)
 // bufs[i], its span relative to c0; no pixels when all black), `out_row` where output
 // row y goes over [x0, x1), or null to hand the rows to `store`, up to `batch` at once (y .. y + n - 1, one after another).
 // A batch of more than one line suits a source read down its columns (hexagon_direct).
+// `lit`: lines and columns outside it are black (the source's data window under the black
+// border), so no window slides before its first lit line, nor makes T where no lit column
+// reaches.
 struct SweepIO {
     int w = 0, h = 0;
     int batch = 1;
+    Region lit{ 0, 0, std::numeric_limits<int>::max(), std::numeric_limits<int>::max() };
     std::function<void(int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines)> lines;
     std::function<float*(int y, int x0, int x1)> out_row;
     std::function<void(int y, int n, int x0, int x1, const float* rows)> store;
@@ -607,15 +611,22 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         // lines over [i0, i1).
         const int xa = std::max(0, X0 - la), xb = std::min(io.w, X1 + ha);
         const int t0 = std::min(xa, X0 - lc), t1 = std::max(xb, X1 - fc);
-        const int ta = std::max(0, t0), tb = std::min(io.w, t1);
+        // T is black beyond seg_b's reach of the lit columns (at 255 px most of the left
+        // chunk's margin).
+        const int lit_x0 = std::max(0, io.lit.x0), lit_x1 = std::min(io.w, io.lit.x1);
+        const int ta = std::max({ 0, t0, lit_x0 - reach_b });
+        const int tb = std::max(ta + 1, std::min({ io.w, t1, lit_x1 + reach_b }));
         const int u0 = xa - lc, u1 = xb - fc;
         const int i0 = std::max(0, std::min(ta - reach_b, u0));
         const int i1 = std::min(io.w, std::max(tb + reach_b, u1)), ni = i1 - i0;
         const int x_end = Y1 + lead;  // X's and T's rows end here
-        SteepWindow seg_b(bx, by, nc, ni, ta - i0, tb - i0, 0, std::numeric_limits<int>::min(),
+        // Lines before the first lit one are black: seg_b starts with it, not at the top of
+        // the padded frame (at 255 px its ~110 black rows were 6-8 % of the steps).
+        const int lit_y0 = std::clamp(io.lit.y0, 0, io.h);
+        SteepWindow seg_b(bx, by, nc, ni, ta - i0, tb - i0, lit_y0, std::numeric_limits<int>::min(),
                           x_end);
-        // X's rows before x_lo are zero: the source's before 0, T's before seg_b's start.
-        const int x_lo = std::min(0, seg_b.start());
+        // X's rows before x_lo are black: the source's before lit_y0, T's before seg_b's start.
+        const int x_lo = std::min(lit_y0, seg_b.start());
         SteepWindow seg_a(ax, ay, nc, xb - xa, X0 - xa, X1 - xa, x_lo, Y0, Y1);
         // T's rows from y to y + lead in a ring; X only as the row of this step, which
         // seg_a takes as its newest at once (it keeps the sheared rows it needs).
@@ -671,7 +682,9 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         std::vector<float> ab_row(no), o_rows(size_t(batch) * no);
         std::vector<double> prefix(size_t(std::max(u1 - u0, t1 - t0) + 1) * ncs);
         const int y_first = std::min(seg_b.start(), x_lo) - lead;
-        for (int y = std::min(y_first, seg_a.start()); y < Y1; ++y) {
+        // Outputs may start above the first step (a grown window over black lines): those
+        // read the windows' empty sums.
+        for (int y = std::min({ y_first, seg_a.start(), Y0 }); y < Y1; ++y) {
             const int r = y + lead;  // the row of T and X made at this step
             if (r >= seg_b.start() && r < x_end) {
                 seg_b.step(r, in_line(r - seg_b.first));
@@ -1294,6 +1307,11 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
     io.w = t ? region.height() : region.width();
     io.h = t ? region.width() : region.height();
     const Region out_region{ t ? ry : rx, t ? rx : ry, io.w - (t ? ry : rx), io.h - (t ? rx : ry) };
+    if (border == Border::Black) {
+        const Region lit{ data.xbegin - region.xbegin, data.ybegin - region.ybegin,
+                          data.xend - region.xbegin, data.yend - region.ybegin };
+        io.lit = t ? Region{ lit.y0, lit.x0, lit.y1, lit.x1 } : lit;
+    }
     if (!t) {
         io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
             for (int i = 0; i < n; ++i)
