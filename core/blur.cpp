@@ -236,18 +236,17 @@ double* aligned64(double* p)
 }
 
 // The box straight from the source ImageBuf into `dst` (no padded plane, no middle plane,
-// no copy out). Each task owns a strip of kBoxStrip output columns (twice that for wide
-// boxes) and walks down it: the horizontal pass reads one source row of the strip plus
-// the box's reach (in place; under the clamp and mirror borders an edge strip's row is
-// filled into a small buffer by the border rule), slides a double running sum along it
-// and keeps the result in a ring of the last 2 ry + 2 rows (2 MiB at 512 columns and
-// ry = 127; black rows are not stored, but read from one zero row); the vertical
-// running sum (double) over that ring is written straight into `dst`. The source and
-// `dst` are each touched once, so the cost is one read and one write of the frame plus
-// the arithmetic, whatever the size. Prefix sums start afresh at every strip, so they
-// never grow beyond the sum of one strip's row (a 1e6 pixel leaves no drift); the strips
-// are fixed, so the result does not depend on the thread count.
-constexpr int kBoxStrip = 256;
+// no copy out). Each task owns a strip of output columns (column_chunks) and walks down
+// it: the horizontal pass reads one source row of the strip plus the box's reach (in
+// place; under the clamp and mirror borders an edge strip's row is filled into a small
+// buffer by the border rule), slides a double running sum along it and keeps the result
+// in a ring of the last 2 ry + 2 rows (3.9 MiB at 960 columns and ry = 127; black rows
+// are not stored, but read from one zero row); the vertical running sum (double) over
+// that ring is written straight into `dst`. The source and `dst` are each touched once,
+// so the cost is one read and one write of the frame plus the arithmetic, whatever the
+// size. Prefix sums start afresh at every strip, so they never grow beyond the sum of one
+// strip's row (a 1e6 pixel leaves no drift); the strips are fixed by the width, so the
+// result does not depend on the thread count.
 
 // One row of a horizontal box: out(x) = inner * (sum of the full pixels
 // v[x + radius - full .. x + radius + full]) + end * (v[x] + v[x + 2 radius]), for the
@@ -436,12 +435,12 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
     const size_t ncs = size_t(nc);
     const int w = roi.width(), h = roi.height(), ry = by.radius;
     const int ring = 2 * ry + 2;  // rows y .. y + 2 ry are in use, and row y - 1 by the slide
-    // Wide boxes take wider strips, so the reach each strip reads on both sides stays
-    // a small share of it (fixed by the kernel, never by the thread count).
-    const int strip   = bx.radius >= 48 ? 2 * kBoxStrip : kBoxStrip;
-    const int nstrips = (w + strip - 1) / strip;
+    const int nstrips = column_chunks(w);
+    const int strip   = (w + nstrips - 1) / nstrips;
     parallel_for_chunks(0, nstrips, 1, nthreads, [&](int64_t s, int64_t) {
         const int xs = int(s) * strip, xe = std::min(w, xs + strip);
+        if (xe <= xs)
+            return;
         const size_t n = size_t(xe - xs) * ncs;
         const size_t nrow = size_t(xe - xs + 2 * bx.radius) * ncs;
         // The ring starts uninitialised: a slot is written before it is read, or marked

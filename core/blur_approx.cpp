@@ -579,7 +579,7 @@ struct SweepIO {
 // until seg_c T reads it; each row of X is seg_a's newest as it is made (the windows keep
 // their own sheared rows). Each source line is read once (a ring keeps the few lines of
 // a step and of a column batch) and each output row written once, no middle planes.
-// Columns run in two fixed chunks (never by the thread count), each over the columns its
+// Columns run in fixed chunks (column_chunks: two at 1080p), each over the columns its
 // outputs read; the windows' sums restart per chunk but add the same values in the same
 // order, so only the row prefix sums depend on where a chunk starts (float rounding).
 void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double ax, double ay,
@@ -595,11 +595,8 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
     const int reach_b = int(std::ceil(std::abs(bx))) + 4;
     // seg_a reads X's rows up to `lead` ahead of the output row.
     const int lead = std::max(0, -SegmentWeights(ay).first);
-    // Two chunks, one a thread: more cost their margins more than they save in cache
-    // (session 13, A/B on 1080p RGBA: two against the four small kernels took before,
-    // 0.90-0.96x at 15-95 px; 4, 8 and 16 at 255 px one thread 1.2x, 1.4x, 2.5x).
     const int width   = out_region.x1 - out_region.x0;
-    const int nchunks = 2;
+    const int nchunks = column_chunks(width);
     const int chunk   = (width + nchunks - 1) / nchunks;
     parallel_for_chunks(0, nchunks, 1, nthreads, [&](int64_t ci, int64_t) {
         const int X0 = out_region.x0 + int(ci) * chunk, X1 = std::min(out_region.x1, X0 + chunk);

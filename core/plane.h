@@ -92,6 +92,17 @@ void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border
 /// each cache line for each of its pixels).
 void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Border border,
                     float* const* out);
+/// How many column chunks a sweep down the rows (the box, the hexagon) cuts a frame `w`
+/// wide into: about 960 columns each, an even count, fixed by the width (never by the
+/// thread count, so the float rounding is too). Each chunk reads and computes its
+/// kernel's reach again on both sides, which wide chunks make a small share. Measured
+/// (session 13, 1080p RGBA, two threads, A/B): the box in two strips of 960 against 256
+/// columns (512 from 96 px) 0.73-0.82x at 15-255 px, though a 255 px box's ring (3.9 MiB)
+/// is then far out of this machine's 1 MiB L2, three strips of 640 the slowest; the
+/// hexagon sweep in two chunks against four 0.90-0.96x at 15-95 px, and at 255 px on one
+/// thread four, eight and sixteen took 1.2x, 1.4x and 2.5x the time of two.
+inline int column_chunks(int w) { return 2 * std::max(1, (w + 960) / 1920); }
+
 /// Columns a transposing reader or writer takes at once (source_columns): 16 RGBA float
 /// pixels are four 64-byte cache lines. The upright hexagon's sweep at 63 px, 1080p
 /// RGBA, interleaved in one process (session 10): 63 ms one at a time, 52 by 4, 48 by 8,
