@@ -414,6 +414,30 @@ TEST(Cli, BlurMethodsAndConvolve)
                          "kernel image channel 0 sums to 0", out);
     expect_clean_failure(bokehtool(format("{0} --blur:kernel=box:method=fft 9 -o {1}", in, out)),
                          "method=fft is for disk, polygon and gaussian kernels", out);
+    // --blur:kernel=image takes the kernel from the stack too, resized to WxH: at its own
+    // size it is --convolve; a flat 3x3 image stretched to 9x9 is the 9x9 box; size 0 is
+    // the image itself, as for every kernel.
+    OIIO::ImageBuf flat(OIIO::ImageSpec(3, 3, 1, OIIO::TypeFloat));
+    OIIO::ImageBufAlgo::fill(flat, { 0.25f });
+    ASSERT_TRUE(flat.write(dir + "/flat.exr"));
+    r = bokehtool(format("{0} {1}/k.exr --blur:kernel=image 9x9 -o {1}/image.exr "
+                         "{0} {1}/flat.exr --blur:kernel=image 9 -o {1}/stretched.exr "
+                         "{0} --blur:kernel=box 9 -o {1}/box.exr "
+                         "{0} {1}/flat.exr --blur:kernel=image 0 -o {1}/same.exr", in, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_EQ(max_difference(conv, OIIO::ImageBuf(dir + "/image.exr")), 0.0);
+    EXPECT_LE(max_difference(OIIO::ImageBuf(dir + "/box.exr"), OIIO::ImageBuf(dir + "/stretched.exr")),
+              1e-3) << "half output";
+    EXPECT_EQ(max_difference(OIIO::ImageBuf(in), OIIO::ImageBuf(dir + "/same.exr")), 0.0);
+    expect_clean_failure(bokehtool(format("{0} --blur:kernel=image 9 -o {1}", in, out)),
+                         "needs 2 image(s) on the stack", out);
+    expect_clean_failure(bokehtool(format("{0} {1}/flat.exr --blur:kernel=image:method=bands 9 -o {2}",
+                                          in, dir, out)),
+                         "method=bands does not apply to kernel=image", out);
+    expect_clean_failure(bokehtool(format("{0} {1}/flat.exr --blur:kernel=image 9.5 -o {2}", in, dir, out)),
+                         "kernel=image takes a whole number of pixels", out);
+    expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --blur:kernel=image 9 -o {2}", in, dir, out)),
+                         "kernel image channel 0 sums to 0", out);
 }
 
 TEST(Cli, Blur)

@@ -24,7 +24,7 @@
 
 #include <OpenImageIO/imagebuf.h>
 
-#define BOKEH_PLUGIN_ABI_VERSION 1
+#define BOKEH_PLUGIN_ABI_VERSION 2
 #define BOKEH_PLUGIN_EXPORT extern "C" __attribute__((visibility("default")))
 
 namespace bokeh {
@@ -114,6 +114,9 @@ struct Command {
     std::string help;       ///< one line
     int inputs  = 0;        ///< images it pops from the stack
     int outputs = 1;        ///< images it pushes
+    /// Where the options change how many images it pops (`--blur:kernel=image` takes the
+    /// kernel from the stack too): that count for the given options; unset: `inputs`.
+    std::function<int(const OptionValues&)> inputs_for;
     /// The host converts the inputs to the scene-linear working space first (filters do).
     bool needs_scene_linear = false;
     std::vector<OptionSpec> options;
@@ -121,6 +124,11 @@ struct Command {
     std::string plugin;     ///< set by the registry: the module that registered it
 
     int argument_count() const;
+    /// The images it pops with these options.
+    int input_count(const OptionValues& options) const
+    {
+        return inputs_for ? inputs_for(options) : inputs;
+    }
 };
 
 /// A command taking `inputs` images and pushing one, with the fields most commands set.

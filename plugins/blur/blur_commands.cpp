@@ -1,9 +1,13 @@
 // blur_commands.cpp — `--blur`, spelled as oiiotool spells it (`--blur:kernel=disk 31x31`),
-// with our kernels and options, and `--convolve` with an image kernel. The work is
-// bokeh::blur and bokeh::convolve_image (core/blur*.cpp).
+// with our kernels and options (`kernel=image`: the kernel from the stack, resized), and
+// `--convolve` with an image kernel. The work is bokeh::blur, bokeh::resize and
+// bokeh::convolve_image (core/).
 
 #include <bokeh/blur.h>
 #include <bokeh/plugin.h>
+#include <bokeh/resample.h>
+
+#include <cmath>
 
 #include <OpenImageIO/strutil.h>
 
@@ -25,12 +29,43 @@ bokeh::BlurOptions blur_options(const CommandContext& c)
     return o;
 }
 
+// `--blur:kernel=image WxH`: the top image is the kernel (an aperture scan, say), resized
+// to WxH and convolved as `--convolve` does.
+bool blur_with_image_command(CommandContext& c, float width_px, float height_px)
+{
+    const std::string& method = c.options.get_string("method");
+    if (method != "auto" && method != "exact" && method != "fft")
+        return c.fail(format("method={} does not apply to kernel=image (convolved exactly, by FFT)",
+                             method));
+    const int w = int(std::lround(width_px)), h = int(std::lround(height_px));
+    if (w != width_px || h != height_px)
+        return c.fail(format("'{}': kernel=image takes a whole number of pixels", c.args[0]));
+    bokeh::StackImage out = c.inputs[0];
+    out.buf               = std::make_shared<OIIO::ImageBuf>();
+    if (w == 0 || h == 0) {  // the zero-size kernel, as every other: the image itself
+        out.buf->copy(*c.inputs[0].buf);
+        c.outputs.push_back(std::move(out));
+        return true;
+    }
+    // Resized as `--resize` (bilinear, the edge repeated, as IBA::resize): a picture of
+    // the aperture scaled to the bokeh's size.
+    OIIO::ImageBuf kernel;
+    if (!bokeh::resize(kernel, *c.inputs[1].buf, w, h, {}, c.nthreads))
+        return c.fail(format("the kernel image: {}", kernel.geterror()));
+    if (!bokeh::convolve_image(*out.buf, *c.inputs[0].buf, kernel, blur_options(c), {}, c.nthreads))
+        return c.fail(out.buf->geterror());
+    c.outputs.push_back(std::move(out));
+    return true;
+}
+
 bool blur_command(CommandContext& c)
 {
     bokeh::Kernel k;
     if (!bokeh::parse_extent(c.args[0], k.width_px, k.height_px))
         return c.fail(format("'{}' is not a kernel size (WxH or N pixels, >= 0)", c.args[0]));
     const std::string& shape = c.options.get_string("kernel");
+    if (shape == "image")
+        return blur_with_image_command(c, k.width_px, k.height_px);
     k.shape = shape == "box"        ? bokeh::KernelShape::Box
               : shape == "gaussian" ? bokeh::KernelShape::Gaussian
               : shape == "disk"     ? bokeh::KernelShape::Disk
@@ -99,8 +134,10 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                           "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
     };
     c.options = {
-        OptionSpec::Choice("kernel", { "gaussian", "box", "disk", "hex", "polygon" },
-                           "kernel shape (gaussian: sigma = W/4 as oiiotool, not truncated)"),
+        OptionSpec::Choice("kernel", { "gaussian", "box", "disk", "hex", "polygon", "image" },
+                           "kernel shape (gaussian: sigma = W/4 as oiiotool, not truncated; "
+                           "image: the top image of the stack, resized to WxH, blurs the one "
+                           "below it, as --convolve)"),
         OptionSpec::Choice("edge", { "aa", "hard" },
                            "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk)"),
         OptionSpec::Choice("method",
@@ -128,6 +165,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk/polygon: catadioptric hole (radius fraction)"),
     };
     c.options.insert(c.options.end(), shared.begin(), shared.end());
+    c.inputs_for = [](const bokeh::OptionValues& o) { return o.get_string("kernel") == "image" ? 2 : 1; };
     r.add(c);
 
     bokeh::Command conv = bokeh::make_command(

@@ -251,9 +251,10 @@ bool Host::print_command_help(const std::string& name) const
         c = m_registry.find("--" + name);
     if (!c)
         return false;
-    std::cout << format("{}{}\n    {}\n    takes {} image(s) from the stack, pushes {}; from {}\n",
+    std::cout << format("{}{}\n    {}\n    takes {} image(s) from the stack{}, pushes {}; from {}\n",
                         c->name, c->arguments.empty() ? "" : " " + c->arguments, c->help,
-                        c->inputs, c->outputs, c->plugin);
+                        c->inputs, c->inputs_for ? " (more with some options, below)" : "",
+                        c->outputs, c->plugin);
     if (!c->options.empty())
         std::cout << "    options:\n";
     for (const OptionSpec& o : c->options)
@@ -390,18 +391,20 @@ bool Host::check_command(const Command& cmd, const std::string& modifiers,
     if (int(args.size()) != cmd.argument_count())
         return fail(cmd.name, format("needs {} argument(s): {}", cmd.argument_count(),
                                      cmd.arguments));
-    if (m_depth < cmd.inputs)
+    const int inputs = cmd.input_count(opts);
+    if (m_depth < inputs)
         return fail(cmd.name, format("needs {} image(s) on the stack but {} {} there",
-                                     cmd.inputs, m_depth, m_depth == 1 ? "is" : "are"));
-    m_depth += cmd.outputs - cmd.inputs;
+                                     inputs, m_depth, m_depth == 1 ? "is" : "are"));
+    m_depth += cmd.outputs - inputs;
     return true;
 }
 
 bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
                        const std::vector<std::string>& args)
 {
-    if (int(m_stack.size()) < cmd.inputs)
-        return fail(cmd.name, format("needs {} image(s) on the stack but {} there", cmd.inputs,
+    const int inputs = cmd.input_count(opts);
+    if (int(m_stack.size()) < inputs)
+        return fail(cmd.name, format("needs {} image(s) on the stack but {} there", inputs,
                                      m_stack.size()));
     CommandContext ctx;
     ctx.args      = args;
@@ -410,8 +413,8 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     ctx.verbosity = m_verbosity;
     ctx.colors    = &m_colors;
     ctx.message   = [this](const std::string& s) { message(s); };
-    ctx.inputs.assign(m_stack.end() - cmd.inputs, m_stack.end());
-    m_stack.resize(m_stack.size() - size_t(cmd.inputs));
+    ctx.inputs.assign(m_stack.end() - inputs, m_stack.end());
+    m_stack.resize(m_stack.size() - size_t(inputs));
 
     if (cmd.needs_scene_linear) {
         for (StackImage& in : ctx.inputs) {
