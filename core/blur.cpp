@@ -1010,8 +1010,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // reduction (their four passes: 130 ms at 35 px against the spans' 107, and under 40
     // dB at 15-23 px, 36.8-39.7; sessions 9, 10). With the spans model and the band counts
     // of session 10 the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
-    // ~23 for an octagon, ~13 for the flat-topped hexagon and ~19 for the upright one
-    // (session 12, parallelograms_cost_ns).
+    // ~23 for an octagon, and (session 13, parallelograms_cost_ns refitted on this
+    // machine) ~9 px for the flat-topped hexagon and ~10 for the upright one.
     // (Only up to 64 px across: the spans' cost grows with the size and is past every
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     // Its bands, unless the user named a count: the fewest within its accuracy bound

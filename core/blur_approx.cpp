@@ -1269,22 +1269,21 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
 
 bool hexagon_sweeps(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]); }
 
-// Flat in the size, by path: measured at 15-63 px (1080p RGBA, two threads) 20-24 ms
-// flat-topped (the sweep as given), 28-32 upright (the sweep transposed, its columns read
-// and written in batches; session 12) and 87-91 at 7 degrees (four passes), i.e. about
-// 5, 7.5 and 30 ns a pixel and channel on one thread. With these, `fast` takes the sweep
-// over the exact spans from 13 px flat-topped and 19 px upright, where spot timings
-// crossed (session 12, 9 runs each: flat-topped, spans 22.1-24.0 ms at 13 px and the sweep
-// 23.0-25.5, at 15 px 25.8 against 21.8; upright, 36.9 against 37.3 at 17 px, 31.1
-// against 28.5 at 19). spans_cost_ns reads a hexagon's
-// spans within 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare
-// as they are. (Until its row term, they were read up to 1.39x low, and this model was
-// divided by 1.3 to match.)
+// Flat in the size, by path, in spans_cost_ns's units (ns a pixel and channel on one
+// thread): the sweep 3.6 flat-topped and 4.6 upright, the four passes 30. Refitted in
+// session 13 on this project's machine (AMD EPYC, 1 MiB L2), where the sweep had become
+// the cheaper of the two against the exact spans from 9-10 px (spot timings, 1080p RGBA,
+// two threads, 9 runs each: upright 10.8 against the spans' 10.6 ms at 9 px, 11.1 against
+// 12.1 at 11; flat-topped 10.3 against 10.6 at 9, 10.2 against 9.0 at 7): with these,
+// `fast` takes the sweep from 9 px flat-topped and 10 px upright. (Session 12's 5 and 7.5,
+// fitted on the machine before, crossed at 13 and 19 px; the four passes measured 3.7-3.8x
+// the spans at 15 px on both machines.) spans_cost_ns reads a hexagon's spans within
+// 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare as they are.
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
     const double ns = !hexagon_sweeps(k)      ? 30.0
-                      : hexagon_transposed(k) ? 7.5
-                                              : 5.0;
+                      : hexagon_transposed(k) ? 4.6
+                                              : 3.6;
     return double(w) * double(h) * ns;
 }
 

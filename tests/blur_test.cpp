@@ -915,11 +915,15 @@ TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIri
                            Case{ 50.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon },
                            // The hexagon: reduced from 45 px too; below, the parallelograms
                            // or, where the cost models say they cost less, the exact spans
-                           // (small hexagons; at rotations off 30 degrees, whose four passes
-                           // cost more than the spans up to 43 px, 107 against 130 ms at 35).
+                           // (hexagons under 9-10 px; at rotations off 30 degrees, whose four
+                           // passes cost more than the spans up to 43 px, 107 against 130 ms
+                           // at 35).
                            Case{ 45.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon, 6 },
                            Case{ 40.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6 },
-                           Case{ 15.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6 },
+                           Case{ 15.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6 },
+                           Case{ 8.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6 },
+                           Case{ 8.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 30.0f },
+                           Case{ 11.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6, 30.0f },
                            Case{ 23.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 7.0f },
                            Case{ 40.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 7.0f },
                            Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Gaussian },
