@@ -45,10 +45,14 @@
 // source's columns and writes the destination's 16 at a time (kColumnBatch; one at a time
 // a 1920 px frame's column falls in 2 of L1's 64 cache sets): 0.79-0.92x its time before
 // (session 10).
-// Known limit: 20-33 ms flat-topped, 28-39 upright (1080p RGBA, two threads, session 12),
-// over the 25 from 127 px flat-topped (15 px upright) and growing 1.4-1.6x from 15
-// to 255 px (wider chunk margins; T's ring and the windows' rings of sheared rows, ~6 MB a
-// chunk at 255 px, out of L2, the two chunks sharing the L3's bandwidth). The window
+// Known limit: 10-14 ms flat-topped and 11-18 upright at 15-255 px (1080p RGBA, two
+// threads, session 13's machine), growing 1.36x and 1.66x from 15 to 255 px: the windows
+// cover the chunk, c's length and their span's drift, and sweep the kernel's reach above
+// and below the frame (~1.25x the work at 255 px; the upright frame's chunks are 540
+// columns, so twice the share), and T's ring and the windows' rings of sheared rows (~6 MB
+// a chunk at 255 px) are out of the 1 MiB L2 (~15-20 % of the 255 px time; see
+// docs/benchmarks.md, session 13). Rotations off multiples of 30 degrees take the four
+// passes: 54-57 ms at every size, under 40 dB at 15 px (36.8). The window
 // slides (double running sums) take ~20 % of the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row
 // sums ~25 %; upright, the column gathers and scatters ~22 % more. Float sums, a fused
 // step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
