@@ -92,6 +92,7 @@ void source_row(const OIIO::ImageBuf& src, int sy, int x0, int x1, Border border
 /// each cache line for each of its pixels).
 void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Border border,
                     float* const* out);
+
 /// How many column chunks a sweep down the rows (the box, the hexagon) cuts a frame `w`
 /// wide into: about 960 columns each, an even count, fixed by the width (never by the
 /// thread count, so the float rounding is too). Each chunk reads and computes its
