@@ -33,6 +33,12 @@ bokeh::BlurOptions blur_options(const CommandContext& c)
 // to WxH and convolved as `--convolve` does.
 bool blur_with_image_command(CommandContext& c, float width_px, float height_px)
 {
+    bokeh::Kernel size;  // the size rule every kernel follows, checked before resizing
+    size.width_px  = width_px;
+    size.height_px = height_px;
+    std::string err;
+    if (!bokeh::validate(size, err))
+        return c.fail(err);
     const std::string& method = c.options.get_string("method");
     if (method != "auto" && method != "exact" && method != "fft")
         return c.fail(format("method={} does not apply to kernel=image (convolved exactly, by FFT)",
