@@ -28,8 +28,11 @@
 // computes only the region the later ones read. Planes are
 // reused once their values are used up, and allocated on huge pages (plane.h): the first
 // touch of a fresh 1080p plane costs about half a pass even so. Measured (docs/benchmarks.md):
-// 67-92 ms at 15-255 px for 1080p RGBA on two threads, bound by memory traffic (four
-// passes, the padding and, upright, the transposing copies).
+// 54-57 ms at 15-255 px for 1080p RGBA on two threads (session 13's machine; 67-92 on the
+// one before), bound by memory traffic (four passes, the padding and, upright, the
+// transposing copies). Shearing the frame's columns so that the third segment runs along
+// the rows, for one sweep, measured 0.87-0.95x of that at 15-63 px and 1.15x at 255
+// (session 13): not kept.
 // Fused (issue 3): when the third segment runs along the rows of the working frame (the
 // upright and the flat-topped hexagon, every rotation by a multiple of 30 degrees), one
 // sweep down the rows makes the hexagon (hexagon_sweep), the rhombi grouped so that each
