@@ -247,14 +247,15 @@ TEST(Blur, TranslationEquivariance)
 
 TEST(Blur, WideImagesMatchTheBruteForceReferenceStripByStrip)
 {
-    // Wider than several of the fused methods' column strips (box: 256 or 512 columns): inner
-    // strips read the source in place, edge strips by the border rule (black: in place too,
-    // the running sum reading zeros past the data window); 1, 2 (prefix-sum
-    // fallback), 3 and 4 channels; fractional sizes; an explicit ROI reaching past the data.
+    // Wider than the fused methods' column strips (box: column_chunks, two up to 2879 px,
+    // four from 2880): edge strips read by the border rule (black: in place too, the
+    // running sum reading zeros past the data window), inner strips (the 3000 px image
+    // below) the source in place on both sides; 1, 2 (prefix-sum fallback), 3 and 4
+    // channels; fractional sizes; an explicit ROI reaching past the data.
     const OIIO::ImageBuf rgba = test_image(700, 29, -11, 5);
     std::vector<Kernel> ks;
     for (auto [w, h] : { std::pair{ 7.0f, 7.0f }, { 6.5f, 4.2f }, { 41.3f, 9.0f }, { 1.0f, 13.6f },
-                         { 101.5f, 9.0f },    // radius >= 48: 512-column strips
+                         { 101.5f, 9.0f },
                          { 1201.5f, 1.0f } }) {  // wider than the frame: both ends black at once
         Kernel k;
         k.shape     = KernelShape::Box;
@@ -285,6 +286,18 @@ TEST(Blur, WideImagesMatchTheBruteForceReferenceStripByStrip)
                     EXPECT_LE(bokeh_test::max_difference(fast, ref), 2e-6 * peak(ref));
                 }
     }
+    // Four strips of 750: the two inner ones read their reach from their neighbours' columns.
+    const OIIO::ImageBuf wide = test_image(3000, 13, 3, -2);
+    for (std::size_t i : { std::size_t(2), std::size_t(4) })
+        for (Border border : { Border::Black, Border::Mirror }) {
+            SCOPED_TRACE(std::to_string(ks[i].width_px) + ", border " + std::to_string(int(border)));
+            BlurOptions o;
+            o.border = border;
+            OIIO::ImageBuf fast, ref;
+            ASSERT_TRUE(blur(fast, wide, ks[i], o)) << fast.geterror();
+            ASSERT_TRUE(convolve_reference(ref, wide, kernel_weights(ks[i]), o, {}));
+            EXPECT_LE(bokeh_test::max_difference(fast, ref), 2e-6 * peak(ref));
+        }
 }
 
 TEST(Blur, WideImagesMatchTheReferenceTileByTileForSpansFftAndBands)
