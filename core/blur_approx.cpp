@@ -271,6 +271,9 @@ struct Region {
     int x0, y0, x1, y1;
 };
 
+// The same rectangle in the transposed frame.
+Region transposed(const Region& r) { return { r.y0, r.x0, r.y1, r.x1 }; }
+
 // Slot of row r (any sign) in a ring of n rows.
 size_t ring_slot(int r, int n) { return size_t(((r % n) + n) % n); }
 
@@ -533,8 +536,8 @@ void segment_pass(const Plane& in, const Region& valid, Plane& out, const Region
     if (std::abs(ey) >= std::abs(ex)) {
         segment_sweep(in, valid, out, region, ex, ey, add, scale, nthreads);
     } else {
-        auto flip = [](const Region& r) { return Region{ r.y0, r.x0, r.y1, r.x1 }; };
-        segment_sweep(in, flip(valid), out, flip(region), ey, ex, add, scale, nthreads, true);
+        segment_sweep(in, transposed(valid), out, transposed(region), ey, ex, add, scale,
+                      nthreads, true);
     }
 }
 
@@ -1314,7 +1317,7 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
     if (border == Border::Black) {
         const Region lit{ data.xbegin - region.xbegin, data.ybegin - region.ybegin,
                           data.xend - region.xbegin, data.yend - region.ybegin };
-        io.lit = t ? Region{ lit.y0, lit.x0, lit.y1, lit.x1 } : lit;
+        io.lit = t ? transposed(lit) : lit;
     }
     if (!t) {
         io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
