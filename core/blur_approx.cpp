@@ -30,9 +30,8 @@
 // touch of a fresh 1080p plane costs about half a pass even so. Measured (docs/benchmarks.md):
 // 54-57 ms at 15-255 px for 1080p RGBA on two threads (session 13's machine; 67-92 on the
 // one before), bound by memory traffic (four passes, the padding and, upright, the
-// transposing copies). Shearing the frame's columns so that the third segment runs along
-// the rows, for one sweep, measured 0.87-0.95x of that at 15-63 px and 1.15x at 255
-// (session 13): not kept.
+// transposing copies). Since session 14 only iris mode (which runs on a padded plane)
+// takes them: elsewhere the sheared sweep below.
 // Fused (issue 3): when the third segment runs along the rows of the working frame (the
 // upright and the flat-topped hexagon, every rotation by a multiple of 30 degrees), one
 // sweep down the rows makes the hexagon (hexagon_sweep), the rhombi grouped so that each
@@ -62,6 +61,17 @@
 // or less (session 9, docs/benchmarks.md); so did row sums in L1-sized tiles and rings on
 // huge pages (session 11); an upright sweep without transposing (flat windows) lost 5-8 dB
 // to the sampling of flat lines by rows.
+// Sheared (issue 3, session 14): at other rotations one segment lies within 30 degrees of
+// the rows and one within 30 of the columns; the frame's columns (or, transposed, its
+// rows) are sheared through the B-spline's taps so that one of them runs along the
+// working rows, the fused sweep runs there, and each output reads the result back through
+// the taps (hexagon_sheared_direct): no padded planes, the lines gathered and the outputs
+// scattered as the sweep goes. Of the two frames the cost model takes the cheaper (the
+// sweep's lines grow by |m| per column of a chunk). A session-13 try sheared whole planes
+// before and after the sweep (0.87-1.15x of the four passes: the planes' traffic and page
+// faults); gathered per line it measured 0.40-0.76x of the four passes (A/B, 15-255 px,
+// 1080p RGBA, two threads). The two extra B-spline reads smooth across the lines by
+// 1/2 px^2 more than the upright and flat-topped sweeps do.
 //
 // Bands (disk, polygon): the exact kernel's rows are grouped into a few horizontal bands
 // (boundaries by dynamic programming, least squares on the row areas; over the lower half,
@@ -112,9 +122,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <functional>
 #include <limits>
 #include <map>
+#include <optional>
 
 namespace bokeh {
 
@@ -562,13 +574,20 @@ Region hull(const Region& a, const Region& b)
 // bufs[i], its span relative to c0; no pixels when all black), `out_row` where output
 // row y goes over [x0, x1), or null to hand the rows to `store`, up to `batch` at once (y .. y + n - 1, one after another).
 // A batch of more than one line suits a source read down its columns (hexagon_direct).
+// `keep`: the rows handed to `store` come with the `keep` rows before them in memory
+// (rows - keep * row length on; those before the chunk's first row undefined), for a
+// store that reads taps across batches (the sheared frame's unshear).
 // `lit`: lines and columns outside it are black (the source's data window under the black
 // border), so no window slides before its first lit line, nor makes T where no lit column
-// reaches.
+// reaches. `first_lit`, where given, says the first line with a lit pixel in columns
+// [c0, c1) instead of lit.y0; `out_rows` the output rows [y0, y1) a chunk of columns
+// [x0, x1) needs instead of the out region's (the sheared frame, where they drift with x).
 struct SweepIO {
     int w = 0, h = 0;
-    int batch = 1;
+    int batch = 1, keep = 0;
     Region lit{ 0, 0, std::numeric_limits<int>::max(), std::numeric_limits<int>::max() };
+    std::function<int(int c0, int c1)> first_lit;
+    std::function<std::pair<int, int>(int x0, int x1)> out_rows;
     std::function<void(int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines)> lines;
     std::function<float*(int y, int x0, int x1)> out_row;
     std::function<void(int y, int n, int x0, int x1, const float* rows)> store;
@@ -612,7 +631,7 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         const int X0 = out_region.x0 + int(ci) * chunk, X1 = std::min(out_region.x1, X0 + chunk);
         if (X1 <= X0)
             return;
-        const int Y0 = out_region.y0, Y1 = out_region.y1;
+        const auto [Y0, Y1] = io.out_rows ? io.out_rows(X0, X1) : std::pair{ out_region.y0, out_region.y1 };
         // X over [xa, xb) (zero outside the frame); seg_c of T reads T over
         // [X0 - lc, X1 - fc), so T's rows span [t0, t1), made over [ta, tb) inside the frame
         // and zero elsewhere; seg_c of the source row reads it over [u0, u1); the source
@@ -630,7 +649,7 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         const int x_end = Y1 + lead;  // X's and T's rows end here
         // Lines before the first lit one are black: seg_b starts with it, not at the top of
         // the padded frame (at 255 px its ~110 black rows were 6-8 % of the steps).
-        const int lit_y0 = std::clamp(io.lit.y0, 0, io.h);
+        const int lit_y0 = std::clamp(io.first_lit ? io.first_lit(i0, i1) : io.lit.y0, 0, io.h);
         SteepWindow seg_b(bx, by, nc, ni, ta - i0, tb - i0, lit_y0, std::numeric_limits<int>::min(),
                           x_end);
         // X's rows before x_lo are black: the source's before lit_y0, T's before seg_b's start.
@@ -687,7 +706,8 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
         // Output rows for `store`, a batch at a time.
         const size_t no = size_t(X1 - X0) * ncs;
         const int nt_read = (X1 - fc) - (X0 - lc);  // T's pixels seg_c reads for [X0, X1)
-        std::vector<float> ab_row(no), o_rows(size_t(batch) * no);
+        const size_t keep = size_t(io.keep);
+        std::vector<float> ab_row(no), o_rows((keep + size_t(batch)) * no);
         std::vector<double> prefix(size_t(std::max(u1 - u0, t1 - t0) + 1) * ncs);
         const int y_first = std::min(seg_b.start(), x_lo) - lead;
         // Outputs may start above the first step (a grown window over black lines): those
@@ -710,7 +730,7 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
             seg_a.read(y, ab_row.data(), nullptr, 1.0f);
             float* o       = io.out_row(y, X0, X1);
             const int held = (y - Y0) % batch;  // rows held for `store` before this one
-            float* row     = o_rows.data() + size_t(held) * no;
+            float* row     = o_rows.data() + (keep + size_t(held)) * no;
             segment_row(row, RowSpan{ t_row(y) + size_t(X0 - lc - t0) * ncs, 0, nt_read },
                         prefix.data(), nt_read, nc, seg_c, ab_row.data(), float(1.0 / 3.0), no,
                         t_zero);
@@ -718,8 +738,11 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
             // upright store's columns, streamed, measured 1.06x and stay plain).
             if (o)
                 stream_floats(o, row, no);
-            else if (held == batch - 1 || y == Y1 - 1)
-                io.store(y - held, held + 1, X0, X1, o_rows.data());
+            else if (held == batch - 1 || y == Y1 - 1) {
+                io.store(y - held, held + 1, X0, X1, o_rows.data() + keep * no);
+                if (keep > 0)  // the batch's last rows, for the next one
+                    std::memmove(o_rows.data(), o_rows.data() + size_t(batch) * no, keep * no * sizeof(float));
+            }
         }
         stream_fence();
     });
@@ -1277,7 +1300,341 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
     return std::move(out);
 }
 
-bool hexagon_sweeps(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]); }
+namespace {
+
+// o[i] = w0[i] p0[i] + w1[i] p1[i] + w2[i] p2[i], i < n: three taps whose weights change
+// per pixel (spread over its channels), on a run of pixels that read the same rows.
+inline void three_taps(float* __restrict o, const float* p0, const float* p1, const float* p2,
+                       const float* w0, const float* w1, const float* w2, size_t n)
+{
+    for (size_t i = 0; i < n; ++i)
+        o[i] = w0[i] * p0[i] + w1[i] * p1[i] + w2[i] * p2[i];
+}
+
+// The sweep's cost in spans_cost_ns's units, flat-topped (its lines the source's rows) and
+// upright (its lines the source's columns): see parallelograms_cost_ns.
+constexpr double kSweepFlatNs = 3.6, kSweepUprightNs = 4.6;
+// The sheared frame's lines and outputs read through three taps, over the sweep's cost
+// in its frame (cheaper_shear): measured 1.14-1.56 at 63 px (session 14, 1080p RGBA, two
+// threads, against the upright and the flat-topped sweeps in the same runs).
+constexpr double kShearTapsCost = 1.4;
+
+// The hexagon at other rotations (issue 3): its three segments lie 60 degrees apart, so
+// one is within 30 degrees of the rows and one within 30 degrees of the columns. Shearing
+// the frame's columns, (x, y) -> (x, y - m x) with m = c.y / c.x, turns the first, c, along
+// the rows and leaves the other two steep (for the regular hexagon |y'| / |x'| >=
+// sin 60 / (cos 30 cos(angle c)) >= 1), so the fused sweep runs in that frame as for the
+// flat-topped hexagon; likewise in the transposed frame (the source's rows sheared) with
+// the segment near the columns, as for the upright one. A shear of determinant one maps
+// the hexagon's rhombi to the sheared hexagon's, weights and all. The two sweeps of
+// session 13 took 10-18 ms at 15-255 px against the four passes' 54-57.
+struct ColumnShear {
+    bool transposed = false;  // the frame is the source's transpose (c near the columns)
+    double m        = 0.0;
+    Dir a, b, c;
+};
+
+// The shear that turns the segment nearest the rows of the frame (the source's, or its
+// transpose's) along them, `m` and the segments in the sheared frame; none where a
+// stretched hexagon's shear leaves a or b flat.
+std::optional<ColumnShear> column_shear(const Kernel& k, bool transposed)
+{
+    std::array<Dir, 3> d = hexagon_dirs(k);
+    if (transposed)
+        for (Dir& v : d)
+            std::swap(v.x, v.y);
+    auto rise = [](Dir v) { return std::abs(v.y) / std::max(std::abs(v.x), 1e-300); };
+    std::sort(d.begin(), d.end(), [&](Dir p, Dir q) { return rise(p) < rise(q); });
+    if (rise(d[0]) > 1.0)
+        return std::nullopt;
+    ColumnShear s;
+    s.transposed = transposed;
+    s.m          = d[0].y / d[0].x;
+    s.c          = { d[0].x, 0.0 };
+    Dir a = { d[1].x, d[1].y - s.m * d[1].x }, b = { d[2].x, d[2].y - s.m * d[2].x };
+    if (!a.steep() || !b.steep())
+        return std::nullopt;
+    if (b.slope() < a.slope())
+        std::swap(a, b);
+    s.a = a;
+    s.b = b;
+    return s;
+}
+
+// The cheaper of the two frames' shears for a w x h output, by the sweeps' cost (the
+// frames' base costs, parallelograms_cost_ns) times the lines a chunk of columns sweeps:
+// its output's plus |m| per column of the chunk (two chunks at 1080p); `cost_ns` its
+// cost in those units.
+std::optional<ColumnShear> cheaper_shear(const Kernel& k, int w, int h, double* cost_ns = nullptr)
+{
+    std::optional<ColumnShear> best;
+    double best_cost = 0.0;
+    for (bool t : { false, true }) {
+        const std::optional<ColumnShear> s = column_shear(k, t);
+        if (!s)
+            continue;
+        const int across = t ? h : w, lines = t ? w : h;
+        const int chunk  = (across + column_chunks(across) - 1) / column_chunks(across);
+        // As given, the diagonal reads and writes cost ~0.75 |m| more (measured against the
+        // transposed frame at 5-25 degrees, 15-255 px, session 14).
+        const double diagonal = t ? 1.0 : 1.0 + 0.75 * std::abs(s->m);
+        const double cost     = (t ? kSweepUprightNs : kSweepFlatNs) * diagonal
+                            * (1.0 + std::abs(s->m) * chunk / std::max(lines, 1));
+        if (!best || cost < best_cost) {
+            best      = s;
+            best_cost = cost;
+        }
+    }
+    if (cost_ns)
+        *cost_ns = best_cost;
+    return best;
+}
+
+// hexagon_direct at rotations off multiples of 30 degrees (column_shear). In the working
+// frame (the source, or its transpose), working column x is source column (row) org + x;
+// line r reads the source at (x, base + r + m x) through the quadratic B-spline's taps
+// across the lines (the taps the sweep's windows use along them: energy and centroid
+// exact, variance 1/4 px^2 at every phase), and output (x, Y) reads the sweep's result
+// back at (x, Y - base - m x) through them. Both taps depend on the column alone (r and Y
+// are whole), so each is tabled per column. The lines a chunk of columns needs drift by m
+// per column (SweepIO::out_rows): 1080 + 960 |m| as given at 1080p (two chunks of 960),
+// 1920 + 540 |m| transposed. The sweep's rows come to the store in batches of
+// kColumnBatch with the two rows before them kept (SweepIO::keep), so an output is written
+// with the batch holding its last tap.
+// As given, a line runs along a diagonal of the source (~1 / m pixels from each row) and
+// an output batch along one of `dst`: the lines prefetch the rows ahead. Transposed, a
+// batch of 16 lines at column x reads 18 adjacent pixels of a source row, all with x's
+// weights, and writes 16 adjacent pixels of an output row: the upright sweep's pattern.
+bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                            const Kernel& k, const ColumnShear& s, int rx, int ry, Border border,
+                            int nthreads)
+{
+    prepare_destination(dst, in, roi);
+    const int nc = in.nchannels();
+    const size_t ncs = size_t(nc);
+    const OIIO::ROI data = in.roi();
+    const bool t = s.transposed;
+    // Along the working columns ("across") and the lines ("down"), in source coordinates.
+    const int across0 = t ? roi.ybegin : roi.xbegin, across1 = t ? roi.yend : roi.xend;
+    const int down0 = t ? roi.xbegin : roi.ybegin, down1 = t ? roi.xend : roi.yend;
+    const int data_a0 = t ? data.ybegin : data.xbegin, data_a1 = t ? data.yend : data.xend;
+    const int data_d0 = t ? data.xbegin : data.ybegin, data_d1 = t ? data.xend : data.yend;
+    const int reach_a = t ? ry : rx;
+    const int w = across1 - across0 + 2 * reach_a, org = across0 - reach_a;
+    std::vector<Taps> down, up;  // per working column: the shear's taps, the unshear's
+    down.reserve(size_t(w));
+    up.reserve(size_t(w));
+    for (int x = 0; x < w; ++x) {
+        down.emplace_back(s.m * x);
+        up.emplace_back(-s.m * x);
+    }
+    // The first taps over columns [x0, x1): monotonic in x (round(m x) - 1), so the ends.
+    auto first_range = [](const std::vector<Taps>& tp, int x0, int x1) {
+        const int p = tp[size_t(x0)].first, q = tp[size_t(x1 - 1)].first;
+        return std::pair{ std::min(p, q), std::max(p, q) };
+    };
+    // The sheared kernel's reach across the lines, and the frame: outputs read lines
+    // [ry_w, h - ry_w), the kernel's reach around them.
+    double reach = 0.0;
+    for (int i = 0; i < 6; ++i) {
+        const auto [vx, vy] = hexagon_vertex(k, i);
+        reach = std::max(reach, t ? std::abs(vx - s.m * vy) : std::abs(vy - s.m * vx));
+    }
+    const int ry_w          = int(std::ceil(reach)) + 2;
+    const auto [u_lo, u_hi] = first_range(up, reach_a, w - reach_a);
+    const int base = down0 + u_lo - ry_w;
+    const int h    = down1 - 1 - base + u_hi + 3 + ry_w;
+    SweepIO io;
+    io.w = w;
+    io.h = h;
+    const Region out_region{ reach_a, ry_w, w - reach_a, h - ry_w };
+    io.out_rows = [&](int x0, int x1) {
+        const auto [lo, hi] = first_range(up, x0, x1);
+        return std::pair{ down0 - base + lo, down1 - 1 - base + hi + 3 };
+    };
+    const bool black = border == Border::Black;
+    const int lit_x0 = black ? std::max(0, data_a0 - org) : 0;
+    const int lit_x1 = black ? std::min(w, data_a1 - org) : w;
+    if (black) {
+        io.lit       = { lit_x0, 0, lit_x1, h };
+        io.first_lit = [&](int c0, int c1) {
+            const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
+            return b > a ? data_d0 - base - 2 - first_range(down, a, b).second : h;
+        };
+    }
+    // Whether line `row0` (its source position less m x) reads only black where its taps
+    // start at f0 .. f1.
+    auto black_line = [&](int row0, int f0, int f1) {
+        return black && (row0 + std::max(f0, f1) + 2 < data_d0 || row0 + std::min(f0, f1) >= data_d1);
+    };
+    // Each tap's weights spread over the channels (a run of pixels with the same taps'
+    // rows is then one vector loop).
+    auto spread = [&](const std::vector<Taps>& tp) {
+        std::array<std::vector<float>, 3> wt;
+        for (int j = 0; j < 3; ++j) {
+            wt[size_t(j)].resize(size_t(w) * ncs);
+            for (int x = 0; x < w; ++x)
+                std::fill_n(wt[size_t(j)].data() + size_t(x) * ncs, ncs, tp[size_t(x)].w[j]);
+        }
+        return wt;
+    };
+    const std::array<std::vector<float>, 3> down_w = spread(down), up_w = spread(up);
+    io.batch = kColumnBatch;
+    io.keep  = 2;
+    io.out_row = [](int, int, int) -> float* { return nullptr; };
+    const size_t pitch = size_t(dst.spec().width) * ncs;  // prepare_destination: roi-sized
+    float* const d0    = static_cast<float*>(dst.localpixels());
+    // Source rows (columns, t) the lines read at working columns [0, w), by the border
+    // rule: row offsets as given, the zero row where black.
+    const std::vector<float> zero(size_t(std::max(data.width(), data.height()) + 2 * kColumnBatch) * ncs, 0.0f);
+    constexpr int kAhead = 2;  // lines read ahead (prefetched), as given
+    const auto [d_lo, d_hi] = first_range(down, 0, w);
+    const int s0 = base + d_lo, s1 = base + h + d_hi + 2 + kAhead;
+    // As given (the tables outlive this scope: the sweep calls the lambdas below).
+    std::vector<const float*> src_rows;
+    std::vector<size_t> col;
+    std::vector<int> run_end;
+    std::vector<std::pair<int, int>> up_columns;
+    const auto [up_lo, up_hi] = first_range(up, 0, w);
+    if (!t) {
+        src_rows.resize(size_t(s1 - s0));
+        for (int sr = s0; sr < s1; ++sr) {
+            const int sy = border_index(sr, data.ybegin, data.yend, border);
+            src_rows[size_t(sr - s0)] =
+                sy == kOutside ? zero.data() : static_cast<const float*>(in.pixeladdr(data.xbegin, sy, data.zbegin));
+        }
+        col.assign(size_t(w), 0);
+        for (int x = 0; x < w; ++x) {
+            const int sx = border_index(org + x, data.xbegin, data.xend, border);
+            col[size_t(x)] = sx == kOutside ? 0 : size_t(sx - data.xbegin) * ncs;
+        }
+        // Runs of columns whose taps start on the same row and read adjacent source
+        // columns: run_end[x] is where x's run ends.
+        run_end.resize(size_t(w));
+        for (int x = w - 1; x >= 0; --x) {
+            const bool on = x + 1 < w && down[size_t(x + 1)].first == down[size_t(x)].first
+                            && col[size_t(x + 1)] == col[size_t(x)] + ncs;
+            run_end[size_t(x)] = on ? run_end[size_t(x + 1)] : x + 1;
+        }
+        // The unshear's runs by their first tap: the columns [x0, x1) whose taps start at u.
+        up_columns.assign(size_t(up_hi - up_lo + 1), { 0, 0 });
+        for (int x = w - 1; x >= 0; --x) {
+            auto& c = up_columns[size_t(up[size_t(x)].first - up_lo)];
+            c = c.second > c.first ? std::pair{ x, c.second } : std::pair{ x, x + 1 };
+        }
+        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
+            const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
+            for (int i = 0; i < n; ++i) {
+                lines[i]       = {};
+                const int row0 = base + r + i;  // line r + i reads rows row0 + first + 0..2
+                if (b <= a || black_line(row0, down[size_t(a)].first, down[size_t(b - 1)].first))
+                    continue;
+                float* o                       = bufs[i];
+                const float* const* const rows = src_rows.data() + (row0 - s0);
+                for (int x = a; x < b;) {
+                    const int e = std::min(run_end[size_t(x)], b), f = down[size_t(x)].first;
+                    const size_t j = col[size_t(x)], kx = size_t(x) * ncs;
+                    // The line kAhead on takes its newest row here: a diagonal the
+                    // hardware's prefetchers do not follow.
+                    prefetch_lines(rows[f + 2 + kAhead] + j, size_t(e - x) * ncs * sizeof(float));
+                    three_taps(o, rows[f] + j, rows[f + 1] + j, rows[f + 2] + j, down_w[0].data() + kx,
+                               down_w[1].data() + kx, down_w[2].data() + kx, size_t(e - x) * ncs);
+                    o += size_t(e - x) * ncs;
+                    x = e;
+                }
+                lines[i] = { bufs[i], a - c0, b - c0 };
+            }
+        };
+        io.store = [&](int y, int n, int x0, int x1, const float* rows) {
+            const ptrdiff_t no = ptrdiff_t(x1 - x0) * ptrdiff_t(ncs);
+            // Output row Y takes the columns whose last tap, line Y - base + u + 2, came
+            // in this batch: u in [y - Y + base - 2, y + n - Y + base - 2), each u a run.
+            const auto [u0, u1] = first_range(up, x0, x1);
+            const int yy0 = std::max(down0, y + base - u1 - 2), yy1 = std::min(down1, y + n + base - u0 - 2);
+            for (int yy = yy0; yy < yy1; ++yy) {
+                const int lo = y - yy + base - 2;
+                const float* q = rows + ptrdiff_t(yy - base - y) * no;
+                float* const o = d0 + size_t(yy - roi.ybegin) * pitch + size_t(org - roi.xbegin) * ncs;
+                // Left to right (u falls with x where m > 0).
+                const int ua = std::max(lo, u0), ub = std::min(lo + n, u1 + 1);
+                for (int i = 0; i < ub - ua; ++i) {
+                    const int u         = s.m > 0.0 ? ub - 1 - i : ua + i;
+                    const auto [ca, cb] = up_columns[size_t(u - up_lo)];
+                    const int xa = std::max(ca, x0), xb = std::min(cb, x1);
+                    if (xb <= xa)
+                        continue;
+                    const float* qx = q + ptrdiff_t(u) * no + ptrdiff_t(xa - x0) * ptrdiff_t(ncs);
+                    const size_t kx = size_t(xa) * ncs;
+                    three_taps(o + kx, qx, qx + no, qx + 2 * no, up_w[0].data() + kx, up_w[1].data() + kx,
+                               up_w[2].data() + kx, size_t(xb - xa) * ncs);
+                }
+            }
+        };
+    } else {
+        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
+            const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
+            std::vector<float> run(size_t(n + 2) * ncs);
+            int lit_lines = 0;
+            for (int i = 0; i < n; ++i) {
+                const bool dark = b <= a || black_line(base + r + i, down[size_t(a)].first, down[size_t(b - 1)].first);
+                lines[i] = dark ? RowSpan{} : RowSpan{ bufs[i], a - c0, b - c0 };
+                lit_lines += !dark;
+            }
+            if (lit_lines == 0)
+                return;
+            for (int x = a; x < b; ++x) {
+                // Source row org + x, columns base + r + f + [0, n + 2): in place inside
+                // the data window, else by the border rule.
+                const int sy = border_index(org + x, data.ybegin, data.yend, border);
+                const int sx0 = base + r + down[size_t(x)].first;
+                const float* p = zero.data();
+                if (sy != kOutside) {
+                    if (sx0 >= data.xbegin && sx0 + n + 2 <= data.xend)
+                        p = static_cast<const float*>(in.pixeladdr(sx0, sy, data.zbegin));
+                    else {
+                        for (int j = 0; j < n + 2; ++j) {
+                            const int sx = border_index(sx0 + j, data.xbegin, data.xend, border);
+                            const float* v = sx == kOutside ? zero.data()
+                                                            : static_cast<const float*>(in.pixeladdr(sx, sy, data.zbegin));
+                            std::copy_n(v, ncs, run.data() + size_t(j) * ncs);
+                        }
+                        p = run.data();
+                    }
+                }
+                const size_t kx = size_t(x) * ncs, ox = size_t(x - a) * ncs;
+                for (int i = 0; i < n; ++i, p += ncs)
+                    three_taps(bufs[i] + ox, p, p + ncs, p + 2 * ncs, down_w[0].data() + kx,
+                               down_w[1].data() + kx, down_w[2].data() + kx, ncs);
+            }
+        };
+        io.store = [&](int y, int n, int x0, int x1, const float* rows) {
+            const ptrdiff_t no = ptrdiff_t(x1 - x0) * ptrdiff_t(ncs);
+            for (int x = x0; x < x1; ++x) {
+                // Output row org + x takes the columns X whose last tap, line
+                // X - base + u + 2, came in this batch.
+                const int u  = up[size_t(x)].first;
+                const int xa = std::max(down0, y + base - u - 2), xb = std::min(down1, y + n + base - u - 2);
+                float* o = d0 + size_t(org + x - roi.ybegin) * pitch + size_t(xa - roi.xbegin) * ncs;
+                if (x + kPrefetchRows < x1)
+                    prefetch_lines(o + kPrefetchRows * pitch, size_t(std::max(0, xb - xa)) * ncs * sizeof(float), true);
+                const float* q  = rows + ptrdiff_t(xa - base + u - y) * no + ptrdiff_t(x - x0) * ptrdiff_t(ncs);
+                const size_t kx = size_t(x) * ncs;
+                for (int X = xa; X < xb; ++X, o += ncs, q += no)
+                    three_taps(o, q, q + no, q + 2 * no, up_w[0].data() + kx, up_w[1].data() + kx,
+                               up_w[2].data() + kx, ncs);
+            }
+        };
+    }
+    hexagon_sweep(io, nc, out_region, s.a.x, s.a.y, s.b.x, s.b.y, s.c.x, nthreads);
+    return true;
+}
+
+}  // namespace
+
+bool hexagon_sweeps(const Kernel& k)
+{
+    return runs_along_rows(working_dirs(k)[2]) || column_shear(k, false) || column_shear(k, true);
+}
 
 // Flat in the size, by path, in spans_cost_ns's units (ns a pixel and channel on one
 // thread): the sweep 3.6 flat-topped and 4.6 upright, the four passes 30. Refitted in
@@ -1291,9 +1648,11 @@ bool hexagon_sweeps(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]
 // 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare as they are.
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
-    const double ns = !hexagon_sweeps(k)      ? 30.0
-                      : hexagon_transposed(k) ? 4.6
-                                              : 3.6;
+    double ns = 30.0;  // the four passes
+    if (runs_along_rows(working_dirs(k)[2]))
+        ns = hexagon_transposed(k) ? kSweepUprightNs : kSweepFlatNs;
+    else if (cheaper_shear(k, w, h, &ns))
+        ns *= kShearTapsCost;
     return double(w) * double(h) * ns;
 }
 
@@ -1302,6 +1661,9 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
 {
     const std::array<Dir, 3> d = working_dirs(k);
     const Dir a = d[0], b = d[1], c = d[2];
+    if (!runs_along_rows(c))
+        return hexagon_sheared_direct(dst, in, roi, k, *cheaper_shear(k, roi.width(), roi.height()), rx, ry,
+                                      border, nthreads);
     const bool t = hexagon_transposed(k);
     prepare_destination(dst, in, roi);
     const int nc = in.nchannels();

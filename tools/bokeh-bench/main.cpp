@@ -189,10 +189,14 @@ int main(int argc, char* argv[])
         bokeh::Kernel flat = kernel(S::Polygon, d);
         flat.rotation_deg  = 30.0f;
         ours("hexagon", "3 parallelograms (flat top)", d, flat, M::Parallelograms);
-        // Any other rotation: four passes over planes, one of them gathered down columns.
-        bokeh::Kernel turned = kernel(S::Polygon, d);
-        turned.rotation_deg  = 7.0f;
-        ours("hexagon", "3 parallelograms (7 degrees)", d, turned, M::Parallelograms);
+        // Any other rotation: the sweep in a sheared frame, transposed at 7 degrees (the
+        // segment near the columns sheared upright), as given at 20 (near the rows).
+        for (float degrees : { 7.0f, 20.0f }) {
+            bokeh::Kernel turned = kernel(S::Polygon, d);
+            turned.rotation_deg  = degrees;
+            ours("hexagon", "3 parallelograms (" + std::to_string(int(degrees)) + " degrees)", d, turned,
+                 M::Parallelograms);
+        }
         ours("hexagon", "reduced 1/N (bilinear)", d, kernel(S::Polygon, d), M::Reduced);
         ours("hexagon", "fast (the tool's choice)", d, kernel(S::Polygon, d), M::Fast);
         bokeh::Kernel g = kernel(S::Gaussian, d);
