@@ -53,8 +53,10 @@
 // and below the frame (~1.25x the work at 255 px; the upright frame's chunks are 540
 // columns, so twice the share), and T's ring and the windows' rings of sheared rows (~6 MB
 // a chunk at 255 px) are out of the 1 MiB L2 (~15-20 % of the 255 px time; see
-// docs/benchmarks.md, session 13). Rotations off multiples of 30 degrees take the four
-// passes: 54-57 ms at every size, under 40 dB at 15 px (36.8). The window
+// docs/benchmarks.md, session 13). Rotations off multiples of 30 degrees take the sheared
+// sweep: ~1.3x the upright sweep's time (transposed frame) and 1.5-1.9x the flat-topped's
+// (as given), 20-40 ms at 15-255 px in session 14's runs (a slow phase of the machine),
+// 35.7-37.7 dB at 15 px. The window
 // slides (double running sums) take ~20 % of the sweep's time, the shears' and unshears' three-tap reads ~17 %, the row
 // sums ~25 %; upright, the column gathers and scatters ~22 % more. Float sums, a fused
 // step, L1-sized blocks, narrower chunks and aligned buffers each changed the time by 11 %
@@ -69,7 +71,7 @@
 // scattered as the sweep goes. Of the two frames the cost model takes the cheaper (the
 // sweep's lines grow by |m| per column of a chunk). A session-13 try sheared whole planes
 // before and after the sweep (0.87-1.15x of the four passes: the planes' traffic and page
-// faults); gathered per line it measured 0.40-0.76x of the four passes (A/B, 15-255 px,
+// faults); gathered per line it measured 0.42-0.59x of the four passes (A/B, 15-255 px,
 // 1080p RGBA, two threads). The two extra B-spline reads smooth across the lines by
 // 1/2 px^2 more than the upright and flat-topped sweeps do.
 //
