@@ -1405,9 +1405,11 @@ std::optional<ColumnShear> cheaper_shear(const Kernel& k, int w, int h, double* 
 // kColumnBatch with the two rows before them kept (SweepIO::keep), so an output is written
 // with the batch holding its last tap.
 // As given, a line runs along a diagonal of the source (~1 / m pixels from each row) and
-// an output batch along one of `dst`: the lines prefetch the rows ahead. Transposed, a
-// batch of 16 lines at column x reads 18 adjacent pixels of a source row, all with x's
-// weights, and writes 16 adjacent pixels of an output row: the upright sweep's pattern.
+// an output batch along one of `dst`: a batch of lines is gathered a run of columns with
+// one first tap at a time (its 18 rows' pieces in L1), the next run's rows prefetched.
+// Transposed, a batch of 16 lines at column x reads 18 adjacent pixels of a source row,
+// all with x's weights, and writes 16 adjacent pixels of an output row: the upright
+// sweep's pattern.
 bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                             const Kernel& k, const ColumnShear& s, int rx, int ry, Border border,
                             int nthreads)
@@ -1490,11 +1492,10 @@ bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const
     // Source rows (columns, t) the lines read at working columns [0, w), by the border
     // rule: row offsets as given, the zero row where black.
     const std::vector<float> zero(size_t(std::max(data.width(), data.height()) + 2 * kColumnBatch) * ncs, 0.0f);
-    constexpr int kAhead = 2;  // lines read ahead (prefetched), as given
     const auto [d_lo, d_hi] = first_range(down, 0, w);
-    const int s0 = base + d_lo, s1 = base + h + d_hi + 2 + kAhead;
-    // As given (the tables outlive this scope: the sweep calls the lambdas below).
-    std::vector<const float*> src_rows;
+    const int s0 = base + d_lo, s1 = base + h + d_hi + 2;
+    // The frames' tables (they outlive the branches: the sweep calls the lambdas below).
+    std::vector<const float*> src_rows, row_of;  // as given, transposed
     std::vector<size_t> col;
     std::vector<int> run_end;
     std::vector<std::pair<int, int>> up_columns;
@@ -1527,25 +1528,33 @@ bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const
         }
         io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
             const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
+            int lit_lines = 0;
             for (int i = 0; i < n; ++i) {
-                lines[i]       = {};
-                const int row0 = base + r + i;  // line r + i reads rows row0 + first + 0..2
-                if (b <= a || black_line(row0, down[size_t(a)].first, down[size_t(b - 1)].first))
-                    continue;
-                float* o                       = bufs[i];
-                const float* const* const rows = src_rows.data() + (row0 - s0);
-                for (int x = a; x < b;) {
-                    const int e = std::min(run_end[size_t(x)], b), f = down[size_t(x)].first;
-                    const size_t j = col[size_t(x)], kx = size_t(x) * ncs;
-                    // The line kAhead on takes its newest row here: a diagonal the
-                    // hardware's prefetchers do not follow.
-                    prefetch_lines(rows[f + 2 + kAhead] + j, size_t(e - x) * ncs * sizeof(float));
-                    three_taps(o, rows[f] + j, rows[f + 1] + j, rows[f + 2] + j, down_w[0].data() + kx,
-                               down_w[1].data() + kx, down_w[2].data() + kx, size_t(e - x) * ncs);
-                    o += size_t(e - x) * ncs;
-                    x = e;
+                const bool dark = b <= a || black_line(base + r + i, down[size_t(a)].first, down[size_t(b - 1)].first);
+                lines[i]        = dark ? RowSpan{} : RowSpan{ bufs[i], a - c0, b - c0 };
+                lit_lines += !dark;
+            }
+            if (lit_lines == 0)
+                return;
+            // Line r + i reads rows[i + first + 0..2]; a run of columns with one first tap
+            // is done for the batch's lines at once, its n + 2 rows' pieces in L1.
+            const float* const* const rows = src_rows.data() + (base + r - s0);
+            for (int x = a; x < b;) {
+                const int e = std::min(run_end[size_t(x)], b), f = down[size_t(x)].first;
+                const size_t j = col[size_t(x)], kx = size_t(x) * ncs, ox = size_t(x - a) * ncs;
+                const size_t len = size_t(e - x) * ncs;
+                if (e < b) {  // the next run's rows: a diagonal the hardware's prefetchers miss
+                    const int fn    = down[size_t(e)].first;
+                    const size_t jn = col[size_t(e)];
+                    const size_t bytes = size_t(std::min(run_end[size_t(e)], b) - e) * ncs * sizeof(float);
+                    for (int t = 0; t < n + 2; ++t)
+                        prefetch_lines(rows[fn + t] + jn, bytes);
                 }
-                lines[i] = { bufs[i], a - c0, b - c0 };
+                for (int i = 0; i < n; ++i)
+                    if (lines[i].p)
+                        three_taps(bufs[i] + ox, rows[i + f] + j, rows[i + f + 1] + j, rows[i + f + 2] + j,
+                                   down_w[0].data() + kx, down_w[1].data() + kx, down_w[2].data() + kx, len);
+                x = e;
             }
         };
         io.store = [&](int y, int n, int x0, int x1, const float* rows) {
@@ -1590,6 +1599,13 @@ bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const
             }
         };
     } else {
+        // Per working column, source row org + x by the border rule (null where black).
+        row_of.resize(size_t(w));
+        for (int x = 0; x < w; ++x) {
+            const int sy = border_index(org + x, data.ybegin, data.yend, border);
+            row_of[size_t(x)] =
+                sy == kOutside ? nullptr : static_cast<const float*>(in.pixeladdr(data.xbegin, sy, data.zbegin));
+        }
         io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
             const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
             std::vector<float> run(size_t(n + 2) * ncs);
@@ -1604,17 +1620,16 @@ bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const
             for (int x = a; x < b; ++x) {
                 // Source row org + x, columns base + r + f + [0, n + 2): in place inside
                 // the data window, else by the border rule.
-                const int sy = border_index(org + x, data.ybegin, data.yend, border);
-                const int sx0 = base + r + down[size_t(x)].first;
-                const float* p = zero.data();
-                if (sy != kOutside) {
+                const float* const row = row_of[size_t(x)];
+                const int sx0          = base + r + down[size_t(x)].first;
+                const float* p         = zero.data();
+                if (row) {
                     if (sx0 >= data.xbegin && sx0 + n + 2 <= data.xend)
-                        p = static_cast<const float*>(in.pixeladdr(sx0, sy, data.zbegin));
+                        p = row + size_t(sx0 - data.xbegin) * ncs;
                     else {
                         for (int j = 0; j < n + 2; ++j) {
-                            const int sx = border_index(sx0 + j, data.xbegin, data.xend, border);
-                            const float* v = sx == kOutside ? zero.data()
-                                                            : static_cast<const float*>(in.pixeladdr(sx, sy, data.zbegin));
+                            const int sx   = border_index(sx0 + j, data.xbegin, data.xend, border);
+                            const float* v = sx == kOutside ? zero.data() : row + size_t(sx - data.xbegin) * ncs;
                             std::copy_n(v, ncs, run.data() + size_t(j) * ncs);
                         }
                         p = run.data();

@@ -1024,6 +1024,64 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
     }
 }
 
+TEST(BlurApprox, ParallelogramsComputeTheirDefinitionOnOneAndThreeChannels)
+{
+    // The sweeps' RGBA paths hold a pixel in one vector; other channel counts take the
+    // general loops (the sheared frames' gathers and stores too).
+    const OIIO::ImageBuf rgba = test_image(90, 70, 2, 1);
+    for (int nc : { 1, 3 }) {
+        const std::vector<int> order(nc == 1 ? std::vector<int>{ 2 } : std::vector<int>{ 0, 1, 2 });
+        const OIIO::ImageBuf src = OIIO::ImageBufAlgo::channels(rgba, nc, order);
+        for (const float rotation : { 30.0f, 0.0f, 7.0f, 25.0f }) {
+            for (Border border : { Border::Black, Border::Clamp }) {
+                SCOPED_TRACE(nc);
+                SCOPED_TRACE(rotation);
+                SCOPED_TRACE(int(border));
+                const Kernel k = hexagon(17, 17, rotation);
+                BlurOptions o;
+                o.method = BlurMethod::Parallelograms;
+                o.border = border;
+                o.grow   = border == Border::Clamp;
+                OIIO::ImageBuf got;
+                ASSERT_TRUE(blur(got, src, k, o)) << got.geterror();
+                std::vector<OIIO::ImageBuf> want;
+                if (std::fmod(rotation, 30.0f) == 0.0f)
+                    want.push_back(parallelogram_reference::hexagon(src, k, border, o.grow));
+                else
+                    for (bool transposed : { false, true })
+                        want.push_back(parallelogram_reference::sheared_hexagon(src, k, border, o.grow, transposed));
+                double best = std::numeric_limits<double>::infinity();
+                for (const OIIO::ImageBuf& w : want) {
+                    ASSERT_EQ(got.roi(), w.roi());
+                    best = std::min(best, bokeh_test::max_difference(got, w));
+                }
+                EXPECT_LE(best, 2e-6 * peak(want[0]));
+            }
+        }
+    }
+    // A frame smaller than the kernel, grown: the sheared frames are mostly margin.
+    const OIIO::ImageBuf tiny = test_image(3, 2, 5, 4);
+    for (const float rotation : { 7.0f, 25.0f }) {
+        SCOPED_TRACE(rotation);
+        BlurOptions o;
+        o.method = BlurMethod::Parallelograms;
+        o.grow   = true;
+        OIIO::ImageBuf got;
+        ASSERT_TRUE(blur(got, tiny, hexagon(41, 41, rotation), o)) << got.geterror();
+        double best = std::numeric_limits<double>::infinity();
+        for (bool transposed : { false, true }) {
+            const OIIO::ImageBuf w = parallelogram_reference::sheared_hexagon(tiny, hexagon(41, 41, rotation), Border::Black,
+                                                                              true, transposed);
+            ASSERT_EQ(got.roi(), w.roi());
+            best = std::min(best, bokeh_test::max_difference(got, w));
+        }
+        EXPECT_LE(best, 2e-6 * peak(got));
+        const std::vector<double> before = channel_sums(tiny), after = channel_sums(got);
+        for (size_t c = 0; c < after.size(); ++c)
+            EXPECT_NEAR(after[c], before[c], 1e-5 * before[c]) << "energy, channel " << c;
+    }
+}
+
 TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIris)
 {
     // Fast is the reduced buffer where the automatic reduction exceeds 1 (37.5 px and up)
