@@ -1006,12 +1006,13 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // hexagon, the bands for other shapes) against the exact row spans by the cost models,
     // and takes the exact blur where it costs less: small kernels (15 px: a disk's spans
     // 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
-    // flat-topped and 54 upright) and hexagons at rotations off 30 degrees up to the
-    // reduction (their four passes: 130 ms at 35 px against the spans' 107, and under 40
-    // dB at 15-23 px, 36.8-39.7; sessions 9, 10). With the spans model and the band counts
+    // flat-topped and 54 upright; sessions 9, 10). With the spans model and the band counts
     // of session 10 the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
     // ~23 for an octagon, and (session 13, parallelograms_cost_ns refitted on this
-    // machine) ~9 px for the flat-topped hexagon and ~10 for the upright one.
+    // machine) ~9 px for the flat-topped hexagon and ~10 for the upright one, ~7 for the
+    // sheared sweep (session 14). The parallelograms are taken only from the size where
+    // they keep to the 40 dB budget (parallelograms_budget_px: 15 px, sheared 27; before
+    // session 14 the cost alone decided, and the sweep ran from 9 px at 36.5 dB).
     // (Only up to 64 px across: the spans' cost grows with the size and is past every
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     // Its bands, unless the user named a count: the fewest within its accuracy bound
@@ -1029,7 +1030,9 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         const double approx_ns = method == BlurMethod::Parallelograms
                                      ? parallelograms_cost_ns(k, w, h)
                                      : bands_cost_ns(w, h, bands, mirrored);
-        if (spans_cost_ns(w, h, s) < approx_ns)
+        const bool in_budget = method != BlurMethod::Parallelograms
+                               || std::max(k.width_px, k.height_px) >= parallelograms_budget_px(k);
+        if (!in_budget || spans_cost_ns(w, h, s) < approx_ns)
             method = BlurMethod::Exact;
     }
     // The weights the method computes with (the effective ones for the approximations

@@ -1108,18 +1108,18 @@ TEST(BlurApprox, FastPicksTheReductionForLargeShapesTheBandsBelowAndExactWithIri
                            Case{ 40.0f, 0.0f, BlurMethod::Bands, KernelShape::Polygon, 5, 0.0f, 8 },
                            Case{ 50.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon },
                            // The hexagon: reduced from 45 px too; below, the parallelograms
-                           // or, where the cost models say they cost less, the exact spans
-                           // (hexagons under 9-10 px; at rotations off 30 degrees, whose
-                           // sheared sweep measured 20-31 ms against the spans' 21-31 at
-                           // 5-7 px, under 7-8 px).
+                           // where they keep to the 40 dB budget (from 15 px; at rotations
+                           // off 30 degrees, the sheared sweep, from 27) and the cost models
+                           // say they cost less than the exact spans, else the spans.
                            Case{ 45.0f, 0.0f, BlurMethod::Reduced, KernelShape::Polygon, 6 },
                            Case{ 40.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6 },
                            Case{ 15.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6 },
                            Case{ 8.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6 },
                            Case{ 8.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 30.0f },
-                           Case{ 11.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6, 30.0f },
-                           Case{ 5.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 7.0f },
-                           Case{ 23.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6, 7.0f },
+                           Case{ 11.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 30.0f },
+                           Case{ 17.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6, 30.0f },
+                           Case{ 23.0f, 0.0f, BlurMethod::Exact, KernelShape::Polygon, 6, 7.0f },
+                           Case{ 29.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6, 7.0f },
                            Case{ 40.0f, 0.0f, BlurMethod::Parallelograms, KernelShape::Polygon, 6, 20.0f },
                            Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Gaussian },
                            Case{ 21.0f, 0.05f, BlurMethod::Exact, KernelShape::Polygon } }) {
