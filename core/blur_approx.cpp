@@ -1410,271 +1410,335 @@ std::optional<ColumnShear> cheaper_shear(const Kernel& k, int w, int h, double* 
 // Transposed, a batch of 16 lines at column x reads 18 adjacent pixels of a source row,
 // all with x's weights, and writes 16 adjacent pixels of an output row: the upright
 // sweep's pattern.
+class ShearedFrame {
+public:
+    // `dst` prepared over roi (prepare_destination).
+    ShearedFrame(const OIIO::ImageBuf& in, OIIO::ImageBuf& dst, const OIIO::ROI& roi, const Kernel& k,
+                 const ColumnShear& s, int rx, int ry, Border border)
+        : in_(in), roi_(roi), data_(in.roi()), border_(border), black_(border == Border::Black),
+          t_(s.transposed), m_(s.m), ncs_(size_t(in.nchannels())),
+          pitch_(size_t(dst.spec().width) * size_t(in.nchannels())), d0_(static_cast<float*>(dst.localpixels()))
+    {
+        const bool t = t_;
+        // Along the working columns ("across") and the lines ("down"), in source coordinates.
+        const int across0 = t ? roi.ybegin : roi.xbegin, across1 = t ? roi.yend : roi.xend;
+        down0_   = t ? roi.xbegin : roi.ybegin;
+        down1_   = t ? roi.xend : roi.yend;
+        data_d0_ = t ? data_.xbegin : data_.ybegin;
+        data_d1_ = t ? data_.xend : data_.yend;
+        reach_a_ = t ? ry : rx;
+        w_       = across1 - across0 + 2 * reach_a_;
+        org_     = across0 - reach_a_;
+        down_.reserve(size_t(w_));
+        up_.reserve(size_t(w_));
+        for (int x = 0; x < w_; ++x) {
+            down_.emplace_back(m_ * x);
+            up_.emplace_back(-m_ * x);
+        }
+        // The sheared kernel's reach across the lines, and the frame: outputs read lines
+        // [ry_w, h - ry_w), the kernel's reach around them.
+        double reach = 0.0;
+        for (int i = 0; i < 6; ++i) {
+            const auto [vx, vy] = hexagon_vertex(k, i);
+            reach = std::max(reach, t ? std::abs(vx - m_ * vy) : std::abs(vy - m_ * vx));
+        }
+        ry_w_                   = int(std::ceil(reach)) + 2;
+        const auto [u_lo, u_hi] = first_range(up_, reach_a_, w_ - reach_a_);
+        base_                   = down0_ + u_lo - ry_w_;
+        h_                      = down1_ - 1 - base_ + u_hi + 3 + ry_w_;
+        const int data_a0 = t ? data_.ybegin : data_.xbegin, data_a1 = t ? data_.yend : data_.xend;
+        lit_x0_ = black_ ? std::max(0, data_a0 - org_) : 0;
+        lit_x1_ = black_ ? std::min(w_, data_a1 - org_) : w_;
+        spread(down_, down_w_);
+        spread(up_, up_w_);
+        zero_.assign(size_t(std::max(data_.width(), data_.height()) + 2 * kColumnBatch) * ncs_, 0.0f);
+        if (t)
+            transposed_tables();
+        else
+            as_given_tables();
+    }
+
+    Region out_region() const { return { reach_a_, ry_w_, w_ - reach_a_, h_ - ry_w_ }; }
+
+    // The sweep's input and output through this frame (the frame outlives the sweep).
+    SweepIO io() const
+    {
+        SweepIO io;
+        io.w        = w_;
+        io.h        = h_;
+        io.batch    = kColumnBatch;
+        io.keep     = 2;
+        io.out_rows = [this](int x0, int x1) {
+            const auto [lo, hi] = first_range(up_, x0, x1);
+            return std::pair{ down0_ - base_ + lo, down1_ - 1 - base_ + hi + 3 };
+        };
+        if (black_) {
+            io.lit       = { lit_x0_, 0, lit_x1_, h_ };
+            io.first_lit = [this](int c0, int c1) {
+                const int a = std::max(c0, lit_x0_), b = std::min(c1, lit_x1_);
+                return b > a ? data_d0_ - base_ - 2 - first_range(down_, a, b).second : h_;
+            };
+        }
+        io.out_row = [](int, int, int) -> float* { return nullptr; };
+        if (t_) {
+            io.lines = [this](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
+                lines_transposed(r, n, c0, c1, bufs, lines);
+            };
+            io.store = [this](int y, int n, int x0, int x1, const float* rows) { store_transposed(y, n, x0, x1, rows); };
+        } else {
+            io.lines = [this](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
+                lines_as_given(r, n, c0, c1, bufs, lines);
+            };
+            io.store = [this](int y, int n, int x0, int x1, const float* rows) { store_as_given(y, n, x0, x1, rows); };
+        }
+        return io;
+    }
+
+private:
+    // The first taps over columns [x0, x1): monotonic in x (round(m x) - 1), so the ends.
+    static std::pair<int, int> first_range(const std::vector<Taps>& tp, int x0, int x1)
+    {
+        const int p = tp[size_t(x0)].first, q = tp[size_t(x1 - 1)].first;
+        return { std::min(p, q), std::max(p, q) };
+    }
+
+    // Each tap's weights spread over the channels (a run of pixels with the same taps'
+    // rows is then one vector loop).
+    void spread(const std::vector<Taps>& tp, std::array<std::vector<float>, 3>& wt) const
+    {
+        for (int j = 0; j < 3; ++j) {
+            wt[size_t(j)].resize(size_t(w_) * ncs_);
+            for (int x = 0; x < w_; ++x)
+                std::fill_n(wt[size_t(j)].data() + size_t(x) * ncs_, ncs_, tp[size_t(x)].w[j]);
+        }
+    }
+
+    // Lines r .. r + n - 1 over [c0, c1), lit over [a, b): their spans (none where a line
+    // reads only black: all its taps outside the data window); how many have pixels.
+    int line_spans(int r, int n, int c0, float* const* bufs, RowSpan* lines, int a, int b) const
+    {
+        int lit = 0;
+        for (int i = 0; i < n; ++i) {
+            bool dark = b <= a;
+            if (!dark && black_) {
+                const int row0 = base_ + r + i, f0 = down_[size_t(a)].first, f1 = down_[size_t(b - 1)].first;
+                dark = row0 + std::max(f0, f1) + 2 < data_d0_ || row0 + std::min(f0, f1) >= data_d1_;
+            }
+            lines[i] = dark ? RowSpan{} : RowSpan{ bufs[i], a - c0, b - c0 };
+            lit += !dark;
+        }
+        return lit;
+    }
+
+    // As given: the source rows the lines read (the zero row where black), each working
+    // column's source column by the border rule, the runs of columns whose taps start on
+    // one row and read adjacent source columns (run_end_[x]: where x's run ends), and the
+    // unshear's columns by first tap.
+    void as_given_tables()
+    {
+        const auto [d_lo, d_hi] = first_range(down_, 0, w_);
+        s0_                     = base_ + d_lo;
+        const int s1            = base_ + h_ + d_hi + 2;
+        src_rows_.resize(size_t(s1 - s0_));
+        for (int sr = s0_; sr < s1; ++sr) {
+            const int sy = border_index(sr, data_.ybegin, data_.yend, border_);
+            src_rows_[size_t(sr - s0_)] =
+                sy == kOutside ? zero_.data() : static_cast<const float*>(in_.pixeladdr(data_.xbegin, sy, data_.zbegin));
+        }
+        col_.assign(size_t(w_), 0);
+        for (int x = 0; x < w_; ++x) {
+            const int sx   = border_index(org_ + x, data_.xbegin, data_.xend, border_);
+            col_[size_t(x)] = sx == kOutside ? 0 : size_t(sx - data_.xbegin) * ncs_;
+        }
+        run_end_.resize(size_t(w_));
+        for (int x = w_ - 1; x >= 0; --x) {
+            const bool on = x + 1 < w_ && down_[size_t(x + 1)].first == down_[size_t(x)].first
+                            && col_[size_t(x + 1)] == col_[size_t(x)] + ncs_;
+            run_end_[size_t(x)] = on ? run_end_[size_t(x + 1)] : x + 1;
+        }
+        const auto [u_lo, u_hi] = first_range(up_, 0, w_);
+        up_lo_                  = u_lo;
+        up_columns_.assign(size_t(u_hi - u_lo + 1), { 0, 0 });
+        for (int x = w_ - 1; x >= 0; --x) {
+            auto& c = up_columns_[size_t(up_[size_t(x)].first - up_lo_)];
+            c       = c.second > c.first ? std::pair{ x, c.second } : std::pair{ x, x + 1 };
+        }
+    }
+
+    // Transposed: per working column, source row org + x by the border rule (null: black).
+    void transposed_tables()
+    {
+        row_of_.resize(size_t(w_));
+        for (int x = 0; x < w_; ++x) {
+            const int sy = border_index(org_ + x, data_.ybegin, data_.yend, border_);
+            row_of_[size_t(x)] =
+                sy == kOutside ? nullptr : static_cast<const float*>(in_.pixeladdr(data_.xbegin, sy, data_.zbegin));
+        }
+    }
+
+    void lines_as_given(int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) const
+    {
+        const int a = std::max(c0, lit_x0_), b = std::min(c1, lit_x1_);
+        if (line_spans(r, n, c0, bufs, lines, a, b) == 0)
+            return;
+        // Line r + i reads rows[i + first + 0..2]; a run of columns with one first tap is
+        // done for the batch's lines at once, its n + 2 rows' pieces in L1.
+        const float* const* const rows = src_rows_.data() + (base_ + r - s0_);
+        for (int x = a; x < b;) {
+            const int e = std::min(run_end_[size_t(x)], b), f = down_[size_t(x)].first;
+            const size_t j = col_[size_t(x)], kx = size_t(x) * ncs_, ox = size_t(x - a) * ncs_;
+            const size_t len = size_t(e - x) * ncs_;
+            if (e < b) {  // the next run's rows: a diagonal the hardware's prefetchers miss
+                const int fn       = down_[size_t(e)].first;
+                const size_t jn    = col_[size_t(e)];
+                const size_t bytes = size_t(std::min(run_end_[size_t(e)], b) - e) * ncs_ * sizeof(float);
+                for (int t = 0; t < n + 2; ++t)
+                    prefetch_lines(rows[fn + t] + jn, bytes);
+            }
+            for (int i = 0; i < n; ++i)
+                if (lines[i].p)
+                    three_taps(bufs[i] + ox, rows[i + f] + j, rows[i + f + 1] + j, rows[i + f + 2] + j,
+                               down_w_[0].data() + kx, down_w_[1].data() + kx, down_w_[2].data() + kx, len);
+            x = e;
+        }
+    }
+
+    void store_as_given(int y, int n, int x0, int x1, const float* rows) const
+    {
+        const ptrdiff_t no = ptrdiff_t(x1 - x0) * ptrdiff_t(ncs_);
+        // Output row Y takes the columns whose last tap, line Y - base + u + 2, came in
+        // this batch: u in [y - Y + base - 2, y + n - Y + base - 2), each u a run.
+        const auto [u0, u1] = first_range(up_, x0, x1);
+        const int yy0 = std::max(down0_, y + base_ - u1 - 2), yy1 = std::min(down1_, y + n + base_ - u0 - 2);
+        for (int yy = yy0; yy < yy1; ++yy) {
+            const int lo   = y - yy + base_ - 2;
+            const float* q = rows + ptrdiff_t(yy - base_ - y) * no;
+            float* const o = d0_ + size_t(yy - roi_.ybegin) * pitch_ + size_t(org_ - roi_.xbegin) * ncs_;
+            // Left to right (u falls with x where m > 0).
+            const int ua = std::max(lo, u0), ub = std::min(lo + n, u1 + 1);
+            if (ub <= ua)
+                continue;
+            if (ncs_ == 4) {  // one vector a pixel, each reading its own lines
+                const int ul = m_ > 0.0 ? ub - 1 : ua, ur = m_ > 0.0 ? ua : ub - 1;
+                const int xa = std::max(x0, up_columns_[size_t(ul - up_lo_)].first);
+                const int xb = std::min(x1, up_columns_[size_t(ur - up_lo_)].second);
+                for (int x = xa; x < xb; ++x) {
+                    const Taps& tp  = up_[size_t(x)];
+                    const float* qx = q + ptrdiff_t(tp.first) * no + ptrdiff_t(x - x0) * 4;
+                    *reinterpret_cast<PixelRgba*>(o + size_t(x) * 4) = tp.w[0] * *reinterpret_cast<const PixelRgba*>(qx)
+                                                                       + tp.w[1] * *reinterpret_cast<const PixelRgba*>(qx + no)
+                                                                       + tp.w[2] * *reinterpret_cast<const PixelRgba*>(qx + 2 * no);
+                }
+                continue;
+            }
+            for (int i = 0; i < ub - ua; ++i) {
+                const int u         = m_ > 0.0 ? ub - 1 - i : ua + i;
+                const auto [ca, cb] = up_columns_[size_t(u - up_lo_)];
+                const int xa = std::max(ca, x0), xb = std::min(cb, x1);
+                if (xb <= xa)
+                    continue;
+                const float* qx = q + ptrdiff_t(u) * no + ptrdiff_t(xa - x0) * ptrdiff_t(ncs_);
+                const size_t kx = size_t(xa) * ncs_;
+                three_taps(o + kx, qx, qx + no, qx + 2 * no, up_w_[0].data() + kx, up_w_[1].data() + kx,
+                           up_w_[2].data() + kx, size_t(xb - xa) * ncs_);
+            }
+        }
+    }
+
+    void lines_transposed(int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) const
+    {
+        const int a = std::max(c0, lit_x0_), b = std::min(c1, lit_x1_);
+        if (line_spans(r, n, c0, bufs, lines, a, b) == 0)
+            return;
+        std::vector<float> run(size_t(n + 2) * ncs_);
+        for (int x = a; x < b; ++x) {
+            // Source row org + x, columns base + r + f + [0, n + 2): in place inside the
+            // data window, else by the border rule.
+            const float* const row = row_of_[size_t(x)];
+            const int sx0          = base_ + r + down_[size_t(x)].first;
+            const float* p         = zero_.data();
+            if (row) {
+                if (sx0 >= data_.xbegin && sx0 + n + 2 <= data_.xend)
+                    p = row + size_t(sx0 - data_.xbegin) * ncs_;
+                else {
+                    for (int j = 0; j < n + 2; ++j) {
+                        const int sx   = border_index(sx0 + j, data_.xbegin, data_.xend, border_);
+                        const float* v = sx == kOutside ? zero_.data() : row + size_t(sx - data_.xbegin) * ncs_;
+                        std::copy_n(v, ncs_, run.data() + size_t(j) * ncs_);
+                    }
+                    p = run.data();
+                }
+            }
+            const size_t kx = size_t(x) * ncs_, ox = size_t(x - a) * ncs_;
+            if (ncs_ == 4) {  // one vector a pixel, the weights held
+                const Taps& tp = down_[size_t(x)];
+                const auto* q  = reinterpret_cast<const PixelRgba*>(p);
+                for (int i = 0; i < n; ++i)
+                    *reinterpret_cast<PixelRgba*>(bufs[i] + ox) = tp.w[0] * q[i] + tp.w[1] * q[i + 1] + tp.w[2] * q[i + 2];
+                continue;
+            }
+            for (int i = 0; i < n; ++i, p += ncs_)
+                three_taps(bufs[i] + ox, p, p + ncs_, p + 2 * ncs_, down_w_[0].data() + kx, down_w_[1].data() + kx,
+                           down_w_[2].data() + kx, ncs_);
+        }
+    }
+
+    void store_transposed(int y, int n, int x0, int x1, const float* rows) const
+    {
+        const ptrdiff_t no = ptrdiff_t(x1 - x0) * ptrdiff_t(ncs_);
+        for (int x = x0; x < x1; ++x) {
+            // Output row org + x takes the columns X whose last tap, line X - base + u + 2,
+            // came in this batch.
+            const int u  = up_[size_t(x)].first;
+            const int xa = std::max(down0_, y + base_ - u - 2), xb = std::min(down1_, y + n + base_ - u - 2);
+            float* o     = d0_ + size_t(org_ + x - roi_.ybegin) * pitch_ + size_t(xa - roi_.xbegin) * ncs_;
+            if (x + kPrefetchRows < x1)
+                prefetch_lines(o + kPrefetchRows * pitch_, size_t(std::max(0, xb - xa)) * ncs_ * sizeof(float), true);
+            const float* q  = rows + ptrdiff_t(xa - base_ + u - y) * no + ptrdiff_t(x - x0) * ptrdiff_t(ncs_);
+            const size_t kx = size_t(x) * ncs_;
+            if (ncs_ == 4) {  // one vector a pixel, the weights held
+                const Taps& tp = up_[size_t(x)];
+                for (int X = xa; X < xb; ++X, o += ncs_, q += no)
+                    *reinterpret_cast<PixelRgba*>(o) = tp.w[0] * *reinterpret_cast<const PixelRgba*>(q)
+                                                       + tp.w[1] * *reinterpret_cast<const PixelRgba*>(q + no)
+                                                       + tp.w[2] * *reinterpret_cast<const PixelRgba*>(q + 2 * no);
+                continue;
+            }
+            for (int X = xa; X < xb; ++X, o += ncs_, q += no)
+                three_taps(o, q, q + no, q + 2 * no, up_w_[0].data() + kx, up_w_[1].data() + kx, up_w_[2].data() + kx,
+                           ncs_);
+        }
+    }
+
+    const OIIO::ImageBuf& in_;
+    const OIIO::ROI roi_, data_;
+    const Border border_;
+    const bool black_, t_;
+    const double m_;
+    const size_t ncs_, pitch_;  // pitch_: dst's row, roi-sized
+    float* const d0_;
+    int down0_ = 0, down1_ = 0, data_d0_ = 0, data_d1_ = 0, reach_a_ = 0;
+    int w_ = 0, h_ = 0, org_ = 0, base_ = 0, ry_w_ = 0, lit_x0_ = 0, lit_x1_ = 0;
+    std::vector<Taps> down_, up_;  // per working column: the shear's taps, the unshear's
+    std::array<std::vector<float>, 3> down_w_, up_w_;
+    std::vector<float> zero_;
+    // As given (as_given_tables).
+    int s0_ = 0, up_lo_ = 0;
+    std::vector<const float*> src_rows_;
+    std::vector<size_t> col_;
+    std::vector<int> run_end_;
+    std::vector<std::pair<int, int>> up_columns_;
+    // Transposed (transposed_tables).
+    std::vector<const float*> row_of_;
+};
+
 bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                             const Kernel& k, const ColumnShear& s, int rx, int ry, Border border,
                             int nthreads)
 {
     prepare_destination(dst, in, roi);
-    const int nc = in.nchannels();
-    const size_t ncs = size_t(nc);
-    const OIIO::ROI data = in.roi();
-    const bool t = s.transposed;
-    // Along the working columns ("across") and the lines ("down"), in source coordinates.
-    const int across0 = t ? roi.ybegin : roi.xbegin, across1 = t ? roi.yend : roi.xend;
-    const int down0 = t ? roi.xbegin : roi.ybegin, down1 = t ? roi.xend : roi.yend;
-    const int data_a0 = t ? data.ybegin : data.xbegin, data_a1 = t ? data.yend : data.xend;
-    const int data_d0 = t ? data.xbegin : data.ybegin, data_d1 = t ? data.xend : data.yend;
-    const int reach_a = t ? ry : rx;
-    const int w = across1 - across0 + 2 * reach_a, org = across0 - reach_a;
-    std::vector<Taps> down, up;  // per working column: the shear's taps, the unshear's
-    down.reserve(size_t(w));
-    up.reserve(size_t(w));
-    for (int x = 0; x < w; ++x) {
-        down.emplace_back(s.m * x);
-        up.emplace_back(-s.m * x);
-    }
-    // The first taps over columns [x0, x1): monotonic in x (round(m x) - 1), so the ends.
-    auto first_range = [](const std::vector<Taps>& tp, int x0, int x1) {
-        const int p = tp[size_t(x0)].first, q = tp[size_t(x1 - 1)].first;
-        return std::pair{ std::min(p, q), std::max(p, q) };
-    };
-    // The sheared kernel's reach across the lines, and the frame: outputs read lines
-    // [ry_w, h - ry_w), the kernel's reach around them.
-    double reach = 0.0;
-    for (int i = 0; i < 6; ++i) {
-        const auto [vx, vy] = hexagon_vertex(k, i);
-        reach = std::max(reach, t ? std::abs(vx - s.m * vy) : std::abs(vy - s.m * vx));
-    }
-    const int ry_w          = int(std::ceil(reach)) + 2;
-    const auto [u_lo, u_hi] = first_range(up, reach_a, w - reach_a);
-    const int base = down0 + u_lo - ry_w;
-    const int h    = down1 - 1 - base + u_hi + 3 + ry_w;
-    SweepIO io;
-    io.w = w;
-    io.h = h;
-    const Region out_region{ reach_a, ry_w, w - reach_a, h - ry_w };
-    io.out_rows = [&](int x0, int x1) {
-        const auto [lo, hi] = first_range(up, x0, x1);
-        return std::pair{ down0 - base + lo, down1 - 1 - base + hi + 3 };
-    };
-    const bool black = border == Border::Black;
-    const int lit_x0 = black ? std::max(0, data_a0 - org) : 0;
-    const int lit_x1 = black ? std::min(w, data_a1 - org) : w;
-    if (black) {
-        io.lit       = { lit_x0, 0, lit_x1, h };
-        io.first_lit = [&](int c0, int c1) {
-            const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
-            return b > a ? data_d0 - base - 2 - first_range(down, a, b).second : h;
-        };
-    }
-    // Whether line `row0` (its source position less m x) reads only black where its taps
-    // start at f0 .. f1.
-    auto black_line = [&](int row0, int f0, int f1) {
-        return black && (row0 + std::max(f0, f1) + 2 < data_d0 || row0 + std::min(f0, f1) >= data_d1);
-    };
-    // Each tap's weights spread over the channels (a run of pixels with the same taps'
-    // rows is then one vector loop).
-    auto spread = [&](const std::vector<Taps>& tp) {
-        std::array<std::vector<float>, 3> wt;
-        for (int j = 0; j < 3; ++j) {
-            wt[size_t(j)].resize(size_t(w) * ncs);
-            for (int x = 0; x < w; ++x)
-                std::fill_n(wt[size_t(j)].data() + size_t(x) * ncs, ncs, tp[size_t(x)].w[j]);
-        }
-        return wt;
-    };
-    const std::array<std::vector<float>, 3> down_w = spread(down), up_w = spread(up);
-    io.batch = kColumnBatch;
-    io.keep  = 2;
-    io.out_row = [](int, int, int) -> float* { return nullptr; };
-    const size_t pitch = size_t(dst.spec().width) * ncs;  // prepare_destination: roi-sized
-    float* const d0    = static_cast<float*>(dst.localpixels());
-    // Source rows (columns, t) the lines read at working columns [0, w), by the border
-    // rule: row offsets as given, the zero row where black.
-    const std::vector<float> zero(size_t(std::max(data.width(), data.height()) + 2 * kColumnBatch) * ncs, 0.0f);
-    const auto [d_lo, d_hi] = first_range(down, 0, w);
-    const int s0 = base + d_lo, s1 = base + h + d_hi + 2;
-    // The frames' tables (they outlive the branches: the sweep calls the lambdas below).
-    std::vector<const float*> src_rows, row_of;  // as given, transposed
-    std::vector<size_t> col;
-    std::vector<int> run_end;
-    std::vector<std::pair<int, int>> up_columns;
-    const auto [up_lo, up_hi] = first_range(up, 0, w);
-    if (!t) {
-        src_rows.resize(size_t(s1 - s0));
-        for (int sr = s0; sr < s1; ++sr) {
-            const int sy = border_index(sr, data.ybegin, data.yend, border);
-            src_rows[size_t(sr - s0)] =
-                sy == kOutside ? zero.data() : static_cast<const float*>(in.pixeladdr(data.xbegin, sy, data.zbegin));
-        }
-        col.assign(size_t(w), 0);
-        for (int x = 0; x < w; ++x) {
-            const int sx = border_index(org + x, data.xbegin, data.xend, border);
-            col[size_t(x)] = sx == kOutside ? 0 : size_t(sx - data.xbegin) * ncs;
-        }
-        // Runs of columns whose taps start on the same row and read adjacent source
-        // columns: run_end[x] is where x's run ends.
-        run_end.resize(size_t(w));
-        for (int x = w - 1; x >= 0; --x) {
-            const bool on = x + 1 < w && down[size_t(x + 1)].first == down[size_t(x)].first
-                            && col[size_t(x + 1)] == col[size_t(x)] + ncs;
-            run_end[size_t(x)] = on ? run_end[size_t(x + 1)] : x + 1;
-        }
-        // The unshear's runs by their first tap: the columns [x0, x1) whose taps start at u.
-        up_columns.assign(size_t(up_hi - up_lo + 1), { 0, 0 });
-        for (int x = w - 1; x >= 0; --x) {
-            auto& c = up_columns[size_t(up[size_t(x)].first - up_lo)];
-            c = c.second > c.first ? std::pair{ x, c.second } : std::pair{ x, x + 1 };
-        }
-        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
-            const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
-            int lit_lines = 0;
-            for (int i = 0; i < n; ++i) {
-                const bool dark = b <= a || black_line(base + r + i, down[size_t(a)].first, down[size_t(b - 1)].first);
-                lines[i]        = dark ? RowSpan{} : RowSpan{ bufs[i], a - c0, b - c0 };
-                lit_lines += !dark;
-            }
-            if (lit_lines == 0)
-                return;
-            // Line r + i reads rows[i + first + 0..2]; a run of columns with one first tap
-            // is done for the batch's lines at once, its n + 2 rows' pieces in L1.
-            const float* const* const rows = src_rows.data() + (base + r - s0);
-            for (int x = a; x < b;) {
-                const int e = std::min(run_end[size_t(x)], b), f = down[size_t(x)].first;
-                const size_t j = col[size_t(x)], kx = size_t(x) * ncs, ox = size_t(x - a) * ncs;
-                const size_t len = size_t(e - x) * ncs;
-                if (e < b) {  // the next run's rows: a diagonal the hardware's prefetchers miss
-                    const int fn    = down[size_t(e)].first;
-                    const size_t jn = col[size_t(e)];
-                    const size_t bytes = size_t(std::min(run_end[size_t(e)], b) - e) * ncs * sizeof(float);
-                    for (int t = 0; t < n + 2; ++t)
-                        prefetch_lines(rows[fn + t] + jn, bytes);
-                }
-                for (int i = 0; i < n; ++i)
-                    if (lines[i].p)
-                        three_taps(bufs[i] + ox, rows[i + f] + j, rows[i + f + 1] + j, rows[i + f + 2] + j,
-                                   down_w[0].data() + kx, down_w[1].data() + kx, down_w[2].data() + kx, len);
-                x = e;
-            }
-        };
-        io.store = [&](int y, int n, int x0, int x1, const float* rows) {
-            const ptrdiff_t no = ptrdiff_t(x1 - x0) * ptrdiff_t(ncs);
-            // Output row Y takes the columns whose last tap, line Y - base + u + 2, came
-            // in this batch: u in [y - Y + base - 2, y + n - Y + base - 2), each u a run.
-            const auto [u0, u1] = first_range(up, x0, x1);
-            const int yy0 = std::max(down0, y + base - u1 - 2), yy1 = std::min(down1, y + n + base - u0 - 2);
-            for (int yy = yy0; yy < yy1; ++yy) {
-                const int lo = y - yy + base - 2;
-                const float* q = rows + ptrdiff_t(yy - base - y) * no;
-                float* const o = d0 + size_t(yy - roi.ybegin) * pitch + size_t(org - roi.xbegin) * ncs;
-                // Left to right (u falls with x where m > 0).
-                const int ua = std::max(lo, u0), ub = std::min(lo + n, u1 + 1);
-                if (ub <= ua)
-                    continue;
-                if (ncs == 4) {  // one vector a pixel, each reading its own lines
-                    const int ul = s.m > 0.0 ? ub - 1 : ua, ur = s.m > 0.0 ? ua : ub - 1;
-                    const int xa = std::max(x0, up_columns[size_t(ul - up_lo)].first);
-                    const int xb = std::min(x1, up_columns[size_t(ur - up_lo)].second);
-                    for (int x = xa; x < xb; ++x) {
-                        const Taps& tp  = up[size_t(x)];
-                        const float* qx = q + ptrdiff_t(tp.first) * no + ptrdiff_t(x - x0) * 4;
-                        *reinterpret_cast<PixelRgba*>(o + size_t(x) * 4) =
-                            tp.w[0] * *reinterpret_cast<const PixelRgba*>(qx)
-                            + tp.w[1] * *reinterpret_cast<const PixelRgba*>(qx + no)
-                            + tp.w[2] * *reinterpret_cast<const PixelRgba*>(qx + 2 * no);
-                    }
-                    continue;
-                }
-                for (int i = 0; i < ub - ua; ++i) {
-                    const int u         = s.m > 0.0 ? ub - 1 - i : ua + i;
-                    const auto [ca, cb] = up_columns[size_t(u - up_lo)];
-                    const int xa = std::max(ca, x0), xb = std::min(cb, x1);
-                    if (xb <= xa)
-                        continue;
-                    const float* qx = q + ptrdiff_t(u) * no + ptrdiff_t(xa - x0) * ptrdiff_t(ncs);
-                    const size_t kx = size_t(xa) * ncs;
-                    three_taps(o + kx, qx, qx + no, qx + 2 * no, up_w[0].data() + kx, up_w[1].data() + kx,
-                               up_w[2].data() + kx, size_t(xb - xa) * ncs);
-                }
-            }
-        };
-    } else {
-        // Per working column, source row org + x by the border rule (null where black).
-        row_of.resize(size_t(w));
-        for (int x = 0; x < w; ++x) {
-            const int sy = border_index(org + x, data.ybegin, data.yend, border);
-            row_of[size_t(x)] =
-                sy == kOutside ? nullptr : static_cast<const float*>(in.pixeladdr(data.xbegin, sy, data.zbegin));
-        }
-        io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
-            const int a = std::max(c0, lit_x0), b = std::min(c1, lit_x1);
-            std::vector<float> run(size_t(n + 2) * ncs);
-            int lit_lines = 0;
-            for (int i = 0; i < n; ++i) {
-                const bool dark = b <= a || black_line(base + r + i, down[size_t(a)].first, down[size_t(b - 1)].first);
-                lines[i] = dark ? RowSpan{} : RowSpan{ bufs[i], a - c0, b - c0 };
-                lit_lines += !dark;
-            }
-            if (lit_lines == 0)
-                return;
-            for (int x = a; x < b; ++x) {
-                // Source row org + x, columns base + r + f + [0, n + 2): in place inside
-                // the data window, else by the border rule.
-                const float* const row = row_of[size_t(x)];
-                const int sx0          = base + r + down[size_t(x)].first;
-                const float* p         = zero.data();
-                if (row) {
-                    if (sx0 >= data.xbegin && sx0 + n + 2 <= data.xend)
-                        p = row + size_t(sx0 - data.xbegin) * ncs;
-                    else {
-                        for (int j = 0; j < n + 2; ++j) {
-                            const int sx   = border_index(sx0 + j, data.xbegin, data.xend, border);
-                            const float* v = sx == kOutside ? zero.data() : row + size_t(sx - data.xbegin) * ncs;
-                            std::copy_n(v, ncs, run.data() + size_t(j) * ncs);
-                        }
-                        p = run.data();
-                    }
-                }
-                const size_t kx = size_t(x) * ncs, ox = size_t(x - a) * ncs;
-                if (ncs == 4) {  // one vector a pixel, the weights held
-                    const Taps& tp = down[size_t(x)];
-                    const auto* q  = reinterpret_cast<const PixelRgba*>(p);
-                    for (int i = 0; i < n; ++i)
-                        *reinterpret_cast<PixelRgba*>(bufs[i] + ox) = tp.w[0] * q[i] + tp.w[1] * q[i + 1] + tp.w[2] * q[i + 2];
-                    continue;
-                }
-                for (int i = 0; i < n; ++i, p += ncs)
-                    three_taps(bufs[i] + ox, p, p + ncs, p + 2 * ncs, down_w[0].data() + kx,
-                               down_w[1].data() + kx, down_w[2].data() + kx, ncs);
-            }
-        };
-        io.store = [&](int y, int n, int x0, int x1, const float* rows) {
-            const ptrdiff_t no = ptrdiff_t(x1 - x0) * ptrdiff_t(ncs);
-            for (int x = x0; x < x1; ++x) {
-                // Output row org + x takes the columns X whose last tap, line
-                // X - base + u + 2, came in this batch.
-                const int u  = up[size_t(x)].first;
-                const int xa = std::max(down0, y + base - u - 2), xb = std::min(down1, y + n + base - u - 2);
-                float* o = d0 + size_t(org + x - roi.ybegin) * pitch + size_t(xa - roi.xbegin) * ncs;
-                if (x + kPrefetchRows < x1)
-                    prefetch_lines(o + kPrefetchRows * pitch, size_t(std::max(0, xb - xa)) * ncs * sizeof(float), true);
-                const float* q  = rows + ptrdiff_t(xa - base + u - y) * no + ptrdiff_t(x - x0) * ptrdiff_t(ncs);
-                const size_t kx = size_t(x) * ncs;
-                if (ncs == 4) {  // one vector a pixel, the weights held
-                    const Taps& tp = up[size_t(x)];
-                    for (int X = xa; X < xb; ++X, o += ncs, q += no)
-                        *reinterpret_cast<PixelRgba*>(o) = tp.w[0] * *reinterpret_cast<const PixelRgba*>(q)
-                                                           + tp.w[1] * *reinterpret_cast<const PixelRgba*>(q + no)
-                                                           + tp.w[2] * *reinterpret_cast<const PixelRgba*>(q + 2 * no);
-                    continue;
-                }
-                for (int X = xa; X < xb; ++X, o += ncs, q += no)
-                    three_taps(o, q, q + no, q + 2 * no, up_w[0].data() + kx, up_w[1].data() + kx,
-                               up_w[2].data() + kx, ncs);
-            }
-        };
-    }
-    hexagon_sweep(io, nc, out_region, s.a.x, s.a.y, s.b.x, s.b.y, s.c.x, nthreads);
+    const ShearedFrame frame(in, dst, roi, k, s, rx, ry, border);
+    hexagon_sweep(frame.io(), in.nchannels(), frame.out_region(), s.a.x, s.a.y, s.b.x, s.b.y, s.c.x, nthreads);
     return true;
 }
 
