@@ -1128,7 +1128,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // it is padded and finished transposed rather than transposed twice more.
     const bool transpose = method == BlurMethod::Parallelograms && !weights.is_identity()
                            && hexagon_transposed(k);
-    Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads, transpose);
+    const int extra = method == BlurMethod::Parallelograms && !weights.is_identity() ? hexagon_plane_extra(k) : 0;
+    Plane p = pad(in, grown(roi, rx + extra, ry + extra), opts.border, nthreads, transpose);
     if (weights.is_identity())
         return finish(dst, in, roi, p, 0, 0, false, nthreads);  // bit-exact copy
 
@@ -1152,9 +1153,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
             out = box_blur(out, box3x, box3y, nthreads);
         break;
     case BlurMethod::Parallelograms:
-        out = hexagon_parallelograms(std::move(p), k, transpose ? ry : rx, transpose ? rx : ry, nthreads);
-        ox  = rx;
-        oy  = ry;
+        out = hexagon_parallelograms(std::move(p), k, (transpose ? ry : rx) + extra, (transpose ? rx : ry) + extra,
+                                     nthreads);
+        ox  = rx + extra;
+        oy  = ry + extra;
         break;
     case BlurMethod::Bands: out = convolve_banded(p, weights, nthreads); break;
     case BlurMethod::BilinearTaps:

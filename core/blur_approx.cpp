@@ -30,8 +30,9 @@
 // touch of a fresh 1080p plane costs about half a pass even so. Measured (docs/benchmarks.md):
 // 54-57 ms at 15-255 px for 1080p RGBA on two threads (session 13's machine; 67-92 on the
 // one before), bound by memory traffic (four passes, the padding and, upright, the
-// transposing copies). Since session 14 only iris mode (which runs on a padded plane)
-// takes them: elsewhere the sheared sweep below.
+// transposing copies). Since session 14 only a hexagon stretched so far that no shear
+// leaves two of its segments steep takes them (45 x 15 px at 20 degrees, say): every other
+// one the sweeps below, on the source or (iris mode) on the padded plane.
 // Fused (issue 3): when the third segment runs along the rows of the working frame (the
 // upright and the flat-topped hexagon, every rotation by a multiple of 30 degrees), one
 // sweep down the rows makes the hexagon (hexagon_sweep), the rhombi grouped so that each
@@ -1236,19 +1237,21 @@ std::array<Dir, 3> hexagon_dirs(const Kernel& k)
 
 }  // namespace
 
-bool hexagon_transposed(const Kernel& k)
+namespace {
+
+// Whether the planes' passes (the sweep along the rows, the four passes) run on the
+// transposed plane: where fewer than two segments are steep as given.
+bool frame_transposed(const Kernel& k)
 {
     const std::array<Dir, 3> d = hexagon_dirs(k);
     return std::count_if(d.begin(), d.end(), [](Dir v) { return v.steep(); }) < 2;
 }
 
-namespace {
-
 // The steep segments a and b (a the less sheared) and c in the frame the passes run in.
 std::array<Dir, 3> working_dirs(const Kernel& k)
 {
     std::array<Dir, 3> d = hexagon_dirs(k);
-    if (hexagon_transposed(k))
+    if (frame_transposed(k))
         for (Dir& v : d)
             std::swap(v.x, v.y);
     std::sort(d.begin(), d.end(), [](Dir p, Dir q) { return p.slope() < q.slope(); });
@@ -1256,6 +1259,10 @@ std::array<Dir, 3> working_dirs(const Kernel& k)
 }
 
 bool runs_along_rows(const Dir& c) { return std::abs(c.y) < 1e-9 * std::abs(c.x); }
+
+// The sheared frame's sweep on a padded plane (iris mode), where the hexagon takes one
+// (defined with the sheared frame, below).
+std::optional<Plane> sheared_on_plane(const Plane& in, const Kernel& k, int margin_x, int margin_y, int nthreads);
 
 }  // namespace
 
@@ -1276,6 +1283,9 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
     const int w = in.w, h = in.h;
     const Region all{ 0, 0, w, h };
     const Region out_region{ margin_x, margin_y, w - margin_x, h - margin_y };
+    if (!runs_along_rows(c))  // other rotations: the sheared frame's sweep, if one serves
+        if (std::optional<Plane> out = sheared_on_plane(in, k, margin_x, margin_y, nthreads))
+            return std::move(*out);
     if (runs_along_rows(c)) {  // one sweep (iris mode; hexagon_direct otherwise)
         Plane out(w, h, in.nc);
         const size_t ncs = size_t(in.nc);
@@ -1743,6 +1753,39 @@ bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const
 }
 
 }  // namespace
+
+namespace {
+
+std::optional<Plane> sheared_on_plane(const Plane& in, const Kernel& k, int margin_x, int margin_y, int nthreads)
+{
+    const int w = in.w - 2 * margin_x, h = in.h - 2 * margin_y;
+    const std::optional<ColumnShear> s = cheaper_shear(k, w, h);
+    if (!s)
+        return std::nullopt;
+    // The plane as a source (no copy; only read), its outputs past the margins; the taps'
+    // phases count from the reach before the output, as hexagon_direct's do.
+    const OIIO::ImageSpec spec(in.w, in.h, in.nc, OIIO::TypeFloat);
+    const OIIO::ImageBuf view(spec, const_cast<float*>(in.row(0)));
+    const OIIO::ROI roi(margin_x, margin_x + w, margin_y, margin_y + h);
+    OIIO::ImageBuf res;
+    hexagon_sheared_direct(res, view, roi, k, *s, hexagon_reach(k, true), hexagon_reach(k, false), Border::Black,
+                           nthreads);
+    Plane out(in.w, in.h, in.nc);
+    const size_t row = size_t(w) * size_t(in.nc);
+    for (int y = 0; y < h; ++y)
+        std::copy_n(static_cast<const float*>(res.pixeladdr(margin_x, margin_y + y)), row,
+                    out.row(margin_y + y) + size_t(margin_x) * size_t(in.nc));
+    return out;
+}
+
+}  // namespace
+
+bool hexagon_transposed(const Kernel& k)
+{
+    return frame_transposed(k) && (runs_along_rows(working_dirs(k)[2]) || !hexagon_sweeps(k));
+}
+
+int hexagon_plane_extra(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]) || !hexagon_sweeps(k) ? 0 : 4; }
 
 bool hexagon_sweeps(const Kernel& k)
 {

@@ -302,8 +302,12 @@ bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
 /// Approximations (blur_approx.cpp). Planes are the padded input's size.
 /// Whether the parallelograms of `k` run on the transposed plane (see blur_approx.cpp).
 bool hexagon_transposed(const Kernel& k);
-/// The hexagon of `k` by parallelograms; `in` transposed when hexagon_transposed(k). Only
-/// the plane less `margin_x`, `margin_y` on each side (in its own frame) is computed.
+/// How much further than hexagon_reach the parallelograms of `k` read on a padded plane:
+/// the sheared frame's two more taps (blur_approx.cpp).
+int hexagon_plane_extra(const Kernel& k);
+/// The hexagon of `k` by parallelograms; `in` transposed when hexagon_transposed(k), padded
+/// by hexagon_reach + hexagon_plane_extra. Only the plane less `margin_x`, `margin_y` on
+/// each side (in its own frame) is computed.
 Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin_y, int nthreads);
 /// How far the parallelogram passes read along x (or y), interpolation included.
 int hexagon_reach(const Kernel& k, bool along_x);

@@ -5,10 +5,11 @@
 // machine whose speed drifts by +-30 % from one minute to the next, only such interleaved
 // medians compare two versions; separate runs do not (docs/benchmarks.md).
 //
-//   bokeh-ab OLD.so NEW.so [--threads N] [--reps N] [--channels N] [--image FILE] CASE...
+//   bokeh-ab OLD.so NEW.so [--threads N] [--reps N] [--channels N] [--image FILE] [--iris K] CASE...
 //   CASE: kernel:size[@rotation][:method[:N]]  kernel: box gaussian disk hex; method: auto exact fast
 //         bands parallelograms reduced; N: the bands, or the reduction
 //
+// --iris K: every case in iris mode (BlurOptions::iris).
 // Prints per case the two medians (ms), new / old, the minimums and the largest absolute
 // difference between the two results. The frame is 1920x1080 uniform noise in [0, 1], or
 // the image given. Both builds must agree on blur.h's structs (fields are only appended)
@@ -38,7 +39,7 @@ int usage(const char* why)
 {
     std::fprintf(stderr,
                  "bokeh-ab: %s\nusage: bokeh-ab OLD.so NEW.so [--threads N] [--reps N] "
-                 "[--channels N] [--image FILE] kernel:size[@rotation][:method[:N]]...\n",
+                 "[--channels N] [--image FILE] [--iris K] kernel:size[@rotation][:method[:N]]...\n",
                  why);
     return 1;
 }
@@ -108,6 +109,7 @@ int main(int argc, char** argv)
     if (argc < 4)
         return usage("two libraries and at least one case");
     int threads = 2, reps = 15, channels = 4;
+    float iris = 0.0f;
     std::string image;
     std::vector<std::string> cases;
     for (int i = 3; i < argc; ++i) {
@@ -120,6 +122,8 @@ int main(int argc, char** argv)
             channels = std::atoi(argv[++i]);
         else if (a == "--image" && i + 1 < argc)
             image = argv[++i];
+        else if (a == "--iris" && i + 1 < argc)
+            iris = float(std::atof(argv[++i]));
         else
             cases.push_back(a);
     }
@@ -141,8 +145,11 @@ int main(int argc, char** argv)
     }
     std::vector<std::pair<bokeh::Kernel, bokeh::BlurOptions>> parsed(cases.size());
     for (size_t i = 0; i < cases.size(); ++i)
+    {
         if (!parse_case(cases[i], parsed[i].first, parsed[i].second))
             return usage(("bad case '" + cases[i] + "'").c_str());
+        parsed[i].second.iris = iris;
+    }
     std::printf("%-24s %9s %9s %9s %9s %9s %10s\n", "case", "old ms", "new ms", "new/old",
                 "old min", "new min", "max |diff|");
     for (size_t i = 0; i < cases.size(); ++i) {
