@@ -311,8 +311,9 @@ int hexagon_plane_extra(const Kernel& k);
 Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin_y, int nthreads);
 /// How far the parallelogram passes read along x (or y), interpolation included.
 int hexagon_reach(const Kernel& k, bool along_x);
-/// Whether the hexagon of `k` takes the fused sweep (its third segment along the rows of
-/// the working frame: rotations by multiples of 30 degrees).
+/// Whether the hexagon of `k` takes the fused sweep: its third segment along the rows of
+/// the working frame (rotations by multiples of 30 degrees) or, in a frame with sheared
+/// columns or rows, turned along them (other rotations, unless stretched past any shear).
 bool hexagon_sweeps(const Kernel& k);
 /// Predicted single-thread time in ns of one channel of the parallelograms over a w x h
 /// output, in spans_cost_ns's units, so the two compare (blur_approx.cpp's cost model).
@@ -320,8 +321,8 @@ double parallelograms_cost_ns(const Kernel& k, int w, int h);
 /// The kernel size (px across) from which the parallelograms of `k` keep within the 40 dB
 /// budget of `method=fast` on bokeh-bench's scene (blur_approx.cpp).
 double parallelograms_budget_px(const Kernel& k);
-/// The fused sweep straight from `in` into `dst` over roi (no padded plane, no copy out);
-/// rx, ry as hexagon_reach.
+/// The fused sweep straight from `in` into `dst` over roi (no padded plane, no copy out),
+/// where hexagon_sweeps(k); rx, ry as hexagon_reach.
 bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                     const Kernel& k, int rx, int ry, Border border, int nthreads);
 
