@@ -26,8 +26,8 @@
 //   for rows dy and -dy, the same spans, are added into both output rows that read them,
 //   held in a ring of 2 ry + 1 output rows: 0.65-0.8x the time of the general path.
 // * Bands: their own running sums per column strip (convolve_bands_direct, blur_approx.cpp).
-// * Parallelograms at rotations by 30 degrees: one sweep down the rows (hexagon_direct,
-//   blur_approx.cpp).
+// * Parallelograms: one sweep down the rows (hexagon_direct, blur_approx.cpp), in a frame
+//   with sheared columns or rows at rotations off multiples of 30 degrees.
 // * Gaussian by three boxes: three box passes, each writing the region the next reads.
 // Known limits: the span cost still grows linearly with the diameter (about 2.6 spans per
 // kernel row: 161 at 63 px); a tile recomputes the prefix sums of its kernel-high margin
@@ -933,7 +933,9 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         // The hexagon too takes the reduction from 45 px: 40.9-42.2 dB from 45 to 63 px at
         // rotations 0, 30 and 7 degrees, and 41 ms at 45 px (1080p RGBA, 2 threads) against
         // the parallelograms' 36 (flat-topped), 60 (upright) and 132 (7 degrees, four
-        // passes); 27 against 35 / 55 at 63 px (session 9, docs/benchmarks.md).
+        // passes); 27 against 35 / 55 at 63 px (session 9, docs/benchmarks.md). Session 14,
+        // the sheared sweep at 7 and 25 degrees, 63 px: 28 and 24 ms against the reduced
+        // buffer's 19 (one run, a slow phase of the machine): still the reduction.
         m = opts.iris != 0.0f ? BlurMethod::Exact
             : gaussian        ? BlurMethod::ThreeBoxes
             : shape && k.edge == KernelEdge::Antialiased && reduction_factor(k) > 1.0

@@ -1283,7 +1283,9 @@ Plane hexagon_parallelograms(Plane in, const Kernel& k, int margin_x, int margin
     const int w = in.w, h = in.h;
     const Region all{ 0, 0, w, h };
     const Region out_region{ margin_x, margin_y, w - margin_x, h - margin_y };
-    if (!runs_along_rows(c))  // other rotations: the sheared frame's sweep, if one serves
+    // Other rotations: the sheared frame's sweep, if one serves (blur.cpp padded the plane
+    // as given then: hexagon_transposed is false for them); else the four passes below.
+    if (!runs_along_rows(c))
         if (std::optional<Plane> out = sheared_on_plane(in, k, margin_x, margin_y, nthreads))
             return std::move(*out);
     if (runs_along_rows(c)) {  // one sweep (iris mode; hexagon_direct otherwise)
@@ -1388,8 +1390,8 @@ std::optional<ColumnShear> cheaper_shear(const Kernel& k, int w, int h, double* 
         const int across = t ? h : w, lines = t ? w : h;
         const int chunk  = (across + column_chunks(across) - 1) / column_chunks(across);
         // As given, the diagonal reads and writes cost ~1.9 |m| more: the frames measured
-        // alike at 20-22 degrees (15-255 px; the as-given frame 0.7x at 5-7, the
-        // transposed 1.1x at 25 and 1.3x at 28; session 14).
+        // alike at 15-22 degrees (15-255 px; the transposed frame 0.72x the as-given one's
+        // time at 7 and 0.78x at 5, 1.1x at 25 and 1.3-1.4x at 28; session 14).
         const double diagonal = t ? 1.0 : 1.0 + 1.9 * std::abs(s->m);
         const double cost     = (t ? kSweepUprightNs : kSweepFlatNs) * diagonal
                             * (1.0 + std::abs(s->m) * chunk / std::max(lines, 1));
@@ -1398,7 +1400,7 @@ std::optional<ColumnShear> cheaper_shear(const Kernel& k, int w, int h, double* 
             best_cost = cost;
         }
     }
-    if (cost_ns)
+    if (cost_ns && best)  // else the caller's cost (the four passes') stands
         *cost_ns = best_cost;
     return best;
 }
@@ -1621,9 +1623,12 @@ private:
         const auto [u0, u1] = first_range(up_, x0, x1);
         const int yy0 = std::max(down0_, y + base_ - u1 - 2), yy1 = std::min(down1_, y + n + base_ - u0 - 2);
         for (int yy = yy0; yy < yy1; ++yy) {
-            const int lo   = y - yy + base_ - 2;
-            const float* q = rows + ptrdiff_t(yy - base_ - y) * no;
-            float* const o = d0_ + size_t(yy - roi_.ybegin) * pitch_ + size_t(org_ - roi_.xbegin) * ncs_;
+            const int lo = y - yy + base_ - 2;
+            // Line yy - base + u of the batch is row (yy - base - y) + u of `rows` (>= -2:
+            // the kept rows); column x of the frame is pixel org + x - roi.xbegin of the row.
+            const ptrdiff_t line0 = ptrdiff_t(yy - base_ - y);
+            float* const orow     = d0_ + size_t(yy - roi_.ybegin) * pitch_;
+            auto out_px           = [&](int x) { return orow + size_t(org_ + x - roi_.xbegin) * ncs_; };
             // Left to right (u falls with x where m > 0).
             const int ua = std::max(lo, u0), ub = std::min(lo + n, u1 + 1);
             if (ub <= ua)
@@ -1634,10 +1639,10 @@ private:
                 const int xb = std::min(x1, up_columns_[size_t(ur - up_lo_)].second);
                 for (int x = xa; x < xb; ++x) {
                     const Taps& tp  = up_[size_t(x)];
-                    const float* qx = q + ptrdiff_t(tp.first) * no + ptrdiff_t(x - x0) * 4;
-                    *reinterpret_cast<PixelRgba*>(o + size_t(x) * 4) = tp.w[0] * *reinterpret_cast<const PixelRgba*>(qx)
-                                                                       + tp.w[1] * *reinterpret_cast<const PixelRgba*>(qx + no)
-                                                                       + tp.w[2] * *reinterpret_cast<const PixelRgba*>(qx + 2 * no);
+                    const float* qx = rows + (line0 + tp.first) * no + ptrdiff_t(x - x0) * 4;
+                    *reinterpret_cast<PixelRgba*>(out_px(x)) = tp.w[0] * *reinterpret_cast<const PixelRgba*>(qx)
+                                                               + tp.w[1] * *reinterpret_cast<const PixelRgba*>(qx + no)
+                                                               + tp.w[2] * *reinterpret_cast<const PixelRgba*>(qx + 2 * no);
                 }
                 continue;
             }
@@ -1647,9 +1652,9 @@ private:
                 const int xa = std::max(ca, x0), xb = std::min(cb, x1);
                 if (xb <= xa)
                     continue;
-                const float* qx = q + ptrdiff_t(u) * no + ptrdiff_t(xa - x0) * ptrdiff_t(ncs_);
+                const float* qx = rows + (line0 + u) * no + ptrdiff_t(xa - x0) * ptrdiff_t(ncs_);
                 const size_t kx = size_t(xa) * ncs_;
-                three_taps(o + kx, qx, qx + no, qx + 2 * no, up_w_[0].data() + kx, up_w_[1].data() + kx,
+                three_taps(out_px(xa), qx, qx + no, qx + 2 * no, up_w_[0].data() + kx, up_w_[1].data() + kx,
                            up_w_[2].data() + kx, size_t(xb - xa) * ncs_);
             }
         }
@@ -1701,9 +1706,11 @@ private:
             // came in this batch.
             const int u  = up_[size_t(x)].first;
             const int xa = std::max(down0_, y + base_ - u - 2), xb = std::min(down1_, y + n + base_ - u - 2);
-            float* o     = d0_ + size_t(org_ + x - roi_.ybegin) * pitch_ + size_t(xa - roi_.xbegin) * ncs_;
+            if (xb <= xa)
+                continue;
+            float* o = d0_ + size_t(org_ + x - roi_.ybegin) * pitch_ + size_t(xa - roi_.xbegin) * ncs_;
             if (x + kPrefetchRows < x1)
-                prefetch_lines(o + kPrefetchRows * pitch_, size_t(std::max(0, xb - xa)) * ncs_ * sizeof(float), true);
+                prefetch_lines(o + kPrefetchRows * pitch_, size_t(xb - xa) * ncs_ * sizeof(float), true);
             const float* q  = rows + ptrdiff_t(xa - base_ + u - y) * no + ptrdiff_t(x - x0) * ptrdiff_t(ncs_);
             const size_t kx = size_t(x) * ncs_;
             if (ncs_ == 4) {  // one vector a pixel, the weights held
@@ -1802,6 +1809,7 @@ bool hexagon_sweeps(const Kernel& k)
 // fitted on the machine before, crossed at 13 and 19 px; the four passes measured 3.7-3.8x
 // the spans at 15 px on both machines.) spans_cost_ns reads a hexagon's spans within
 // 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare as they are.
+// The sheared sweep (session 14): its frame's cost (cheaper_shear) times kShearTapsCost.
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
     double ns = 30.0;  // the four passes
@@ -1816,7 +1824,9 @@ double parallelograms_cost_ns(const Kernel& k, int w, int h)
 // the size: on bokeh-bench's scene (PSNR after its tone map, 1080p, session 14) the sweep
 // along the rows measured 38.8-39.0 dB at 13 px and 40.5-40.6 at 15; the sheared sweep,
 // two reads through the taps more, 38.5-38.7 at 23 px and 40.0-40.2 at 27 (7 and 20
-// degrees); the four passes (iris mode) 39.0-39.7 at 23 px.
+// degrees). The four passes (left for hexagons stretched past any shear) measured
+// 39.0-39.7 dB at 23 px on regular hexagons (session 10); 27 px is taken for them too,
+// not measured on stretched ones.
 double parallelograms_budget_px(const Kernel& k)
 {
     return runs_along_rows(working_dirs(k)[2]) ? 15.0 : 27.0;

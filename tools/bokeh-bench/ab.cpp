@@ -9,7 +9,7 @@
 //   CASE: kernel:size[@rotation][:method[:N]]  kernel: box gaussian disk hex; method: auto exact fast
 //         bands parallelograms reduced; N: the bands, or the reduction
 //
-// --iris K: every case in iris mode (BlurOptions::iris).
+// --iris K: every case in iris mode (BlurOptions::iris; `fast` is then the exact method).
 // Prints per case the two medians (ms), new / old, the minimums and the largest absolute
 // difference between the two results. The frame is 1920x1080 uniform noise in [0, 1], or
 // the image given. Both builds must agree on blur.h's structs (fields are only appended)
@@ -144,8 +144,7 @@ int main(int argc, char** argv)
         OIIO::ImageBufAlgo::noise(src, "uniform", 0.0f, 1.0f);
     }
     std::vector<std::pair<bokeh::Kernel, bokeh::BlurOptions>> parsed(cases.size());
-    for (size_t i = 0; i < cases.size(); ++i)
-    {
+    for (size_t i = 0; i < cases.size(); ++i) {
         if (!parse_case(cases[i], parsed[i].first, parsed[i].second))
             return usage(("bad case '" + cases[i] + "'").c_str());
         parsed[i].second.iris = iris;
