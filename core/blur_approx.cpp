@@ -1424,12 +1424,11 @@ std::optional<ColumnShear> cheaper_shear(const Kernel& k, int w, int h, double* 
 // sweep's pattern.
 class ShearedFrame {
 public:
-    // `dst` prepared over roi (prepare_destination).
-    ShearedFrame(const OIIO::ImageBuf& in, OIIO::ImageBuf& dst, const OIIO::ROI& roi, const Kernel& k,
+    // Outputs over roi go to `out` (pixel roi.xbegin, roi.ybegin), rows `pitch` floats apart.
+    ShearedFrame(const OIIO::ImageBuf& in, float* out, size_t pitch, const OIIO::ROI& roi, const Kernel& k,
                  const ColumnShear& s, int rx, int ry, Border border)
         : in_(in), roi_(roi), data_(in.roi()), border_(border), black_(border == Border::Black),
-          t_(s.transposed), m_(s.m), ncs_(size_t(in.nchannels())),
-          pitch_(size_t(dst.spec().width) * size_t(in.nchannels())), d0_(static_cast<float*>(dst.localpixels()))
+          t_(s.transposed), m_(s.m), ncs_(size_t(in.nchannels())), pitch_(pitch), d0_(out)
     {
         const bool t = t_;
         // Along the working columns ("across") and the lines ("down"), in source coordinates.
@@ -1754,7 +1753,8 @@ bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const
                             int nthreads)
 {
     prepare_destination(dst, in, roi);
-    const ShearedFrame frame(in, dst, roi, k, s, rx, ry, border);
+    const ShearedFrame frame(in, static_cast<float*>(dst.localpixels()), size_t(dst.spec().width) * size_t(in.nchannels()),
+                             roi, k, s, rx, ry, border);
     hexagon_sweep(frame.io(), in.nchannels(), frame.out_region(), s.a.x, s.a.y, s.b.x, s.b.y, s.c.x, nthreads);
     return true;
 }
@@ -1774,14 +1774,10 @@ std::optional<Plane> sheared_on_plane(const Plane& in, const Kernel& k, int marg
     const OIIO::ImageSpec spec(in.w, in.h, in.nc, OIIO::TypeFloat);
     const OIIO::ImageBuf view(spec, const_cast<float*>(in.row(0)));
     const OIIO::ROI roi(margin_x, margin_x + w, margin_y, margin_y + h);
-    OIIO::ImageBuf res;
-    hexagon_sheared_direct(res, view, roi, k, *s, hexagon_reach(k, true), hexagon_reach(k, false), Border::Black,
-                           nthreads);
     Plane out(in.w, in.h, in.nc);
-    const size_t row = size_t(w) * size_t(in.nc);
-    for (int y = 0; y < h; ++y)
-        std::copy_n(static_cast<const float*>(res.pixeladdr(margin_x, margin_y + y)), row,
-                    out.row(margin_y + y) + size_t(margin_x) * size_t(in.nc));
+    const ShearedFrame frame(view, out.row(margin_y) + size_t(margin_x) * size_t(in.nc), out.stride(), roi, k, *s,
+                             hexagon_reach(k, true), hexagon_reach(k, false), Border::Black);
+    hexagon_sweep(frame.io(), in.nc, frame.out_region(), s->a.x, s->a.y, s->b.x, s->b.y, s->c.x, nthreads);
     return out;
 }
 
