@@ -1247,18 +1247,29 @@ bool frame_transposed(const Kernel& k)
     return std::count_if(d.begin(), d.end(), [](Dir v) { return v.steep(); }) < 2;
 }
 
+// The three segments in the source's frame or, `transposed`, in its transpose's.
+std::array<Dir, 3> frame_dirs(const Kernel& k, bool transposed)
+{
+    std::array<Dir, 3> d = hexagon_dirs(k);
+    if (transposed)
+        for (Dir& v : d)
+            std::swap(v.x, v.y);
+    return d;
+}
+
 // The steep segments a and b (a the less sheared) and c in the frame the passes run in.
 std::array<Dir, 3> working_dirs(const Kernel& k)
 {
-    std::array<Dir, 3> d = hexagon_dirs(k);
-    if (frame_transposed(k))
-        for (Dir& v : d)
-            std::swap(v.x, v.y);
+    std::array<Dir, 3> d = frame_dirs(k, frame_transposed(k));
     std::sort(d.begin(), d.end(), [](Dir p, Dir q) { return p.slope() < q.slope(); });
     return d;
 }
 
 bool runs_along_rows(const Dir& c) { return std::abs(c.y) < 1e-9 * std::abs(c.x); }
+
+// Whether the hexagon's third segment runs along the rows of its working frame (the
+// upright and the flat-topped hexagon: no shear needed).
+bool along_rows(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]); }
 
 // The sheared frame's sweep on a padded plane (iris mode), where the hexagon takes one
 // (defined with the sheared frame, below).
@@ -1325,6 +1336,14 @@ inline void three_taps(float* __restrict o, const float* p0, const float* p1, co
         o[i] = w0[i] * p0[i] + w1[i] * p1[i] + w2[i] * p2[i];
 }
 
+// RGBA pixel o = t.w[0] p0 + t.w[1] p1 + t.w[2] p2, one vector.
+inline void rgba_taps(float* o, const Taps& t, const float* p0, const float* p1, const float* p2)
+{
+    *reinterpret_cast<PixelRgba*>(o) = t.w[0] * *reinterpret_cast<const PixelRgba*>(p0)
+                                       + t.w[1] * *reinterpret_cast<const PixelRgba*>(p1)
+                                       + t.w[2] * *reinterpret_cast<const PixelRgba*>(p2);
+}
+
 // The sweep's cost in spans_cost_ns's units, flat-topped (its lines the source's rows) and
 // upright (its lines the source's columns): see parallelograms_cost_ns.
 constexpr double kSweepFlatNs = 3.6, kSweepUprightNs = 4.6;
@@ -1353,10 +1372,7 @@ struct ColumnShear {
 // stretched hexagon's shear leaves a or b flat.
 std::optional<ColumnShear> column_shear(const Kernel& k, bool transposed)
 {
-    std::array<Dir, 3> d = hexagon_dirs(k);
-    if (transposed)
-        for (Dir& v : d)
-            std::swap(v.x, v.y);
+    std::array<Dir, 3> d = frame_dirs(k, transposed);
     auto rise = [](Dir v) { return std::abs(v.y) / std::max(std::abs(v.x), 1e-300); };
     std::sort(d.begin(), d.end(), [&](Dir p, Dir q) { return rise(p) < rise(q); });
     if (rise(d[0]) > 1.0)
@@ -1427,7 +1443,7 @@ public:
     // Outputs over roi go to `out` (pixel roi.xbegin, roi.ybegin), rows `pitch` floats apart.
     ShearedFrame(const OIIO::ImageBuf& in, float* out, size_t pitch, const OIIO::ROI& roi, const Kernel& k,
                  const ColumnShear& s, int rx, int ry, Border border)
-        : in_(in), roi_(roi), data_(in.roi()), border_(border), black_(border == Border::Black),
+        : in_(in), s_(s), roi_(roi), data_(in.roi()), border_(border), black_(border == Border::Black),
           t_(s.transposed), m_(s.m), ncs_(size_t(in.nchannels())), pitch_(pitch), d0_(out)
     {
         const bool t = t_;
@@ -1469,9 +1485,15 @@ public:
             as_given_tables();
     }
 
-    Region out_region() const { return { reach_a_, ry_w_, w_ - reach_a_, h_ - ry_w_ }; }
+    // The hexagon, into `out`.
+    void sweep(int nthreads) const
+    {
+        hexagon_sweep(io(), int(ncs_), { reach_a_, ry_w_, w_ - reach_a_, h_ - ry_w_ }, s_.a.x, s_.a.y, s_.b.x, s_.b.y,
+                      s_.c.x, nthreads);
+    }
 
-    // The sweep's input and output through this frame (the frame outlives the sweep).
+private:
+    // The sweep's input and output through this frame.
     SweepIO io() const
     {
         SweepIO io;
@@ -1505,7 +1527,6 @@ public:
         return io;
     }
 
-private:
     // The first taps over columns [x0, x1): monotonic in x (round(m x) - 1), so the ends.
     static std::pair<int, int> first_range(const std::vector<Taps>& tp, int x0, int x1)
     {
@@ -1639,9 +1660,7 @@ private:
                 for (int x = xa; x < xb; ++x) {
                     const Taps& tp  = up_[size_t(x)];
                     const float* qx = rows + (line0 + tp.first) * no + ptrdiff_t(x - x0) * 4;
-                    *reinterpret_cast<PixelRgba*>(out_px(x)) = tp.w[0] * *reinterpret_cast<const PixelRgba*>(qx)
-                                                               + tp.w[1] * *reinterpret_cast<const PixelRgba*>(qx + no)
-                                                               + tp.w[2] * *reinterpret_cast<const PixelRgba*>(qx + 2 * no);
+                    rgba_taps(out_px(x), tp, qx, qx + no, qx + 2 * no);
                 }
                 continue;
             }
@@ -1664,7 +1683,7 @@ private:
         const int a = std::max(c0, lit_x0_), b = std::min(c1, lit_x1_);
         if (line_spans(r, n, c0, bufs, lines, a, b) == 0)
             return;
-        std::vector<float> run(size_t(n + 2) * ncs_);
+        std::vector<float> run;  // a row's pixels by the border rule, near the data window's edges
         for (int x = a; x < b; ++x) {
             // Source row org + x, columns base + r + f + [0, n + 2): in place inside the
             // data window, else by the border rule.
@@ -1675,6 +1694,7 @@ private:
                 if (sx0 >= data_.xbegin && sx0 + n + 2 <= data_.xend)
                     p = row + size_t(sx0 - data_.xbegin) * ncs_;
                 else {
+                    run.resize(size_t(n + 2) * ncs_);
                     for (int j = 0; j < n + 2; ++j) {
                         const int sx   = border_index(sx0 + j, data_.xbegin, data_.xend, border_);
                         const float* v = sx == kOutside ? zero_.data() : row + size_t(sx - data_.xbegin) * ncs_;
@@ -1686,9 +1706,8 @@ private:
             const size_t kx = size_t(x) * ncs_, ox = size_t(x - a) * ncs_;
             if (ncs_ == 4) {  // one vector a pixel, the weights held
                 const Taps& tp = down_[size_t(x)];
-                const auto* q  = reinterpret_cast<const PixelRgba*>(p);
-                for (int i = 0; i < n; ++i)
-                    *reinterpret_cast<PixelRgba*>(bufs[i] + ox) = tp.w[0] * q[i] + tp.w[1] * q[i + 1] + tp.w[2] * q[i + 2];
+                for (int i = 0; i < n; ++i, p += 4)
+                    rgba_taps(bufs[i] + ox, tp, p, p + 4, p + 8);
                 continue;
             }
             for (int i = 0; i < n; ++i, p += ncs_)
@@ -1715,9 +1734,7 @@ private:
             if (ncs_ == 4) {  // one vector a pixel, the weights held
                 const Taps& tp = up_[size_t(x)];
                 for (int X = xa; X < xb; ++X, o += ncs_, q += no)
-                    *reinterpret_cast<PixelRgba*>(o) = tp.w[0] * *reinterpret_cast<const PixelRgba*>(q)
-                                                       + tp.w[1] * *reinterpret_cast<const PixelRgba*>(q + no)
-                                                       + tp.w[2] * *reinterpret_cast<const PixelRgba*>(q + 2 * no);
+                    rgba_taps(o, tp, q, q + no, q + 2 * no);
                 continue;
             }
             for (int X = xa; X < xb; ++X, o += ncs_, q += no)
@@ -1727,11 +1744,12 @@ private:
     }
 
     const OIIO::ImageBuf& in_;
+    const ColumnShear s_;
     const OIIO::ROI roi_, data_;
     const Border border_;
     const bool black_, t_;
     const double m_;
-    const size_t ncs_, pitch_;  // pitch_: dst's row, roi-sized
+    const size_t ncs_, pitch_;  // pitch_: floats from one output row to the next
     float* const d0_;
     int down0_ = 0, down1_ = 0, data_d0_ = 0, data_d1_ = 0, reach_a_ = 0;
     int w_ = 0, h_ = 0, org_ = 0, base_ = 0, ry_w_ = 0, lit_x0_ = 0, lit_x1_ = 0;
@@ -1753,9 +1771,9 @@ bool hexagon_sheared_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const
                             int nthreads)
 {
     prepare_destination(dst, in, roi);
-    const ShearedFrame frame(in, static_cast<float*>(dst.localpixels()), size_t(dst.spec().width) * size_t(in.nchannels()),
-                             roi, k, s, rx, ry, border);
-    hexagon_sweep(frame.io(), in.nchannels(), frame.out_region(), s.a.x, s.a.y, s.b.x, s.b.y, s.c.x, nthreads);
+    ShearedFrame(in, static_cast<float*>(dst.localpixels()), size_t(dst.spec().width) * size_t(in.nchannels()), roi,
+                 k, s, rx, ry, border)
+        .sweep(nthreads);
     return true;
 }
 
@@ -1775,25 +1793,26 @@ std::optional<Plane> sheared_on_plane(const Plane& in, const Kernel& k, int marg
     const OIIO::ImageBuf view(spec, const_cast<float*>(in.row(0)));
     const OIIO::ROI roi(margin_x, margin_x + w, margin_y, margin_y + h);
     Plane out(in.w, in.h, in.nc);
-    const ShearedFrame frame(view, out.row(margin_y) + size_t(margin_x) * size_t(in.nc), out.stride(), roi, k, *s,
-                             hexagon_reach(k, true), hexagon_reach(k, false), Border::Black);
-    hexagon_sweep(frame.io(), in.nc, frame.out_region(), s->a.x, s->a.y, s->b.x, s->b.y, s->c.x, nthreads);
+    ShearedFrame(view, out.row(margin_y) + size_t(margin_x) * size_t(in.nc), out.stride(), roi, k, *s,
+                 hexagon_reach(k, true), hexagon_reach(k, false), Border::Black)
+        .sweep(nthreads);
     return out;
 }
 
 }  // namespace
 
-bool hexagon_transposed(const Kernel& k)
-{
-    return frame_transposed(k) && (runs_along_rows(working_dirs(k)[2]) || !hexagon_sweeps(k));
-}
+namespace {
 
-int hexagon_plane_extra(const Kernel& k) { return runs_along_rows(working_dirs(k)[2]) || !hexagon_sweeps(k) ? 0 : 4; }
+// Whether the hexagon takes a sheared frame: not along the rows, and a shear serves.
+bool sheared(const Kernel& k) { return !along_rows(k) && (column_shear(k, false) || column_shear(k, true)); }
 
-bool hexagon_sweeps(const Kernel& k)
-{
-    return runs_along_rows(working_dirs(k)[2]) || column_shear(k, false) || column_shear(k, true);
-}
+}  // namespace
+
+bool hexagon_transposed(const Kernel& k) { return frame_transposed(k) && !sheared(k); }
+
+int hexagon_plane_extra(const Kernel& k) { return sheared(k) ? 4 : 0; }
+
+bool hexagon_sweeps(const Kernel& k) { return along_rows(k) || sheared(k); }
 
 // Flat in the size, by path, in spans_cost_ns's units (ns a pixel and channel on one
 // thread): the sweep 3.6 flat-topped and 4.6 upright, the four passes 30. Refitted in
@@ -1809,7 +1828,7 @@ bool hexagon_sweeps(const Kernel& k)
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
     double ns = 30.0;  // the four passes
-    if (runs_along_rows(working_dirs(k)[2]))
+    if (along_rows(k))
         ns = hexagon_transposed(k) ? kSweepUprightNs : kSweepFlatNs;
     else if (cheaper_shear(k, w, h, &ns))
         ns *= kShearTapsCost;
@@ -1825,7 +1844,7 @@ double parallelograms_cost_ns(const Kernel& k, int w, int h)
 // not measured on stretched ones.
 double parallelograms_budget_px(const Kernel& k)
 {
-    return runs_along_rows(working_dirs(k)[2]) ? 15.0 : 27.0;
+    return along_rows(k) ? 15.0 : 27.0;
 }
 
 bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
