@@ -945,6 +945,38 @@ OIIO::ImageBuf sheared_hexagon(const OIIO::ImageBuf& src, const Kernel& k, Borde
     });
 }
 
+// The method's definitions for `k` over `src`: off multiples of 30 degrees the sheared
+// frames that serve (the method takes the cheaper), else (along the rows, or a hexagon
+// stretched past any shear) the plain one.
+std::vector<OIIO::ImageBuf> definitions(const OIIO::ImageBuf& src, const Kernel& k, Border border, bool grow,
+                                        double iris = 0.0)
+{
+    std::vector<OIIO::ImageBuf> frames;
+    if (std::fmod(k.rotation_deg, 30.0f) != 0.0f)
+        for (bool transposed : { false, true }) {
+            OIIO::ImageBuf f = sheared_hexagon(src, k, border, grow, transposed, iris);
+            if (f.initialized())
+                frames.push_back(f);
+        }
+    if (frames.empty())
+        frames.push_back(hexagon(src, k, border, grow, iris));
+    return frames;
+}
+
+// How far `got` is from the nearest of `refs` (infinite, and a failure, where a window differs).
+double closest(const OIIO::ImageBuf& got, const std::vector<OIIO::ImageBuf>& refs)
+{
+    double best = std::numeric_limits<double>::infinity();
+    for (const OIIO::ImageBuf& r : refs) {
+        if (got.roi() != r.roi()) {
+            ADD_FAILURE() << "the result's window differs from the definition's";
+            return std::numeric_limits<double>::infinity();
+        }
+        best = std::min(best, bokeh_test::max_difference(got, r));
+    }
+    return best;
+}
+
 }  // namespace parallelogram_reference
 
 TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
@@ -1010,25 +1042,12 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinition)
         // tolerance, so the check tells them apart. Where neither is (a hexagon stretched
         // further), and along the rows, the plain definition: the four passes, or the
         // sweep whose grouping equals them to float rounding.
-        std::vector<OIIO::ImageBuf> frames;
-        if (std::fmod(c.k.rotation_deg, 30.0f) != 0.0f)
-            for (bool transposed : { false, true }) {
-                OIIO::ImageBuf f = parallelogram_reference::sheared_hexagon(in, c.k, c.border, c.grow, transposed, c.iris);
-                if (f.initialized())
-                    frames.push_back(f);
-            }
-        if (frames.empty())
-            frames.push_back(parallelogram_reference::hexagon(in, c.k, c.border, c.grow, c.iris));
-        for (const OIIO::ImageBuf& f : frames)
-            ASSERT_EQ(got.roi(), f.roi());
+        const std::vector<OIIO::ImageBuf> frames = parallelogram_reference::definitions(in, c.k, c.border, c.grow, c.iris);
         const double tol = 2e-6 * peak(frames[0]);
         if (frames.size() == 2) {
             EXPECT_GT(bokeh_test::max_difference(frames[0], frames[1]), 100 * tol);
         }
-        double best = std::numeric_limits<double>::infinity();
-        for (const OIIO::ImageBuf& f : frames)
-            best = std::min(best, bokeh_test::max_difference(got, f));
-        EXPECT_LE(best, tol);
+        EXPECT_LE(parallelogram_reference::closest(got, frames), tol);
     }
 }
 
@@ -1052,18 +1071,8 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinitionOnOneAndThreeChannels)
                 o.grow   = border == Border::Clamp;
                 OIIO::ImageBuf got;
                 ASSERT_TRUE(blur(got, src, k, o)) << got.geterror();
-                std::vector<OIIO::ImageBuf> want;
-                if (std::fmod(rotation, 30.0f) == 0.0f)
-                    want.push_back(parallelogram_reference::hexagon(src, k, border, o.grow));
-                else
-                    for (bool transposed : { false, true })
-                        want.push_back(parallelogram_reference::sheared_hexagon(src, k, border, o.grow, transposed));
-                double best = std::numeric_limits<double>::infinity();
-                for (const OIIO::ImageBuf& w : want) {
-                    ASSERT_EQ(got.roi(), w.roi());
-                    best = std::min(best, bokeh_test::max_difference(got, w));
-                }
-                EXPECT_LE(best, 2e-6 * peak(want[0]));
+                const std::vector<OIIO::ImageBuf> want = parallelogram_reference::definitions(src, k, border, o.grow);
+                EXPECT_LE(parallelogram_reference::closest(got, want), 2e-6 * peak(want[0]));
             }
         }
     }
@@ -1076,15 +1085,9 @@ TEST(BlurApprox, ParallelogramsComputeTheirDefinitionOnOneAndThreeChannels)
         o.grow   = true;
         OIIO::ImageBuf got;
         ASSERT_TRUE(blur(got, tiny, hexagon(41, 41, rotation), o)) << got.geterror();
-        double best = std::numeric_limits<double>::infinity();
-        for (bool transposed : { false, true }) {
-            const OIIO::ImageBuf w = parallelogram_reference::sheared_hexagon(tiny, hexagon(41, 41, rotation), Border::Black,
-                                                                              true, transposed);
-            ASSERT_EQ(got.roi(), w.roi());
-            best = std::min(best, bokeh_test::max_difference(got, w));
-        }
-        EXPECT_LE(best, 2e-6 * peak(parallelogram_reference::sheared_hexagon(tiny, hexagon(41, 41, rotation),
-                                                                             Border::Black, true, false)));
+        const std::vector<OIIO::ImageBuf> want
+            = parallelogram_reference::definitions(tiny, hexagon(41, 41, rotation), Border::Black, true);
+        EXPECT_LE(parallelogram_reference::closest(got, want), 2e-6 * peak(want[0]));
         const std::vector<double> before = channel_sums(tiny), after = channel_sums(got);
         for (size_t c = 0; c < after.size(); ++c)
             EXPECT_NEAR(after[c], before[c], 1e-5 * before[c]) << "energy, channel " << c;
