@@ -1013,8 +1013,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // ~23 for an octagon, and (session 13, parallelograms_cost_ns refitted on this
     // machine) ~9 px for the flat-topped hexagon and ~10 for the upright one, ~7 for the
     // sheared sweep (session 14). The parallelograms are taken only from the size where
-    // they keep to the 40 dB budget (parallelograms_budget_px: 15 px, sheared 27; before
-    // session 14 the cost alone decided, and the sweep ran from 9 px at 36.5 dB).
+    // they keep to the 40 dB budget (parallelograms_budget_px, on the narrow side: 15 px,
+    // stretched 21, sheared 27; before session 14 the cost alone decided, and the sweep ran
+    // from 9 px at 36.5 dB; before session 15 the wide side, and a 27 x 9 hexagon took the
+    // sweep at 36.9 dB).
     // (Only up to 64 px across: the spans' cost grows with the size and is past every
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     // Its bands, unless the user named a count: the fewest within its accuracy bound
@@ -1033,7 +1035,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
                                      ? parallelograms_cost_ns(k, w, h)
                                      : bands_cost_ns(w, h, bands, mirrored);
         const bool in_budget = method != BlurMethod::Parallelograms
-                               || std::max(k.width_px, k.height_px) >= parallelograms_budget_px(k);
+                               || std::min(k.width_px, k.height_px) >= parallelograms_budget_px(k);
         if (!in_budget || spans_cost_ns(w, h, s) < approx_ns)
             method = BlurMethod::Exact;
     }

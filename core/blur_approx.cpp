@@ -1839,12 +1839,17 @@ double parallelograms_cost_ns(const Kernel& k, int w, int h)
 // the size: on bokeh-bench's scene (PSNR after its tone map, 1080p, session 14) the sweep
 // along the rows measured 38.8-39.0 dB at 13 px and 40.5-40.6 at 15; the sheared sweep,
 // two reads through the taps more, 38.5-38.7 at 23 px and 40.0-40.2 at 27 (7 and 20
-// degrees). The four passes (left for hexagons stretched past any shear) measured
-// 39.0-39.7 dB at 23 px on regular hexagons (session 10); 27 px is taken for them too,
-// not measured on stretched ones.
+// degrees). Stretched hexagons (anamorphic) are softened as much on their narrow side, so
+// that side decides, and more (bokeh-bench's crop blurred alone, session 15): 2:1 and 3:1
+// along the rows (0 and 90 degrees) 38.2-40.1 dB at 15 px across, 39.7-43.0 at 18,
+// 43.0-45.1 at 21; sheared or the four passes (left for hexagons stretched past any shear)
+// 36.4-37.2 at 15 across, 39.2 at 21, 40.5-43.7 at 27 (54 x 27 to 81 x 27 at 7 and 20
+// degrees).
 double parallelograms_budget_px(const Kernel& k)
 {
-    return along_rows(k) ? 15.0 : 27.0;
+    if (!along_rows(k))
+        return 27.0;
+    return k.width_px == k.height_px ? 15.0 : 21.0;
 }
 
 bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,

@@ -318,7 +318,7 @@ bool hexagon_sweeps(const Kernel& k);
 /// Predicted single-thread time in ns of one channel of the parallelograms over a w x h
 /// output, in spans_cost_ns's units, so the two compare (blur_approx.cpp's cost model).
 double parallelograms_cost_ns(const Kernel& k, int w, int h);
-/// The kernel size (px across) from which the parallelograms of `k` keep within the 40 dB
+/// The narrow side (px) from which the parallelograms of `k` keep within the 40 dB
 /// budget of `method=fast` on bokeh-bench's scene (blur_approx.cpp).
 double parallelograms_budget_px(const Kernel& k);
 /// The fused sweep straight from `in` into `dst` over roi (no padded plane, no copy out),

@@ -166,7 +166,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                           "over 25, a polygon's over 30, at most 8; 1 below 1.5)"),
         OptionSpec::Float("sigma", 0.0, 0.0, 1024.0, "Gaussian sigma in pixels (0: W/4)"),
         OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
-        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon: degrees (0: a vertex up)"),
+        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon and hex: degrees (0: a vertex up)"),
         OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon: 0 straight blades .. 1 circle"),
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk/polygon: catadioptric hole (radius fraction)"),
     };
