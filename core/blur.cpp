@@ -50,11 +50,13 @@
 // box width is fractional, so the variance matches exactly, not to the nearest odd width.
 
 #include <bokeh/blur.h>
+#include <bokeh/image.h>
 #include <bokeh/parallel.h>
 
 #include "plane.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -964,6 +966,89 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
     return false;
 }
 
+// Non-finite source values (DESIGN.md, "bad values": never beyond the pixel's footprint).
+// The running and prefix sums would carry a NaN or an infinity along the rest of its row
+// and down the columns (and inf - inf is NaN), the FFT over its tile. So the blur runs on
+// the source with them read as 0, and each output whose exact kernel has weight on one of
+// them takes what the brute-force convolution gives it: +inf or -inf where all those it
+// reaches have that sign, NaN otherwise (in iris mode too). Which outputs they reach: an
+// indicator per channel and kind, blurred with the exact kernel by running sums, row spans
+// or separable passes, which leave exact zeros where the kernel has no weight on any (sums
+// of whole numbers and of products with 0, in double); never by the FFT, whose rounding
+// leaves none. Infinite depth ("no depth", +inf in Z) is the common case in practice.
+bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const Kernel& k, const BlurOptions& opts,
+                    OIIO::ROI roi, int nthreads)
+{
+    const OIIO::ROI data = in.roi();
+    const int nc         = in.nchannels();
+    // Kinds: 0 NaN, 1 +inf, 2 -inf; an indicator channel for each kind a channel holds.
+    std::vector<std::array<bool, 3>> held(size_t(nc), { false, false, false });
+    auto kind = [](float v) { return std::isnan(v) ? 0 : v > 0.0f ? 1 : 2; };
+    for (int y = data.ybegin; y < data.yend; ++y) {
+        const float* row = static_cast<const float*>(in.pixeladdr(data.xbegin, y, data.zbegin));
+        for (int i = 0; i < data.width() * nc; ++i)
+            if (!std::isfinite(row[i]))
+                held[size_t(i % nc)][size_t(kind(row[i]))] = true;
+    }
+    std::vector<int> slot(size_t(3 * nc), -1);  // indicator channel of (channel, kind)
+    int nind = 0;
+    for (size_t i = 0; i < slot.size(); ++i)
+        if (held[i / 3][i % 3])
+            slot[i] = nind++;
+    OIIO::ImageSpec ispec(data.width(), data.height(), nind, OIIO::TypeFloat);
+    ispec.x = data.xbegin;
+    ispec.y = data.ybegin;
+    OIIO::ImageBuf zeroed, reach, indicators(ispec, OIIO::InitializePixels::Yes);
+    zeroed.copy(in);
+    parallel_rows(data, nthreads, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            auto* row = static_cast<float*>(zeroed.pixeladdr(data.xbegin, y, data.zbegin));
+            auto* ind = static_cast<float*>(indicators.pixeladdr(data.xbegin, y));
+            for (int x = 0; x < data.width(); ++x)
+                for (int c = 0; c < nc; ++c) {
+                    float& v = row[size_t(x) * size_t(nc) + size_t(c)];
+                    if (!std::isfinite(v)) {
+                        ind[size_t(x) * size_t(nind) + size_t(slot[size_t(3 * c + kind(v))])] = 1.0f;
+                        v = 0.0f;
+                    }
+                }
+        }
+    });
+    if (!blur(dst, zeroed, k, opts, roi, nthreads))
+        return false;
+    BlurOptions plain = opts;
+    plain.iris        = 0.0f;
+    plain.method      = k.shape == KernelShape::Gaussian ? BlurMethod::Separable
+                        : k.shape == KernelShape::Box    ? BlurMethod::Exact
+                                                         : BlurMethod::Spans;
+    if (!blur(reach, indicators, k, plain, dst.roi(), nthreads)) {
+        dst.errorfmt("blur: where the non-finite values reach: {}", reach.geterror());
+        return false;
+    }
+    const OIIO::ROI out = dst.roi();
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    parallel_rows(out, nthreads, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            auto* row       = static_cast<float*>(dst.pixeladdr(out.xbegin, y));
+            const auto* rch = static_cast<const float*>(reach.pixeladdr(out.xbegin, y));
+            for (int x = 0; x < out.width(); ++x)
+                for (int c = 0; c < nc; ++c) {
+                    auto reached = [&](int kd) {
+                        const int s = slot[size_t(3 * c + kd)];
+                        return s >= 0 && rch[size_t(x) * size_t(nind) + size_t(s)] > 0.0f;
+                    };
+                    const bool nan = reached(0), pos = reached(1), neg = reached(2);
+                    float& v = row[size_t(x) * size_t(nc) + size_t(c)];
+                    if (nan || (pos && neg))
+                        v = std::numeric_limits<float>::quiet_NaN();
+                    else if (pos || neg)
+                        v = pos ? kInf : -kInf;
+                }
+        }
+    });
+    return true;
+}
+
 }  // namespace
 
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
@@ -1000,6 +1085,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         return false;
     OIIO::ImageBuf holder;
     const OIIO::ImageBuf& in = float_source(src, holder);
+    if (any_nonfinite(in, nthreads))
+        return blur_nonfinite(dst, in, k, opts, roi, nthreads);
     // Before the exact weights, which it does not need at full size.
     if (method == BlurMethod::Reduced)
         return blur_reduced(dst, in, k, opts, roi, nthreads);

@@ -34,6 +34,7 @@
 // they share.
 
 #include <bokeh/blur.h>
+#include <bokeh/image.h>
 #include <bokeh/parallel.h>
 
 #include "plane.h"
@@ -305,6 +306,13 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
     OIIO::ImageBuf src_holder, kernel_holder;
     const OIIO::ImageBuf& in = float_source(src, src_holder);
     const OIIO::ImageBuf& kf = float_source(kernel, kernel_holder);
+    // The FFT would spread a NaN or an infinity over its whole tile, and the footprint
+    // blur() finds for them (blur_nonfinite) needs a kernel of runs of equal weights.
+    if (any_nonfinite(in, nthreads)) {
+        dst.errorfmt("blur: the source has NaN or infinite values (infinite depth, say), which a "
+                     "kernel image cannot blur within their footprint; drop or replace those channels first");
+        return false;
+    }
     const OIIO::ROI kr       = kf.roi();
     const int knc = kf.nchannels(), nc = in.nchannels();
     if (kr.width() > 4096 || kr.height() > 4096) {

@@ -245,6 +245,104 @@ TEST(Blur, TranslationEquivariance)
     }
 }
 
+TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
+{
+    // DESIGN.md, "bad values": a NaN or an infinity reaches exactly the outputs whose kernel
+    // has weight on it, as in the brute-force convolution (+inf or -inf where all it reaches
+    // have that sign, NaN otherwise), and every other output is the blur of the image with
+    // those values read as 0. Running and prefix sums alone would carry them along the rows
+    // and down the columns (inf - inf is NaN), the FFT over its tile. Every method, every
+    // border, a grown window; infinite depth (a sky) is the case met in practice.
+    OIIO::ImageBuf src = test_image(61, 47);
+    auto put = [&](int x, int y, int c, float v) {
+        float px[4];
+        src.getpixel(x, y, px);
+        px[c] = v;
+        src.setpixel(x, y, px);
+    };
+    const float inf = std::numeric_limits<float>::infinity();
+    put(20, 15, 0, std::numeric_limits<float>::quiet_NaN());
+    put(40, 30, 1, inf);
+    put(43, 30, 1, -inf);  // where both reach: NaN
+    put(10, 35, 2, -inf);
+    for (int y = 5; y < 13; ++y)  // a sky at the right edge (clamp and mirror repeat it)
+        for (int x = 52; x < 61; ++x)
+            put(x, y, 3, inf);
+    // The same image with the bad values as 0, and one indicator image per kind.
+    OIIO::ImageBuf zeroed = src, kinds[3];
+    for (OIIO::ImageBuf& k : kinds) {
+        k = OIIO::ImageBuf(src.spec());
+        OIIO::ImageBufAlgo::zero(k);
+    }
+    for (OIIO::ImageBuf::Iterator<float> it(zeroed); !it.done(); ++it)
+        for (int c = 0; c < 4; ++c)
+            if (!std::isfinite(it[c])) {
+                const int kind = std::isnan(it[c]) ? 0 : it[c] > 0 ? 1 : 2;
+                float one[4] = { 0, 0, 0, 0 };
+                kinds[kind].getpixel(it.x(), it.y(), one);
+                one[c] = 1.0f;
+                kinds[kind].setpixel(it.x(), it.y(), one);
+                it[c] = 0.0f;
+            }
+    for (const Named& n : kernels()) {
+        std::vector<std::pair<BlurMethod, float>> methods;  // (method, iris)
+        for (BlurMethod m : exact_methods(n.k))
+            methods.push_back({ m, 0.0f });
+        methods.push_back({ BlurMethod::Fast, 0.0f });
+        methods.push_back({ BlurMethod::Reduced, 0.0f });
+        methods.push_back({ BlurMethod::Auto, 0.05f });
+        const bool shape = n.k.shape == KernelShape::Disk || n.k.shape == KernelShape::Polygon;
+        if (shape && n.k.hole == 0.0f)
+            methods.push_back({ BlurMethod::Bands, 0.0f });
+        if (n.k.shape == KernelShape::Polygon && n.k.blades == 6)
+            methods.push_back({ BlurMethod::Parallelograms, 0.0f });
+        if (n.k.shape == KernelShape::Gaussian)
+            methods.push_back({ BlurMethod::ThreeBoxes, 0.0f });
+        for (const auto& [method, iris] : methods)
+            for (Border border : { Border::Black, Border::Clamp, Border::Mirror }) {
+                SCOPED_TRACE(testing::Message() << n.name << " method " << int(method) << " iris " << iris
+                                                << " border " << int(border));
+                BlurOptions o;
+                o.method    = method;
+                o.iris      = iris;
+                o.border    = border;
+                o.grow      = border == Border::Black;
+                o.reduction = method == BlurMethod::Reduced ? 2.0f : 0.0f;
+                OIIO::ImageBuf got, clean;
+                ASSERT_TRUE(blur(got, src, n.k, o)) << got.geterror();
+                ASSERT_TRUE(blur(clean, zeroed, n.k, o, got.roi())) << clean.geterror();
+                // Where each kind reaches: the brute force on its indicator (exact zeros elsewhere).
+                OIIO::ImageBuf reach[3];
+                BlurOptions plain = o;
+                plain.iris        = 0.0f;
+                for (int kind = 0; kind < 3; ++kind)
+                    ASSERT_TRUE(convolve_reference(reach[kind], kinds[kind], kernel_weights(n.k), plain, got.roi()));
+                int wrong = 0, bad = 0;
+                for (OIIO::ImageBuf::ConstIterator<float> it(got); !it.done(); ++it)
+                    for (int c = 0; c < 4; ++c) {
+                        float r[3];
+                        for (int kind = 0; kind < 3; ++kind)
+                            r[kind] = reach[kind].getchannel(it.x(), it.y(), 0, c);
+                        const float v = it[c], want_clean = clean.getchannel(it.x(), it.y(), 0, c);
+                        bool ok;
+                        if (r[0] > 0.0f || (r[1] > 0.0f && r[2] > 0.0f))
+                            ok = std::isnan(v);
+                        else if (r[1] > 0.0f || r[2] > 0.0f)
+                            ok = v == (r[1] > 0.0f ? inf : -inf);
+                        else
+                            ok = v == want_clean;
+                        bad += !std::isfinite(v);
+                        if (!ok && wrong++ < 3)
+                            ADD_FAILURE() << "(" << it.x() << ", " << it.y() << ") channel " << c << ": " << v
+                                          << ", reached by NaN/+inf/-inf " << r[0] << "/" << r[1] << "/" << r[2]
+                                          << ", without them " << want_clean;
+                    }
+                EXPECT_EQ(wrong, 0);
+                EXPECT_GT(bad, 0) << "the bad values reach some outputs";
+            }
+    }
+}
+
 TEST(Blur, WideImagesMatchTheBruteForceReferenceStripByStrip)
 {
     // Wider than the fused methods' column strips (box: column_chunks, two up to 2879 px,

@@ -282,6 +282,49 @@ TEST(Cli, NanPolicy)
     EXPECT_EQ(r.err, "") << "-q silences warnings";
 }
 
+TEST(Cli, BlurKeepsInfiniteDepthWithinItsFootprint)
+{
+    // The read keeps +inf depth ("no depth": a sky); a blur of RGBA + Z then gives +inf depth
+    // where the kernel reaches the sky and finite values elsewhere, no NaN anywhere (running
+    // sums alone took inf - inf = NaN along the rows). A kernel image cannot (FFT only):
+    // a clear error.
+    const std::string dir = fresh_dir("cli_inf_depth");
+    OIIO::ImageSpec spec(32, 24, 5, OIIO::TypeFloat);
+    spec.channelnames = { "R", "G", "B", "A", "Z" };
+    spec.alpha_channel = 3;
+    spec.z_channel     = 4;
+    OIIO::ImageBuf buf(spec);
+    for (int y = 0; y < 24; ++y)
+        for (int x = 0; x < 32; ++x) {
+            const float px[5] = { 0.25f, 0.5f, float(x) / 32.0f, 1.0f,
+                                  y < 8 ? std::numeric_limits<float>::infinity() : 2.0f + float(y) };
+            buf.setpixel(x, y, px);
+        }
+    ASSERT_TRUE(buf.write(dir + "/sky.exr"));
+    RunResult r = bokehtool(format("{0}/sky.exr --blur:kernel=disk 9 -o {0}/blurred.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf out(dir + "/blurred.exr");
+    ASSERT_TRUE(out.read(0, 0, true, OIIO::TypeFloat)) << out.geterror();
+    int nan = 0;
+    for (OIIO::ImageBuf::ConstIterator<float> it(out); !it.done(); ++it) {
+        for (int c = 0; c < 5; ++c)
+            nan += std::isnan(it[c]);
+        // The 9 px disk reaches 4 rows: rows 0..11 see the sky, the rest do not.
+        if (it.y() < 12)
+            EXPECT_EQ(it[4], std::numeric_limits<float>::infinity()) << it.x() << ", " << it.y();
+        else
+            EXPECT_TRUE(std::isfinite(it[4])) << it.x() << ", " << it.y();
+        EXPECT_TRUE(std::isfinite(it[0]) && std::isfinite(it[2]));
+    }
+    EXPECT_EQ(nan, 0);
+    OIIO::ImageSpec kspec(3, 3, 1, OIIO::TypeFloat);
+    OIIO::ImageBuf kernel(kspec);
+    OIIO::ImageBufAlgo::fill(kernel, { 1.0f });
+    ASSERT_TRUE(kernel.write(dir + "/kernel.exr"));
+    r = bokehtool(format("{0}/sky.exr {0}/kernel.exr --convolve -o {0}/convolved.exr", dir));
+    expect_clean_failure(r, "NaN or infinite values (infinite depth, say)", dir + "/convolved.exr");
+}
+
 TEST(Cli, NoClobber)
 {
     const std::string dir = fresh_dir("cli_noclobber");

@@ -134,6 +134,10 @@ KernelWeights bilinear_tap_weights(const Kernel& k, int* fetches = nullptr);
 
 /// Blur `src` into `dst` (ImageBufAlgo style: false + dst.geterror() on failure).
 /// `roi` (default: the source data window, grown if asked) is the region computed.
+/// NaN and infinite source values (infinite depth, say) reach exactly the outputs whose
+/// exact kernel has weight on them, as in the brute-force convolution: +inf or -inf where
+/// all they reach have that sign, NaN otherwise; every other output is the blur with them
+/// read as 0, whatever the method (they are looked for in one pass over the source).
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
           const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts = {},
@@ -145,7 +149,8 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// channel; otherwise source channel c uses kernel channel c, and source channels past
 /// the kernel's (alpha, say) use the mean of the kernel's channels. Each kernel channel
 /// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
-/// kernel value, is refused. opts.method and opts.bands are ignored; opts.iris applies.
+/// kernel value, is refused, as is a source with NaN or infinite values (the FFT would
+/// spread them over its tile). opts.method and opts.bands are ignored; opts.iris applies.
 /// Computed in overlap-save tiles (core/blur_fft.cpp) in double.
 bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
                     const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);

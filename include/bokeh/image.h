@@ -76,6 +76,10 @@ struct NonFiniteCount {
     int64_t total() const { return colour + depth; }
 };
 
+/// Whether a flat image holds a NaN or an infinity in any channel over its data window (one
+/// pass; float images are read in place, others converted).
+bool any_nonfinite(const OIIO::ImageBuf& img, int nthreads = 0);
+
 /// Apply `policy` to every channel of a flat float image in place (deep images: every
 /// sample). Returns false when the policy is Error and a non-finite value was found,
 /// with the counts in `count` either way. Depth channels are those named Z or ZBack.
