@@ -67,6 +67,12 @@ std::vector<Named> kernels()
     Kernel* p = add("pentagon 19 rotated curved", KernelShape::Polygon, 19, 19);
     p->blades = 5, p->rotation_deg = 17, p->curvature = 0.4f;
     add("catadioptric 23", KernelShape::Disk, 23, 23)->hole = 0.45f;
+    add("hexagon 21 at 7 degrees", KernelShape::Polygon, 21, 21)->rotation_deg = 7;
+    add("hexagon 25x11 at 20 degrees", KernelShape::Polygon, 25, 11)->rotation_deg = 20;
+    p = add("heptagon 17x23 curved 1 (a disk)", KernelShape::Polygon, 17, 23);
+    p->blades = 7, p->curvature = 1.0f;
+    p = add("octagon 21 with a hole", KernelShape::Polygon, 21, 21);
+    p->blades = 8, p->hole = 0.3f, p->rotation_deg = 11;
     return list;
 }
 
@@ -191,10 +197,35 @@ TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
 
 TEST(Blur, SymmetricKernelsGiveSymmetricResults)
 {
+    // The weights, and the results: a mirrored image's blur mirrored back is the blur
+    // (every exact method, and the bands and three boxes, whose kernels keep the symmetry).
+    const OIIO::ImageBuf src = test_image(41, 33);
+    auto mirrored = [](const OIIO::ImageBuf& img, bool in_x) {
+        return in_x ? OIIO::ImageBufAlgo::flop(img) : OIIO::ImageBufAlgo::flip(img);
+    };
     for (const Named& n : kernels()) {
-        if (n.k.shape == KernelShape::Polygon && n.k.blades % 2 == 1)
+        if (n.k.shape == KernelShape::Polygon && (n.k.blades % 2 == 1 || n.k.rotation_deg != 0.0f))
             continue;  // a pentagon is symmetric about its vertex axis only: checked below
         SCOPED_TRACE(n.name);
+        std::vector<BlurMethod> methods = exact_methods(n.k);
+        if ((n.k.shape == KernelShape::Disk || n.k.shape == KernelShape::Polygon) && n.k.hole == 0.0f)
+            methods.push_back(BlurMethod::Bands);
+        if (n.k.shape == KernelShape::Gaussian)
+            methods.push_back(BlurMethod::ThreeBoxes);
+        for (BlurMethod m : methods)
+            for (bool in_x : { true, false })
+                for (Border border : { Border::Black, Border::Mirror }) {
+                    SCOPED_TRACE(testing::Message() << "method " << int(m) << (in_x ? " in x" : " in y")
+                                                    << " border " << int(border));
+                    BlurOptions o;
+                    o.method = m;
+                    o.border = border;
+                    OIIO::ImageBuf direct, back;
+                    ASSERT_TRUE(blur(direct, src, n.k, o)) << direct.geterror();
+                    ASSERT_TRUE(blur(back, mirrored(src, in_x), n.k, o)) << back.geterror();
+                    // Float rounding of sums taken in the other order, relative to the peak.
+                    EXPECT_LE(bokeh_test::max_difference(mirrored(back, in_x), direct), 2e-6 * peak(direct));
+                }
         const KernelWeights kw = kernel_weights(n.k);
         const bool y_symmetric = !(n.k.shape == KernelShape::Polygon && n.k.blades % 4 != 0
                                    && n.k.blades % 2 == 1);
