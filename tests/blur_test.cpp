@@ -59,6 +59,7 @@ std::vector<Named> kernels()
     add("gaussian 9x9", KernelShape::Gaussian, 9, 9);
     add("gaussian sigma 1.3", KernelShape::Gaussian, 0, 0)->sigma_px = 1.3f;
     add("disk 15", KernelShape::Disk, 15, 15);
+    add("disk 9 (the seed's bilinear taps too)", KernelShape::Disk, 9, 9);
     add("disk 10.5", KernelShape::Disk, 10.5f, 10.5f);
     add("disk 21x9", KernelShape::Disk, 21, 9);
     add("disk 61x7 (15 spans in its top row)", KernelShape::Disk, 61, 7);
@@ -87,9 +88,41 @@ std::vector<BlurMethod> exact_methods(const Kernel& k)
     return { BlurMethod::Auto };
 }
 
+// The approximations that apply to `k` (each against its own effective kernel elsewhere):
+// the bands, the parallelograms, the three boxes, the seed's bilinear taps, and fast.
+std::vector<BlurMethod> approximations(const Kernel& k)
+{
+    std::vector<BlurMethod> m{ BlurMethod::Fast };
+    const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
+    if (shape && k.hole == 0.0f)
+        m.push_back(BlurMethod::Bands);
+    if (k.shape == KernelShape::Polygon && k.blades == 6 && k.curvature == 0.0f && k.hole == 0.0f)
+        m.push_back(BlurMethod::Parallelograms);
+    if (k.shape == KernelShape::Gaussian)
+        m.push_back(BlurMethod::ThreeBoxes);
+    if (k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased && k.hole == 0.0f
+        && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f))
+        m.push_back(BlurMethod::BilinearTaps);
+    return m;
+}
+
+std::vector<BlurMethod> every_method(const Kernel& k)
+{
+    std::vector<BlurMethod> m = exact_methods(k), a = approximations(k);
+    m.insert(m.end(), a.begin(), a.end());
+    return m;
+}
+
 std::string method_name(BlurMethod m)
 {
-    return m == BlurMethod::Spans ? " (spans)" : m == BlurMethod::Fft ? " (fft)" : "";
+    return m == BlurMethod::Spans          ? " (spans)"
+           : m == BlurMethod::Fft          ? " (fft)"
+           : m == BlurMethod::Fast         ? " (fast)"
+           : m == BlurMethod::Bands        ? " (bands)"
+           : m == BlurMethod::Parallelograms ? " (parallelograms)"
+           : m == BlurMethod::ThreeBoxes   ? " (three boxes)"
+           : m == BlurMethod::BilinearTaps ? " (taps)"
+                                           : "";
 }
 
 double peak(const OIIO::ImageBuf& img)
@@ -132,10 +165,11 @@ TEST(Blur, EveryKernelMatchesTheBruteForceReference)
 
 TEST(Blur, EnergyIsConservedWhenTheWindowGrows)
 {
+    // Every method, the approximations too (the weights each spreads sum to 1).
     const OIIO::ImageBuf src = test_image(40, 33);
     const std::vector<double> before = channel_sums(src);
     for (const Named& n : kernels())
-    for (BlurMethod m : exact_methods(n.k)) {
+    for (BlurMethod m : every_method(n.k)) {
         SCOPED_TRACE(n.name + method_name(m));
         BlurOptions o;
         o.grow   = true;
@@ -170,10 +204,14 @@ TEST(Blur, ZeroSizeIsTheIdentityBitForBit)
 
 TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
 {
+    // Every exact method gives the kernel; the seed's bilinear taps give theirs (the bands'
+    // own test is BandsGiveTheirKernelFromALone1e6Pixel).
     for (const Named& n : kernels())
-    for (BlurMethod m : exact_methods(n.k)) {
+    for (BlurMethod m : every_method(n.k)) {
+        if (m != BlurMethod::BilinearTaps && m != BlurMethod::Auto && m != BlurMethod::Spans && m != BlurMethod::Fft)
+            continue;
         SCOPED_TRACE(n.name + method_name(m));
-        const KernelWeights kw = kernel_weights(n.k);
+        const KernelWeights kw = m == BlurMethod::BilinearTaps ? bilinear_tap_weights(n.k) : kernel_weights(n.k);
         OIIO::ImageBuf src(OIIO::ImageSpec(2 * kw.rx + 9, 2 * kw.ry + 9, 1, OIIO::TypeFloat));
         const int cx = kw.rx + 4, cy = kw.ry + 4;
         const float bright = 1e6f;
@@ -258,10 +296,11 @@ TEST(Blur, SymmetricKernelsGiveSymmetricResults)
 
 TEST(Blur, TranslationEquivariance)
 {
-    // The same pixels at another data-window origin give the same result there.
+    // The same pixels at another data-window origin give the same result there, bit for bit,
+    // by every method (the approximations' chunks are fixed by the frame, not its origin).
     const OIIO::ImageBuf a = test_image(45, 31, 0, 0), b = test_image(45, 31, 13, -7);
     for (const Named& n : kernels())
-    for (BlurMethod m : exact_methods(n.k)) {
+    for (BlurMethod m : every_method(n.k)) {
         SCOPED_TRACE(n.name + method_name(m));
         BlurOptions o;
         o.grow   = true;
@@ -507,14 +546,22 @@ TEST(Blur, NoDriftAlongA4KRowAfterA1e6Pixel)
             const float v = x == 20 && y == 1 ? 1e6f : 0.25f + 0.25f * float((x * 37) % 11) / 11.0f;
             src.setpixel(x, y, &v);
         }
+    // The approximations against themselves on the row without the bright pixel.
+    OIIO::ImageBuf dim = src;
+    const float level  = 0.25f;
+    dim.setpixel(20, 1, &level);
     for (const Named& n : kernels())
-    for (BlurMethod m : exact_methods(n.k)) {
+    for (BlurMethod m : every_method(n.k)) {
         SCOPED_TRACE(n.name + method_name(m));
         BlurOptions o;
         o.method = m;
         OIIO::ImageBuf out, ref;
         ASSERT_TRUE(blur(out, src, n.k, o));
-        ASSERT_TRUE(convolve_reference(ref, src, kernel_weights(n.k)));
+        const bool exact = m == BlurMethod::Auto || m == BlurMethod::Spans || m == BlurMethod::Fft;
+        if (exact)
+            ASSERT_TRUE(convolve_reference(ref, src, kernel_weights(n.k)));
+        else
+            ASSERT_TRUE(blur(ref, dim, n.k, o)) << ref.geterror();
         // Far from the bright pixel the values are ~0.3: any drift would show.
         OIIO::ROI far = src.roi();
         far.xbegin    = 200;
