@@ -185,21 +185,42 @@ TEST(Blur, EnergyIsConservedWhenTheWindowGrows)
 
 TEST(Blur, ZeroSizeIsTheIdentityBitForBit)
 {
+    // Every method, border, grown or not, with and without iris, hard or anti-aliased edge.
     const OIIO::ImageBuf src = test_image(23, 17, 5, -3);
     for (KernelShape s : { KernelShape::Box, KernelShape::Gaussian, KernelShape::Disk, KernelShape::Polygon })
-        for (float size : { 0.0f, 0.5f }) {
-            if (s == KernelShape::Gaussian && size > 0.0f)
-                continue;  // sigma = 0.125 is small, not zero
-            Kernel k;
-            k.shape     = s;
-            k.width_px  = size;
-            k.height_px = size;
-            OIIO::ImageBuf out;
-            ASSERT_TRUE(blur(out, src, k));
-            ASSERT_EQ(out.roi(), src.roi());
-            EXPECT_EQ(std::memcmp(out.localpixels(), src.localpixels(), 23 * 17 * 4 * sizeof(float)), 0)
-                << int(s) << " size " << size;
-        }
+        for (float size : { 0.0f, 0.5f })
+            for (KernelEdge edge : { KernelEdge::Antialiased, KernelEdge::Hard }) {
+                if (s == KernelShape::Gaussian && size > 0.0f)
+                    continue;  // sigma = 0.125 is small, not zero
+                Kernel k;
+                k.shape     = s;
+                k.width_px  = size;
+                k.height_px = size;
+                k.edge      = edge;
+                std::vector<BlurMethod> methods = every_method(k);
+                methods.push_back(BlurMethod::Reduced);
+                methods.push_back(BlurMethod::Reference);
+                for (BlurMethod m : methods)
+                    for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
+                        for (bool grow : { false, true })
+                            for (float iris : { 0.0f, 0.05f }) {
+                                if (m == BlurMethod::Reduced && iris != 0.0f)
+                                    continue;  // refused
+                                SCOPED_TRACE(testing::Message() << int(s) << " size " << size << " edge "
+                                                                << int(edge) << method_name(m) << " " << int(m)
+                                                                << " border " << int(border) << " grow " << grow
+                                                                << " iris " << iris);
+                                BlurOptions o;
+                                o.method = m;
+                                o.border = border;
+                                o.grow   = grow;
+                                o.iris   = iris;
+                                OIIO::ImageBuf out;
+                                ASSERT_TRUE(blur(out, src, k, o)) << out.geterror();
+                                ASSERT_EQ(out.roi(), src.roi());
+                                EXPECT_EQ(std::memcmp(out.localpixels(), src.localpixels(), 23 * 17 * 4 * sizeof(float)), 0);
+                            }
+            }
 }
 
 TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
