@@ -325,6 +325,36 @@ TEST(Cli, BlurKeepsInfiniteDepthWithinItsFootprint)
     expect_clean_failure(r, "NaN or infinite values (infinite depth, say)", dir + "/convolved.exr");
 }
 
+TEST(Cli, HardDiskIsOiiotoolsBlur)
+{
+    // A user switching from `oiiotool --blur:kernel=disk WxH` gets the same picture from
+    // `--blur:kernel=disk:edge=hard:border=clamp WxH` (OIIO's convolve repeats the edge
+    // pixels): every pixel within 1e-5 (values 0..1, float output), square, even and
+    // elliptical sizes. oiiotool comes with the project's dependencies (openimageio-tools).
+    if (std::system("command -v oiiotool >/dev/null 2>&1") != 0)
+        GTEST_SKIP() << "oiiotool is not installed (make deps installs it)";
+    const std::string dir = fresh_dir("cli_oiio_disk");
+    OIIO::ImageBuf src(OIIO::ImageSpec(61, 43, 4, OIIO::TypeFloat));
+    for (int y = 0; y < 43; ++y)
+        for (int x = 0; x < 61; ++x) {
+            const float px[4] = { 0.5f + 0.5f * std::sin(0.3f * float(x * y)), float((x * 7 + y * 3) % 10) / 10.0f,
+                                  x % 9 == 0 ? 1.0f : 0.05f, 1.0f };
+            src.setpixel(x, y, px);
+        }
+    ASSERT_TRUE(src.write(dir + "/in.exr"));
+    for (const char* size : { "9x9", "8x8", "15x7", "21x21" }) {
+        SCOPED_TRACE(size);
+        const std::string oiio = dir + "/oiio_" + size + ".exr", ours = dir + "/ours_" + size + ".exr";
+        const std::string cmd  = format("oiiotool {0}/in.exr --blur:kernel=disk {1} -d float -o {2} >/dev/null 2>&1",
+                                        dir, size, oiio);
+        ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+        const RunResult r = bokehtool(format("{0}/in.exr --blur:kernel=disk:edge=hard:border=clamp {1} -d float -o {2}",
+                                             dir, size, ours));
+        ASSERT_EQ(r.status, 0) << r.err;
+        EXPECT_LE(max_difference(OIIO::ImageBuf(ours), OIIO::ImageBuf(oiio)), 1e-5);
+    }
+}
+
 TEST(Cli, NoClobber)
 {
     const std::string dir = fresh_dir("cli_noclobber");

@@ -145,7 +145,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "image: the top image of the stack, resized to WxH, blurs the one "
                            "below it, as --convolve)"),
         OptionSpec::Choice("edge", { "aa", "hard" },
-                           "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk)"),
+                           "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk; with "
+                           "border=clamp, oiiotool's --blur to 1e-5)"),
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps", "reduced", "spans", "fft", "separable" },
