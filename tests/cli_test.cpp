@@ -546,14 +546,36 @@ TEST(Cli, Blur)
                                { "--blur:kernel=disk:method=reduced:iris=2 9", "method=reduced does not take iris" },
                                { "--blur:iris=200 9", "exceeds 30" },
                                { "--convolve", "needs 2 image(s) on the stack" },
-                               { "--blur 5000", "outside 0..4096" } }) {
+                               { "--blur 5000", "outside 0..4096" },
+                               { "--blur nan", "'nan' is not a kernel size" },
+                               { "--blur inf", "'inf' is not a kernel size" },
+                               { "--blur:sigma=-1:kernel=gaussian 9", "option 'sigma' = -1 is out of range" },
+                               { "--blur:rotation=400:kernel=hex 9", "option 'rotation' = 400 is out of range" },
+                               { "--blur:curvature=2:kernel=polygon 9", "option 'curvature' = 2 is out of range" },
+                               { "--blur:hole=0.99 9", "option 'hole' = 0.99 is out of range" },
+                               { "--blur:kernel=disk:method=bands:bands=65 9", "option 'bands' = 65 is out of range" },
+                               { "--blur:border=wrap 9", "option 'border' = 'wrap' is not one of" } }) {
         SCOPED_TRACE(args);
         r = bokehtool(in + " " + args + " -o " + out);
         expect_clean_failure(r, what, out);
     }
+    // A kernel image that cannot be read fails as any input does, naming the file.
+    const std::string bytes = file_bytes(in);
+    std::ofstream(dir + "/truncated.exr", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+    std::ofstream(dir + "/garbage.exr") << "not an image";
+    for (const char* cmd : { "--convolve", "--blur:kernel=image 9" })
+        for (const char* bad : { "truncated.exr", "garbage.exr" }) {
+            SCOPED_TRACE(std::string(cmd) + " " + bad);
+            r = bokehtool(format("{0} {1}/{2} {3} -o {4}", in, dir, bad, cmd, out));
+            expect_clean_failure(r, std::string(bad) + ": cannot read", out);
+        }
+    EXPECT_EQ(file_bytes(in), bytes) << "input untouched";
+}
+
+TEST(Cli, BlurRefusesDeepImages)
+{
     const std::string deep = shared_data("openexr-images/LowResLeftView_Balls.exr");
-    if (!deep.empty()) {
-        r = bokehtool(deep + " --blur 3 -o " + out);
-        expect_clean_failure(r, "deep images cannot be blurred", out);
-    }
+    REQUIRE_SHARED(deep);
+    const std::string out = fresh_dir("cli_blur_deep") + "/x.exr";
+    expect_clean_failure(bokehtool(deep + " --blur 3 -o " + out), "deep images cannot be blurred", out);
 }
