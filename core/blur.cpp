@@ -522,6 +522,16 @@ double box_width_for_variance(double variance)
     return 0.5 * (lo + hi);
 }
 
+// BlurMethod::ThreeBoxes' box along x and along y: three of each make the Gaussian's
+// variance (Wells 1986, "Efficient synthesis of Gaussian filters by cascaded uniform
+// filters"; the boxes fractional, so the variance is met exactly).
+std::pair<std::vector<double>, std::vector<double>> gaussian_boxes(const Kernel& k)
+{
+    const auto [sx, sy] = gaussian_sigma(k);
+    return { box_weights_1d(sx > 0 ? box_width_for_variance(sx * sx / 3.0) : 0.0),
+             box_weights_1d(sy > 0 ? box_width_for_variance(sy * sy / 3.0) : 0.0) };
+}
+
 // --- dispatch ----------------------------------------------------------------------
 
 }  // namespace
@@ -1051,6 +1061,29 @@ bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const Kernel&
 
 }  // namespace
 
+KernelWeights three_box_weights(const Kernel& k)
+{
+    const auto [bx, by] = gaussian_boxes(k);
+    auto thrice         = [](const std::vector<double>& b) {
+        std::vector<double> w{ 1.0 };
+        for (int pass = 0; pass < 3; ++pass) {
+            std::vector<double> next(w.size() + b.size() - 1, 0.0);
+            for (size_t i = 0; i < w.size(); ++i)
+                for (size_t j = 0; j < b.size(); ++j)
+                    next[i + j] += w[i] * b[j];
+            w.swap(next);
+        }
+        return w;
+    };
+    const std::vector<double> wx = thrice(bx), wy = thrice(by);
+    KernelWeights kw{ int(wx.size() / 2), int(wy.size() / 2), {} };
+    kw.w.reserve(wx.size() * wy.size());
+    for (double y : wy)
+        for (double x : wx)
+            kw.w.push_back(x * y);
+    return kw;
+}
+
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
           const BlurOptions& opts, OIIO::ROI roi, int nthreads)
 {
@@ -1142,10 +1175,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     int rx = weights.rx, ry = weights.ry;
     std::vector<double> box3x, box3y;
     if (method == BlurMethod::ThreeBoxes) {
-        // Three boxes per axis with the Gaussian's variance.
-        const auto [sx, sy] = gaussian_sigma(k);
-        box3x = box_weights_1d(sx > 0 ? box_width_for_variance(sx * sx / 3.0) : 0.0);
-        box3y = box_weights_1d(sy > 0 ? box_width_for_variance(sy * sy / 3.0) : 0.0);
+        std::tie(box3x, box3y) = gaussian_boxes(k);
         rx    = 3 * int(box3x.size() / 2);
         ry    = 3 * int(box3y.size() / 2);
     } else if (method == BlurMethod::Parallelograms && !weights.is_identity()) {

@@ -225,14 +225,16 @@ TEST(Blur, ZeroSizeIsTheIdentityBitForBit)
 
 TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
 {
-    // Every exact method gives the kernel; the seed's bilinear taps give theirs (the bands'
-    // own test is BandsGiveTheirKernelFromALone1e6Pixel).
+    // Every exact method gives the kernel; the seed's bilinear taps and the three boxes give
+    // theirs (the bands' own test is BandsGiveTheirKernelFromALone1e6Pixel).
     for (const Named& n : kernels())
     for (BlurMethod m : every_method(n.k)) {
-        if (m != BlurMethod::BilinearTaps && m != BlurMethod::Auto && m != BlurMethod::Spans && m != BlurMethod::Fft)
+        if (m == BlurMethod::Fast || m == BlurMethod::Bands || m == BlurMethod::Parallelograms)
             continue;
         SCOPED_TRACE(n.name + method_name(m));
-        const KernelWeights kw = m == BlurMethod::BilinearTaps ? bilinear_tap_weights(n.k) : kernel_weights(n.k);
+        const KernelWeights kw = m == BlurMethod::BilinearTaps ? bilinear_tap_weights(n.k)
+                                 : m == BlurMethod::ThreeBoxes ? three_box_weights(n.k)
+                                                               : kernel_weights(n.k);
         OIIO::ImageBuf src(OIIO::ImageSpec(2 * kw.rx + 9, 2 * kw.ry + 9, 1, OIIO::TypeFloat));
         const int cx = kw.rx + 4, cy = kw.ry + 4;
         const float bright = 1e6f;
@@ -736,6 +738,45 @@ TEST(Blur, FastGaussianIsCloseToExact)
         EXPECT_LE(diff, 0.13 * peak(b)) << sigma;
         EXPECT_GT(diff, 0.0) << "it is an approximation";
     }
+}
+
+TEST(Blur, ThreeBoxesComputeTheirKernelExactly)
+{
+    // method=boxes3 against the brute force with its own kernel (three_box_weights: three
+    // fractional boxes per axis of the Gaussian's variance), every border, grown or not; the
+    // kernel's variance is the Gaussian's.
+    const OIIO::ImageBuf src = test_image(57, 41);
+    for (float sigma : { 0.8f, 2.5f, 4.0f })
+        for (float aspect : { 1.0f, 0.6f }) {
+            Kernel k;
+            k.shape     = KernelShape::Gaussian;
+            k.width_px  = 4.0f * sigma;
+            k.height_px = 4.0f * sigma * aspect;
+            const KernelWeights w = three_box_weights(k);
+            double sum = 0.0, vx = 0.0, vy = 0.0;
+            for (int dy = -w.ry; dy <= w.ry; ++dy)
+                for (int dx = -w.rx; dx <= w.rx; ++dx) {
+                    sum += w.at(dx, dy);
+                    vx += w.at(dx, dy) * dx * dx;
+                    vy += w.at(dx, dy) * dy * dy;
+                }
+            EXPECT_NEAR(sum, 1.0, 1e-12);
+            EXPECT_NEAR(vx, double(sigma) * sigma, 1e-6 * sigma * sigma);
+            EXPECT_NEAR(vy, double(sigma * aspect) * (sigma * aspect), 1e-6 * sigma * sigma);
+            for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
+                for (bool grow : { false, true }) {
+                    SCOPED_TRACE(testing::Message() << "sigma " << sigma << " aspect " << aspect << " border "
+                                                    << int(border) << " grow " << grow);
+                    BlurOptions o;
+                    o.method = BlurMethod::ThreeBoxes;
+                    o.border = border;
+                    o.grow   = grow;
+                    OIIO::ImageBuf got, ref;
+                    ASSERT_TRUE(blur(got, src, k, o)) << got.geterror();
+                    ASSERT_TRUE(convolve_reference(ref, src, w, o));
+                    EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
+                }
+        }
 }
 
 TEST(Blur, ThreadCountDoesNotChangeResults)

@@ -132,6 +132,10 @@ KernelWeights banded_weights(const Kernel& k, int bands, int nthreads = 0);
 /// 81 for 17 x 17, whose corner groups miss the disk).
 KernelWeights bilinear_tap_weights(const Kernel& k, int* fetches = nullptr);
 
+/// The effective kernel of BlurMethod::ThreeBoxes: three uniform boxes along x and three
+/// along y (fractional widths), together of the Gaussian's variance.
+KernelWeights three_box_weights(const Kernel& k);
+
 /// Blur `src` into `dst` (ImageBufAlgo style: false + dst.geterror() on failure).
 /// `roi` (default: the source data window, grown if asked) is the region computed.
 /// NaN and infinite source values (infinite depth, say) reach exactly the outputs whose
