@@ -1987,7 +1987,7 @@ TEST(BlurImageKernel, FftEqualsBruteForce)
     for (const Named& n : kernels()) {
         SCOPED_TRACE(n.name);
         const KernelWeights kw = kernel_weights(n.k);
-        for (Border border : { Border::Black, Border::Mirror }) {
+        for (Border border : { Border::Black, Border::Clamp, Border::Mirror }) {
             BlurOptions o;
             o.border = border;
             OIIO::ImageBuf got, ref;
@@ -1998,6 +1998,62 @@ TEST(BlurImageKernel, FftEqualsBruteForce)
             EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
         }
     }
+}
+
+TEST(BlurImageKernel, EnergyTranslationMirrorAndALonePixel)
+{
+    // The properties of every kernel, for an image kernel that is not symmetric (a ramp
+    // over a 9 x 5 box, heavier to the right and down), by FFT tiles: energy (grown, black
+    // border) to 1e-6, the same pixels at another origin bit for bit, a mirrored image and
+    // kernel giving the mirrored result, a lone 1e6 pixel giving the normalised kernel.
+    KernelWeights ramp{ 4, 2, {} };
+    double total = 0.0;
+    for (int dy = -2; dy <= 2; ++dy)
+        for (int dx = -4; dx <= 4; ++dx) {
+            ramp.w.push_back(1.0 + 0.5 * (dx + 4) + 0.25 * (dy + 2));
+            total += ramp.w.back();
+        }
+    for (double& v : ramp.w)
+        v /= total;
+    const OIIO::ImageBuf kernel = kernel_image(ramp);
+    BlurOptions grow;
+    grow.grow                = true;
+    const OIIO::ImageBuf src = test_image(45, 31), moved = test_image(45, 31, 13, -7);
+    OIIO::ImageBuf a, b;
+    ASSERT_TRUE(convolve_image(a, src, kernel, grow)) << a.geterror();
+    const std::vector<double> before = channel_sums(src), after = channel_sums(a);
+    for (size_t c = 0; c < after.size(); ++c)
+        EXPECT_NEAR(after[c], before[c], 1e-6 * before[c]) << "energy, channel " << c;
+    ASSERT_TRUE(convolve_image(b, moved, kernel, grow));
+    ASSERT_EQ(b.roi().xbegin - a.roi().xbegin, 13);
+    ASSERT_EQ(b.roi().ybegin - a.roi().ybegin, -7);
+    EXPECT_EQ(std::memcmp(a.localpixels(), b.localpixels(), size_t(a.roi().npixels()) * 4 * sizeof(float)), 0);
+    for (Border border : { Border::Black, Border::Clamp, Border::Mirror }) {
+        SCOPED_TRACE(int(border));
+        BlurOptions o;
+        o.border = border;
+        OIIO::ImageBuf direct, back;
+        ASSERT_TRUE(convolve_image(direct, src, kernel, o));
+        OIIO::ImageBuf flopped_kernel = OIIO::ImageBufAlgo::flop(kernel);
+        flopped_kernel.set_origin(-4, -2);
+        ASSERT_TRUE(convolve_image(back, OIIO::ImageBufAlgo::flop(src), flopped_kernel, o));
+        EXPECT_LE(bokeh_test::max_difference(OIIO::ImageBufAlgo::flop(back), direct), 2e-6 * peak(direct));
+    }
+    OIIO::ImageBuf lone(OIIO::ImageSpec(21, 15, 1, OIIO::TypeFloat));
+    const float bright = 1e6f;
+    lone.setpixel(10, 7, &bright);
+    OIIO::ImageBuf out;
+    ASSERT_TRUE(convolve_image(out, lone, kernel));
+    double worst = 0.0;
+    for (int y = 0; y < 15; ++y)
+        for (int x = 0; x < 21; ++x) {
+            float v;
+            out.getpixel(x, y, &v);
+            const int dx = x - 10, dy = y - 7;
+            const double want = std::abs(dx) <= 4 && std::abs(dy) <= 2 ? ramp.at(dx, dy) : 0.0;
+            worst = std::max(worst, std::abs(v / 1e6 - want));
+        }
+    EXPECT_LE(worst, 1e-7);
 }
 
 TEST(BlurImageKernel, KernelsLargerThanTheImageMatchTheSpans)
