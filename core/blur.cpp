@@ -48,6 +48,11 @@
 // Fast Gaussian: three equal boxes whose variance adds up to sigma^2 (central limit;
 // Wells 1986, "Efficient synthesis of Gaussian filters by cascaded uniform filters"). The
 // box width is fractional, so the variance matches exactly, not to the nearest odd width.
+//
+// Non-finite source values (session 15): every method above would carry a NaN or an
+// infinity beyond its footprint (running and prefix sums along the row, the FFT over its
+// tile). One pass over the source finds them (any_nonfinite, about a read of the frame:
+// +1.1-1.9 ms at 1080p RGBA); if any, blur_nonfinite gives the brute force's answer.
 
 #include <bokeh/blur.h>
 #include <bokeh/image.h>
