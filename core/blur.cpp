@@ -62,6 +62,7 @@
 
 #include <algorithm>
 #include <array>
+#include <functional>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -896,6 +897,109 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     return true;
 }
 
+// Non-finite source values (DESIGN.md, "bad values": never beyond the pixel's footprint).
+// The running and prefix sums would carry a NaN or an infinity along the rest of its row
+// and down the columns (and inf - inf is NaN), the FFT over its tile. So the blur runs on
+// the source with them read as 0 (`clean`), and each output whose kernel has weight on one
+// of them takes what the brute-force convolution gives it: +inf or -inf where all those it
+// reaches have that sign, NaN otherwise (in iris mode too). Which outputs they reach: an
+// indicator per channel and kind, convolved by row spans with the kernel's support (1
+// where it has weight), which leaves exact zeros where it reaches none (sums of whole
+// numbers in double); never the FFT, whose rounding leaves none. Infinite depth ("no
+// depth", +inf in Z) is the common case in practice.
+bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::vector<KernelWeights>& kernels,
+                    const std::vector<int>& kernel_of, Border border,
+                    const std::function<bool(OIIO::ImageBuf&, const OIIO::ImageBuf&)>& clean, int nthreads)
+{
+    const OIIO::ROI data = in.roi();
+    const int nc         = in.nchannels();
+    // Kinds: 0 NaN, 1 +inf, 2 -inf.
+    auto kind = [](float v) { return std::isnan(v) ? 0 : v > 0.0f ? 1 : 2; };
+    std::vector<std::array<bool, 3>> held(size_t(nc), { false, false, false });
+    for (int y = data.ybegin; y < data.yend; ++y) {
+        const float* row = static_cast<const float*>(in.pixeladdr(data.xbegin, y, data.zbegin));
+        for (int i = 0; i < data.width() * nc; ++i)
+            if (!std::isfinite(row[i]))
+                held[size_t(i % nc)][size_t(kind(row[i]))] = true;
+    }
+    OIIO::ImageBuf zeroed;
+    zeroed.copy(in);
+    parallel_rows(data, nthreads, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            auto* row = static_cast<float*>(zeroed.pixeladdr(data.xbegin, y, data.zbegin));
+            for (int i = 0; i < data.width() * nc; ++i)
+                if (!std::isfinite(row[i]))
+                    row[i] = 0.0f;
+        }
+    });
+    if (!clean(dst, zeroed))
+        return false;
+    const OIIO::ROI out = dst.roi();
+    // reached[c][kind]: where that kind in channel c reaches, over `out` (empty: nowhere).
+    std::vector<std::array<std::vector<char>, 3>> reached(static_cast<size_t>(nc));
+    for (size_t j = 0; j < kernels.size(); ++j) {
+        std::vector<std::pair<int, int>> channels;  // (channel, kind) convolved with kernel j
+        for (int c = 0; c < nc; ++c)
+            for (int kd = 0; kd < 3; ++kd)
+                if (kernel_of[size_t(c)] == int(j) && held[size_t(c)][size_t(kd)])
+                    channels.push_back({ c, kd });
+        if (channels.empty())
+            continue;
+        const int nind = int(channels.size());
+        OIIO::ImageSpec ispec(data.width(), data.height(), nind, OIIO::TypeFloat);
+        ispec.x = data.xbegin;
+        ispec.y = data.ybegin;
+        OIIO::ImageBuf indicators(ispec, OIIO::InitializePixels::Yes), reach;
+        parallel_rows(data, nthreads, [&](int y0, int y1) {
+            for (int y = y0; y < y1; ++y) {
+                const auto* row = static_cast<const float*>(in.pixeladdr(data.xbegin, y, data.zbegin));
+                auto* ind       = static_cast<float*>(indicators.pixeladdr(data.xbegin, y));
+                for (int x = 0; x < data.width(); ++x)
+                    for (int i = 0; i < nind; ++i) {
+                        const float v = row[size_t(x) * size_t(nc) + size_t(channels[size_t(i)].first)];
+                        ind[size_t(x) * size_t(nind) + size_t(i)]
+                            = !std::isfinite(v) && kind(v) == channels[size_t(i)].second ? 1.0f : 0.0f;
+                    }
+            }
+        });
+        KernelWeights support = kernels[j];
+        for (double& w : support.w)
+            w = w != 0.0 ? 1.0 : 0.0;
+        if (!convolve_spans_direct(reach, indicators, out, support.rx, support.ry,
+                                   kernel_spans(reflected(support)), border, nthreads)) {
+            dst.errorfmt("blur: where the non-finite values reach: {}", reach.geterror());
+            return false;
+        }
+        for (int i = 0; i < nind; ++i) {
+            std::vector<char>& r = reached[size_t(channels[size_t(i)].first)][size_t(channels[size_t(i)].second)];
+            r.assign(size_t(out.npixels()), 0);
+            for (OIIO::ImageBuf::ConstIterator<float> it(reach); !it.done(); ++it)
+                r[size_t(it.y() - out.ybegin) * size_t(out.width()) + size_t(it.x() - out.xbegin)] = it[i] > 0.0f;
+        }
+    }
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    parallel_rows(out, nthreads, [&](int y0, int y1) {
+        for (int y = y0; y < y1; ++y) {
+            auto* row = static_cast<float*>(dst.pixeladdr(out.xbegin, y));
+            for (int x = 0; x < out.width(); ++x)
+                for (int c = 0; c < nc; ++c) {
+                    const size_t p = size_t(y - out.ybegin) * size_t(out.width()) + size_t(x);
+                    auto hit       = [&](int kd) {
+                        const std::vector<char>& r = reached[size_t(c)][size_t(kd)];
+                        return !r.empty() && r[p];
+                    };
+                    const bool nan = hit(0), pos = hit(1), neg = hit(2);
+                    float& v       = row[size_t(x) * size_t(nc) + size_t(c)];
+                    if (nan || (pos && neg))
+                        v = std::numeric_limits<float>::quiet_NaN();
+                    else if (pos || neg)
+                        v = pos ? kInf : -kInf;
+                }
+        }
+    });
+    return true;
+}
+
 }  // namespace detail
 
 bool convolve_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
@@ -981,89 +1085,6 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
     return false;
 }
 
-// Non-finite source values (DESIGN.md, "bad values": never beyond the pixel's footprint).
-// The running and prefix sums would carry a NaN or an infinity along the rest of its row
-// and down the columns (and inf - inf is NaN), the FFT over its tile. So the blur runs on
-// the source with them read as 0, and each output whose exact kernel has weight on one of
-// them takes what the brute-force convolution gives it: +inf or -inf where all those it
-// reaches have that sign, NaN otherwise (in iris mode too). Which outputs they reach: an
-// indicator per channel and kind, blurred with the exact kernel by running sums, row spans
-// or separable passes, which leave exact zeros where the kernel has no weight on any (sums
-// of whole numbers and of products with 0, in double); never by the FFT, whose rounding
-// leaves none. Infinite depth ("no depth", +inf in Z) is the common case in practice.
-bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const Kernel& k, const BlurOptions& opts,
-                    OIIO::ROI roi, int nthreads)
-{
-    const OIIO::ROI data = in.roi();
-    const int nc         = in.nchannels();
-    // Kinds: 0 NaN, 1 +inf, 2 -inf; an indicator channel for each kind a channel holds.
-    std::vector<std::array<bool, 3>> held(size_t(nc), { false, false, false });
-    auto kind = [](float v) { return std::isnan(v) ? 0 : v > 0.0f ? 1 : 2; };
-    for (int y = data.ybegin; y < data.yend; ++y) {
-        const float* row = static_cast<const float*>(in.pixeladdr(data.xbegin, y, data.zbegin));
-        for (int i = 0; i < data.width() * nc; ++i)
-            if (!std::isfinite(row[i]))
-                held[size_t(i % nc)][size_t(kind(row[i]))] = true;
-    }
-    std::vector<int> slot(size_t(3 * nc), -1);  // indicator channel of (channel, kind)
-    int nind = 0;
-    for (size_t i = 0; i < slot.size(); ++i)
-        if (held[i / 3][i % 3])
-            slot[i] = nind++;
-    OIIO::ImageSpec ispec(data.width(), data.height(), nind, OIIO::TypeFloat);
-    ispec.x = data.xbegin;
-    ispec.y = data.ybegin;
-    OIIO::ImageBuf zeroed, reach, indicators(ispec, OIIO::InitializePixels::Yes);
-    zeroed.copy(in);
-    parallel_rows(data, nthreads, [&](int y0, int y1) {
-        for (int y = y0; y < y1; ++y) {
-            auto* row = static_cast<float*>(zeroed.pixeladdr(data.xbegin, y, data.zbegin));
-            auto* ind = static_cast<float*>(indicators.pixeladdr(data.xbegin, y));
-            for (int x = 0; x < data.width(); ++x)
-                for (int c = 0; c < nc; ++c) {
-                    float& v = row[size_t(x) * size_t(nc) + size_t(c)];
-                    if (!std::isfinite(v)) {
-                        ind[size_t(x) * size_t(nind) + size_t(slot[size_t(3 * c + kind(v))])] = 1.0f;
-                        v = 0.0f;
-                    }
-                }
-        }
-    });
-    if (!blur(dst, zeroed, k, opts, roi, nthreads))
-        return false;
-    BlurOptions plain = opts;
-    plain.iris        = 0.0f;
-    plain.method      = k.shape == KernelShape::Gaussian ? BlurMethod::Separable
-                        : k.shape == KernelShape::Box    ? BlurMethod::Exact
-                                                         : BlurMethod::Spans;
-    if (!blur(reach, indicators, k, plain, dst.roi(), nthreads)) {
-        dst.errorfmt("blur: where the non-finite values reach: {}", reach.geterror());
-        return false;
-    }
-    const OIIO::ROI out = dst.roi();
-    constexpr float kInf = std::numeric_limits<float>::infinity();
-    parallel_rows(out, nthreads, [&](int y0, int y1) {
-        for (int y = y0; y < y1; ++y) {
-            auto* row       = static_cast<float*>(dst.pixeladdr(out.xbegin, y));
-            const auto* rch = static_cast<const float*>(reach.pixeladdr(out.xbegin, y));
-            for (int x = 0; x < out.width(); ++x)
-                for (int c = 0; c < nc; ++c) {
-                    auto reached = [&](int kd) {
-                        const int s = slot[size_t(3 * c + kd)];
-                        return s >= 0 && rch[size_t(x) * size_t(nind) + size_t(s)] > 0.0f;
-                    };
-                    const bool nan = reached(0), pos = reached(1), neg = reached(2);
-                    float& v = row[size_t(x) * size_t(nc) + size_t(c)];
-                    if (nan || (pos && neg))
-                        v = std::numeric_limits<float>::quiet_NaN();
-                    else if (pos || neg)
-                        v = pos ? kInf : -kInf;
-                }
-        }
-    });
-    return true;
-}
-
 }  // namespace
 
 KernelWeights three_box_weights(const Kernel& k)
@@ -1124,7 +1145,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     OIIO::ImageBuf holder;
     const OIIO::ImageBuf& in = float_source(src, holder);
     if (any_nonfinite(in, nthreads))
-        return blur_nonfinite(dst, in, k, opts, roi, nthreads);
+        return blur_nonfinite(dst, in, { kernel_weights(k, nthreads) }, std::vector<int>(size_t(in.nchannels()), 0),
+                              opts.border, [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& zeroed) {
+                                  return blur(out, zeroed, k, opts, roi, nthreads);
+                              }, nthreads);
     // Before the exact weights, which it does not need at full size.
     if (method == BlurMethod::Reduced)
         return blur_reduced(dst, in, k, opts, roi, nthreads);

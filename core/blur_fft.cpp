@@ -306,13 +306,6 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
     OIIO::ImageBuf src_holder, kernel_holder;
     const OIIO::ImageBuf& in = float_source(src, src_holder);
     const OIIO::ImageBuf& kf = float_source(kernel, kernel_holder);
-    // The FFT would spread a NaN or an infinity over its whole tile, and the footprint
-    // blur() finds for them (blur_nonfinite) needs a kernel of runs of equal weights.
-    if (any_nonfinite(in, nthreads)) {
-        dst.errorfmt("blur: the source has NaN or infinite values (infinite depth, say), which a "
-                     "kernel image cannot blur within their footprint; drop or replace those channels first");
-        return false;
-    }
     const OIIO::ROI kr       = kf.roi();
     const int knc = kf.nchannels(), nc = in.nchannels();
     if (kr.width() > 4096 || kr.height() > 4096) {
@@ -358,6 +351,12 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
 
     if (!roi.defined())
         roi = opts.grow ? grown(in.roi(), rx, ry) : in.roi();
+    // The FFT would spread a NaN or an infinity over its whole tile.
+    if (any_nonfinite(in, nthreads))
+        return blur_nonfinite(dst, in, kernels, kernel_of, opts.border,
+                              [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& zeroed) {
+                                  return convolve_image(out, zeroed, kernel, opts, roi, nthreads);
+                              }, nthreads);
     if (opts.iris == 0.0f)
         return convolve_fft_direct(dst, in, roi, kernels, kernel_of, opts.border, nthreads);
     // Iris mode needs each channel's range over the whole padded region first (Iris), so it

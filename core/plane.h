@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <string>
@@ -257,6 +258,14 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 /// the padded source (dy in [-ry, ry]), built per output tile.
 bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                            int rx, int ry, std::vector<Span> spans, Border border, int nthreads);
+
+/// A blur with NaN and infinite source values kept within their footprint (blur.cpp):
+/// `clean` blurs `in` with them read as 0 into `dst`; then each output whose kernel
+/// (kernels[kernel_of[c]] for channel c) has weight on one of them takes what the
+/// brute-force convolution gives it (+inf, -inf or NaN).
+bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::vector<KernelWeights>& kernels,
+                    const std::vector<int>& kernel_of, Border border,
+                    const std::function<bool(OIIO::ImageBuf&, const OIIO::ImageBuf&)>& clean, int nthreads);
 
 /// Predicted single-thread time in ns of the FFT convolution of a w x h output of nc
 /// channels with a kernel reaching rx, ry, in the cheapest tiling, its kernel's transform

@@ -143,6 +143,80 @@ std::vector<double> channel_sums(const OIIO::ImageBuf& img)
     return sums;
 }
 
+// test_image with NaN, +inf and -inf in some channels (and where +inf and -inf meet, NaN),
+// a sky of +inf at the right edge (clamp and mirror repeat it); the same with them as 0;
+// an indicator image of each kind (NaN, +inf, -inf).
+struct NonFiniteImage {
+    OIIO::ImageBuf src, zeroed, kinds[3];
+};
+
+NonFiniteImage nonfinite_image()
+{
+    NonFiniteImage b;
+    b.src    = test_image(61, 47);
+    auto put = [&](int x, int y, int c, float v) {
+        float px[4];
+        b.src.getpixel(x, y, px);
+        px[c] = v;
+        b.src.setpixel(x, y, px);
+    };
+    const float inf = std::numeric_limits<float>::infinity();
+    put(20, 15, 0, std::numeric_limits<float>::quiet_NaN());
+    put(40, 30, 1, inf);
+    put(43, 30, 1, -inf);
+    put(10, 35, 2, -inf);
+    for (int y = 5; y < 13; ++y)
+        for (int x = 52; x < 61; ++x)
+            put(x, y, 3, inf);
+    b.zeroed = b.src;
+    for (OIIO::ImageBuf& k : b.kinds) {
+        k = OIIO::ImageBuf(b.src.spec());
+        OIIO::ImageBufAlgo::zero(k);
+    }
+    for (OIIO::ImageBuf::Iterator<float> it(b.zeroed); !it.done(); ++it)
+        for (int c = 0; c < 4; ++c)
+            if (!std::isfinite(it[c])) {
+                const int kind = std::isnan(it[c]) ? 0 : it[c] > 0 ? 1 : 2;
+                float one[4]   = { 0, 0, 0, 0 };
+                b.kinds[kind].getpixel(it.x(), it.y(), one);
+                one[c] = 1.0f;
+                b.kinds[kind].setpixel(it.x(), it.y(), one);
+                it[c] = 0.0f;
+            }
+    return b;
+}
+
+// Each output of `got` against the brute force's answer: NaN where `reach` (the brute
+// force on each kind's indicator) says NaN reaches it or both infinities do, the infinity
+// where one does, else `clean` (the blur with the bad values as 0) exactly. Also that some
+// output is non-finite.
+void expect_footprint(const OIIO::ImageBuf& got, const OIIO::ImageBuf& clean, const OIIO::ImageBuf (&reach)[3])
+{
+    const float inf = std::numeric_limits<float>::infinity();
+    int wrong = 0, bad = 0;
+    for (OIIO::ImageBuf::ConstIterator<float> it(got); !it.done(); ++it)
+        for (int c = 0; c < got.nchannels(); ++c) {
+            float r[3];
+            for (int kind = 0; kind < 3; ++kind)
+                r[kind] = reach[kind].getchannel(it.x(), it.y(), 0, c);
+            const float v = it[c], want_clean = clean.getchannel(it.x(), it.y(), 0, c);
+            bool ok;
+            if (r[0] > 0.0f || (r[1] > 0.0f && r[2] > 0.0f))
+                ok = std::isnan(v);
+            else if (r[1] > 0.0f || r[2] > 0.0f)
+                ok = v == (r[1] > 0.0f ? inf : -inf);
+            else
+                ok = v == want_clean;
+            bad += !std::isfinite(v);
+            if (!ok && wrong++ < 3)
+                ADD_FAILURE() << "(" << it.x() << ", " << it.y() << ") channel " << c << ": " << v
+                              << ", reached by NaN/+inf/-inf " << r[0] << "/" << r[1] << "/" << r[2]
+                              << ", without them " << want_clean;
+        }
+    EXPECT_EQ(wrong, 0);
+    EXPECT_GT(bad, 0) << "the bad values reach some outputs";
+}
+
 }  // namespace
 
 TEST(Blur, EveryKernelMatchesTheBruteForceReference)
@@ -346,92 +420,31 @@ TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
     // those values read as 0. Running and prefix sums alone would carry them along the rows
     // and down the columns (inf - inf is NaN), the FFT over its tile. Every method, every
     // border, a grown window; infinite depth (a sky) is the case met in practice.
-    OIIO::ImageBuf src = test_image(61, 47);
-    auto put = [&](int x, int y, int c, float v) {
-        float px[4];
-        src.getpixel(x, y, px);
-        px[c] = v;
-        src.setpixel(x, y, px);
-    };
-    const float inf = std::numeric_limits<float>::infinity();
-    put(20, 15, 0, std::numeric_limits<float>::quiet_NaN());
-    put(40, 30, 1, inf);
-    put(43, 30, 1, -inf);  // where both reach: NaN
-    put(10, 35, 2, -inf);
-    for (int y = 5; y < 13; ++y)  // a sky at the right edge (clamp and mirror repeat it)
-        for (int x = 52; x < 61; ++x)
-            put(x, y, 3, inf);
-    // The same image with the bad values as 0, and one indicator image per kind.
-    OIIO::ImageBuf zeroed = src, kinds[3];
-    for (OIIO::ImageBuf& k : kinds) {
-        k = OIIO::ImageBuf(src.spec());
-        OIIO::ImageBufAlgo::zero(k);
-    }
-    for (OIIO::ImageBuf::Iterator<float> it(zeroed); !it.done(); ++it)
-        for (int c = 0; c < 4; ++c)
-            if (!std::isfinite(it[c])) {
-                const int kind = std::isnan(it[c]) ? 0 : it[c] > 0 ? 1 : 2;
-                float one[4] = { 0, 0, 0, 0 };
-                kinds[kind].getpixel(it.x(), it.y(), one);
-                one[c] = 1.0f;
-                kinds[kind].setpixel(it.x(), it.y(), one);
-                it[c] = 0.0f;
-            }
+    const NonFiniteImage b = nonfinite_image();
     for (const Named& n : kernels()) {
         std::vector<std::pair<BlurMethod, float>> methods;  // (method, iris)
-        for (BlurMethod m : exact_methods(n.k))
+        for (BlurMethod m : every_method(n.k))
             methods.push_back({ m, 0.0f });
-        methods.push_back({ BlurMethod::Fast, 0.0f });
         methods.push_back({ BlurMethod::Reduced, 0.0f });
         methods.push_back({ BlurMethod::Auto, 0.05f });
-        const bool shape = n.k.shape == KernelShape::Disk || n.k.shape == KernelShape::Polygon;
-        if (shape && n.k.hole == 0.0f)
-            methods.push_back({ BlurMethod::Bands, 0.0f });
-        if (n.k.shape == KernelShape::Polygon && n.k.blades == 6)
-            methods.push_back({ BlurMethod::Parallelograms, 0.0f });
-        if (n.k.shape == KernelShape::Gaussian)
-            methods.push_back({ BlurMethod::ThreeBoxes, 0.0f });
         for (const auto& [method, iris] : methods)
             for (Border border : { Border::Black, Border::Clamp, Border::Mirror }) {
-                SCOPED_TRACE(testing::Message() << n.name << " method " << int(method) << " iris " << iris
-                                                << " border " << int(border));
+                SCOPED_TRACE(testing::Message() << n.name << method_name(method) << " " << int(method) << " iris "
+                                                << iris << " border " << int(border));
                 BlurOptions o;
                 o.method    = method;
                 o.iris      = iris;
                 o.border    = border;
                 o.grow      = border == Border::Black;
                 o.reduction = method == BlurMethod::Reduced ? 2.0f : 0.0f;
-                OIIO::ImageBuf got, clean;
-                ASSERT_TRUE(blur(got, src, n.k, o)) << got.geterror();
-                ASSERT_TRUE(blur(clean, zeroed, n.k, o, got.roi())) << clean.geterror();
-                // Where each kind reaches: the brute force on its indicator (exact zeros elsewhere).
-                OIIO::ImageBuf reach[3];
+                OIIO::ImageBuf got, clean, reach[3];
+                ASSERT_TRUE(blur(got, b.src, n.k, o)) << got.geterror();
+                ASSERT_TRUE(blur(clean, b.zeroed, n.k, o, got.roi())) << clean.geterror();
                 BlurOptions plain = o;
                 plain.iris        = 0.0f;
                 for (int kind = 0; kind < 3; ++kind)
-                    ASSERT_TRUE(convolve_reference(reach[kind], kinds[kind], kernel_weights(n.k), plain, got.roi()));
-                int wrong = 0, bad = 0;
-                for (OIIO::ImageBuf::ConstIterator<float> it(got); !it.done(); ++it)
-                    for (int c = 0; c < 4; ++c) {
-                        float r[3];
-                        for (int kind = 0; kind < 3; ++kind)
-                            r[kind] = reach[kind].getchannel(it.x(), it.y(), 0, c);
-                        const float v = it[c], want_clean = clean.getchannel(it.x(), it.y(), 0, c);
-                        bool ok;
-                        if (r[0] > 0.0f || (r[1] > 0.0f && r[2] > 0.0f))
-                            ok = std::isnan(v);
-                        else if (r[1] > 0.0f || r[2] > 0.0f)
-                            ok = v == (r[1] > 0.0f ? inf : -inf);
-                        else
-                            ok = v == want_clean;
-                        bad += !std::isfinite(v);
-                        if (!ok && wrong++ < 3)
-                            ADD_FAILURE() << "(" << it.x() << ", " << it.y() << ") channel " << c << ": " << v
-                                          << ", reached by NaN/+inf/-inf " << r[0] << "/" << r[1] << "/" << r[2]
-                                          << ", without them " << want_clean;
-                    }
-                EXPECT_EQ(wrong, 0);
-                EXPECT_GT(bad, 0) << "the bad values reach some outputs";
+                    ASSERT_TRUE(convolve_reference(reach[kind], b.kinds[kind], kernel_weights(n.k), plain, got.roi()));
+                expect_footprint(got, clean, reach);
             }
     }
 }
@@ -2054,6 +2067,77 @@ TEST(BlurImageKernel, EnergyTranslationMirrorAndALonePixel)
             worst = std::max(worst, std::abs(v / 1e6 - want));
         }
     EXPECT_LE(worst, 1e-7);
+}
+
+TEST(BlurImageKernel, NonFiniteValuesStayWithinTheirFootprint)
+{
+    // As for the uniform kernels (Blur.NonFiniteValuesStayWithinTheirFootprint): the FFT
+    // runs on the image with them as 0, and their footprints are the kernel channels'
+    // supports. A one-channel kernel and a colour one (each channel its own support: the
+    // third channel's ring, the fourth source channel the channels' mean).
+    const NonFiniteImage b = nonfinite_image();
+    // 9 x 7 kernels: a ring, a filled ellipse, a ramp heavier to the right.
+    auto weight = [](int kc, int dx, int dy) {
+        const int r2 = dx * dx + dy * dy;
+        return kc == 0 ? (r2 >= 6 && r2 <= 14 ? 1.0f + 0.1f * float(dx) : 0.0f)
+               : kc == 1 ? (4 * dx * dx + 9 * dy * dy <= 60 ? 1.0f : 0.0f)
+                         : 1.0f + 0.25f * float(dx + 4);
+    };
+    auto kernel = [&](int nchannels) {
+        OIIO::ImageSpec spec(9, 7, nchannels, OIIO::TypeFloat);
+        spec.x = -4;
+        spec.y = -3;
+        OIIO::ImageBuf img(spec);
+        for (int dy = -3; dy <= 3; ++dy)
+            for (int dx = -4; dx <= 4; ++dx) {
+                float px[3];
+                for (int kc = 0; kc < nchannels; ++kc)
+                    px[kc] = weight(kc, dx, dy);
+                img.setpixel(dx, dy, px);
+            }
+        return img;
+    };
+    struct Case {
+        const char* name;
+        OIIO::ImageBuf kernel;
+    };
+    for (const Case& k : { Case{ "ring", kernel(1) }, Case{ "colour", kernel(3) } })
+        for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
+            for (float iris : { 0.0f, 0.05f }) {
+                SCOPED_TRACE(testing::Message() << k.name << " border " << int(border) << " iris " << iris);
+                BlurOptions o;
+                o.border = border;
+                o.grow   = border == Border::Black;
+                o.iris   = iris;
+                OIIO::ImageBuf got, clean, reach[3];
+                ASSERT_TRUE(convolve_image(got, b.src, k.kernel, o)) << got.geterror();
+                ASSERT_TRUE(convolve_image(clean, b.zeroed, k.kernel, o, got.roi())) << clean.geterror();
+                // The brute force on the indicators, channel by channel with its kernel.
+                BlurOptions plain = o;
+                plain.iris        = 0.0f;
+                const int knc     = k.kernel.nchannels();
+                for (int kind = 0; kind < 3; ++kind) {
+                    reach[kind] = OIIO::ImageBuf(OIIO::ImageSpec(got.roi(), OIIO::TypeFloat));
+                    for (int c = 0; c < 4; ++c) {
+                        KernelWeights w{ 4, 3, std::vector<double>(63, 0.0) };
+                        for (int kc = 0; kc < knc; ++kc)
+                            if (knc == 1 || kc == c || c >= knc)
+                                for (int dy = -3; dy <= 3; ++dy)
+                                    for (int dx = -4; dx <= 4; ++dx)
+                                        w.w[size_t((dy + 3) * 9 + dx + 4)] += k.kernel.getchannel(dx, dy, 0, kc);
+                        OIIO::ImageBuf one, out;
+                        one = OIIO::ImageBufAlgo::channels(b.kinds[kind], 1, { c });
+                        ASSERT_TRUE(convolve_reference(out, one, w, plain, got.roi()));
+                        ASSERT_TRUE(out.roi().xbegin == reach[kind].roi().xbegin && out.roi().xend == reach[kind].roi().xend
+                                    && out.roi().ybegin == reach[kind].roi().ybegin
+                                    && out.roi().yend == reach[kind].roi().yend);
+                        OIIO::ImageBuf::ConstIterator<float> from(out);
+                        for (OIIO::ImageBuf::Iterator<float> to(reach[kind]); !to.done(); ++to, ++from)
+                            to[c] = from[0];
+                    }
+                }
+                expect_footprint(got, clean, reach);
+            }
 }
 
 TEST(BlurImageKernel, KernelsLargerThanTheImageMatchTheSpans)

@@ -153,8 +153,9 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// channel; otherwise source channel c uses kernel channel c, and source channels past
 /// the kernel's (alpha, say) use the mean of the kernel's channels. Each kernel channel
 /// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
-/// kernel value, is refused, as is a source with NaN or infinite values (the FFT would
-/// spread them over its tile). opts.method and opts.bands are ignored; opts.iris applies.
+/// kernel value, is refused. NaN and infinite source values reach exactly the outputs
+/// whose kernel channel has weight on them, as for blur(). opts.method and opts.bands are
+/// ignored; opts.iris applies.
 /// Computed in overlap-save tiles (core/blur_fft.cpp) in double.
 bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
                     const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
