@@ -1170,6 +1170,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     // Its bands, unless the user named a count: the fewest within its accuracy bound
     // (fast_band_count; 8 bands measured 41-48 ms at 15-37 px, 4 bands 33-35, session 9).
+    // The budget holds at every size: a stretched hexagon past 64 px (81 x 15) too.
+    if (opts.method == BlurMethod::Fast && method == BlurMethod::Parallelograms
+        && std::min(k.width_px, k.height_px) < parallelograms_budget_px(k))
+        method = BlurMethod::Exact;
     std::optional<KernelWeights> exact_weights;
     int bands = opts.bands > 0 ? opts.bands : 8;
     if (opts.method == BlurMethod::Fast && std::max(k.width_px, k.height_px) <= 64.0f
@@ -1183,9 +1187,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         const double approx_ns = method == BlurMethod::Parallelograms
                                      ? parallelograms_cost_ns(k, w, h)
                                      : bands_cost_ns(w, h, bands, mirrored);
-        const bool in_budget = method != BlurMethod::Parallelograms
-                               || std::min(k.width_px, k.height_px) >= parallelograms_budget_px(k);
-        if (!in_budget || spans_cost_ns(w, h, s) < approx_ns)
+        if (spans_cost_ns(w, h, s) < approx_ns)
             method = BlurMethod::Exact;
     }
     // The weights the method computes with (the effective ones for the approximations

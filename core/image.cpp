@@ -220,14 +220,15 @@ bool any_nonfinite(const OIIO::ImageBuf& img, int nthreads)
     const OIIO::ROI roi     = f.roi();
     const size_t n          = size_t(roi.width()) * size_t(f.nchannels());
     return parallel_reduce_chunks(
-        roi.ybegin, roi.yend, 16, nthreads, false,
-        [&](int64_t y0, int64_t y1) {
-            for (int64_t y = y0; y < y1; ++y)
-                if (count_nonfinite_bits(static_cast<const float*>(f.pixeladdr(roi.xbegin, int(y), roi.zbegin)), n))
-                    return true;
-            return false;
-        },
-        [](bool& acc, bool part) { acc = acc || part; });
+               roi.ybegin, roi.yend, 16, nthreads, 0,
+               [&](int64_t y0, int64_t y1) {
+                   for (int64_t y = y0; y < y1; ++y)
+                       if (count_nonfinite_bits(static_cast<const float*>(f.pixeladdr(roi.xbegin, int(y), roi.zbegin)), n))
+                           return 1;
+                   return 0;
+               },
+               [](int& acc, int part) { acc |= part; })
+           != 0;
 }
 
 bool scrub_nonfinite(OIIO::ImageBuf& img, NonFinitePolicy policy, NonFiniteCount& count,

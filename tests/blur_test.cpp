@@ -1659,6 +1659,7 @@ TEST(BlurApprox, FastKeepsItsBudgetForEveryShapeAndAspect)
                            Case{ hex, 45, 15, 90 }, Case{ hex, 36, 18 }, Case{ hex, 18, 36, 90 },
                            Case{ hex, 63, 21 }, Case{ hex, 21, 42 }, Case{ hex, 30, 10, 20 },
                            Case{ hex, 54, 27, 20 }, Case{ hex, 27, 54, 7 }, Case{ hex, 81, 27, 20 },
+                           Case{ hex, 81, 15 }, Case{ hex, 18, 70, 90 }, Case{ hex, 99, 20, 20 },
                            Case{ disk, 31, 15 }, Case{ disk, 45, 15 }, Case{ disk, 63, 31 },
                            Case{ disk, 61, 7 }, Case{ hex, 40, 20, 0, 5 }, Case{ hex, 20, 40, 0, 5 },
                            Case{ hex, 63, 21, 0, 5 }, Case{ hex, 33, 33, 10, 8 },

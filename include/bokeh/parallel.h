@@ -7,6 +7,7 @@
 #pragma once
 
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include <OpenImageIO/imageio.h>
@@ -65,6 +66,9 @@ template<class T, class Partial, class Combine>
 T parallel_reduce_chunks(int64_t begin, int64_t end, int64_t chunk, int nthreads, T init,
                          Partial&& partial, Combine&& combine)
 {
+    // std::vector<bool> packs the parts as bits of shared words, which the chunks' tasks
+    // would write at once (a data race): reduce an int instead.
+    static_assert(!std::is_same_v<T, bool>, "parallel_reduce_chunks: use int, not bool");
     if (end <= begin)
         return init;
     if (chunk < 1)
