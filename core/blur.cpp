@@ -900,48 +900,78 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
 // Non-finite source values (DESIGN.md, "bad values": never beyond the pixel's footprint).
 // The running and prefix sums would carry a NaN or an infinity along the rest of its row
 // and down the columns (and inf - inf is NaN), the FFT over its tile. So the blur runs on
-// the source with them read as 0 (`clean`), and each output whose kernel has weight on one
-// of them takes what the brute-force convolution gives it: +inf or -inf where all those it
-// reaches have that sign, NaN otherwise (in iris mode too). Which outputs they reach: an
-// indicator per channel and kind, convolved by row spans with the kernel's support (1
-// where it has weight), which leaves exact zeros where it reaches none (sums of whole
-// numbers in double); never the FFT, whose rounding leaves none. Infinite depth ("no
-// depth", +inf in Z) is the common case in practice.
+// the source with them replaced (`clean`: by 0; in iris mode by the channel's least finite
+// value, which leaves the range iris mode checks as the data's), and each output whose
+// kernel has weight on one of them takes what the linear convolution gives it: an
+// infinity (of the sign its weight gives it) where all those it reaches agree, NaN
+// otherwise. (In iris mode exp(k * -inf) would be 0, so -inf would count for nothing
+// there; one rule is kept for both.) Which outputs they reach: an indicator per channel
+// and kind, convolved with the kernel's support (1 where its weight is positive; the
+// negative weights of an image kernel, likewise, apart) by row spans, which leave exact
+// whole counts, or by the FFT where its cost model says it is cheaper (counts to within
+// 1e-9, read as reached from 0.5). Infinite depth (+inf in Z, "no depth") is the common case.
 bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::vector<KernelWeights>& kernels,
-                    const std::vector<int>& kernel_of, Border border,
+                    const std::vector<int>& kernel_of, Border border, bool keep_range,
                     const std::function<bool(OIIO::ImageBuf&, const OIIO::ImageBuf&)>& clean, int nthreads)
 {
     const OIIO::ROI data = in.roi();
     const int nc         = in.nchannels();
-    // Kinds: 0 NaN, 1 +inf, 2 -inf.
+    const size_t ncs     = size_t(nc);
+    // Kinds: 0 NaN, 1 +inf, 2 -inf; a negative weight swaps the infinities.
     auto kind = [](float v) { return std::isnan(v) ? 0 : v > 0.0f ? 1 : 2; };
-    std::vector<std::array<bool, 3>> held(size_t(nc), { false, false, false });
-    for (int y = data.ybegin; y < data.yend; ++y) {
-        const float* row = static_cast<const float*>(in.pixeladdr(data.xbegin, y, data.zbegin));
-        for (int i = 0; i < data.width() * nc; ++i)
-            if (!std::isfinite(row[i]))
-                held[size_t(i % nc)][size_t(kind(row[i]))] = true;
-    }
-    OIIO::ImageBuf zeroed;
-    zeroed.copy(in);
+    // Per channel: which kinds it holds (held[3 c + kind]) and its least finite value.
+    struct Found {
+        std::vector<int> held;
+        std::vector<float> least;
+    };
+    const Found none{ std::vector<int>(3 * ncs, 0),
+                      std::vector<float>(ncs, std::numeric_limits<float>::infinity()) };
+    const Found found = parallel_reduce_chunks(
+        data.ybegin, data.yend, 16, nthreads, none,
+        [&](int64_t y0, int64_t y1) {
+            Found f = none;
+            for (int64_t y = y0; y < y1; ++y) {
+                const float* row = static_cast<const float*>(in.pixeladdr(data.xbegin, int(y), data.zbegin));
+                for (size_t i = 0; i < size_t(data.width()) * ncs; ++i) {
+                    if (std::isfinite(row[i]))
+                        f.least[i % ncs] = std::min(f.least[i % ncs], row[i]);
+                    else
+                        f.held[3 * (i % ncs) + size_t(kind(row[i]))] = 1;
+                }
+            }
+            return f;
+        },
+        [](Found& acc, const Found& part) {
+            for (size_t i = 0; i < acc.held.size(); ++i)
+                acc.held[i] |= part.held[i];
+            for (size_t c = 0; c < acc.least.size(); ++c)
+                acc.least[c] = std::min(acc.least[c], part.least[c]);
+        });
+    std::vector<float> substitute(ncs, 0.0f);
+    if (keep_range)
+        for (size_t c = 0; c < ncs; ++c)
+            substitute[c] = std::isfinite(found.least[c]) ? found.least[c] : 0.0f;
+    OIIO::ImageBuf replaced;
+    replaced.copy(in);
     parallel_rows(data, nthreads, [&](int y0, int y1) {
         for (int y = y0; y < y1; ++y) {
-            auto* row = static_cast<float*>(zeroed.pixeladdr(data.xbegin, y, data.zbegin));
-            for (int i = 0; i < data.width() * nc; ++i)
+            auto* row = static_cast<float*>(replaced.pixeladdr(data.xbegin, y, data.zbegin));
+            for (size_t i = 0; i < size_t(data.width()) * ncs; ++i)
                 if (!std::isfinite(row[i]))
-                    row[i] = 0.0f;
+                    row[i] = substitute[i % ncs];
         }
     });
-    if (!clean(dst, zeroed))
+    if (!clean(dst, replaced))
         return false;
     const OIIO::ROI out = dst.roi();
-    // reached[c][kind]: where that kind in channel c reaches, over `out` (empty: nowhere).
-    std::vector<std::array<std::vector<char>, 3>> reached(static_cast<size_t>(nc));
+    const size_t npx    = size_t(out.npixels());
+    // reached[3 c + kind]: where that kind (after the weights' signs) reaches channel c.
+    std::vector<std::vector<char>> reached(3 * ncs);
     for (size_t j = 0; j < kernels.size(); ++j) {
         std::vector<std::pair<int, int>> channels;  // (channel, kind) convolved with kernel j
         for (int c = 0; c < nc; ++c)
             for (int kd = 0; kd < 3; ++kd)
-                if (kernel_of[size_t(c)] == int(j) && held[size_t(c)][size_t(kd)])
+                if (kernel_of[size_t(c)] == int(j) && found.held[size_t(3 * c + kd)])
                     channels.push_back({ c, kd });
         if (channels.empty())
             continue;
@@ -949,32 +979,54 @@ bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::ve
         OIIO::ImageSpec ispec(data.width(), data.height(), nind, OIIO::TypeFloat);
         ispec.x = data.xbegin;
         ispec.y = data.ybegin;
-        OIIO::ImageBuf indicators(ispec, OIIO::InitializePixels::Yes), reach;
+        OIIO::ImageBuf indicators(ispec, OIIO::InitializePixels::Yes);
         parallel_rows(data, nthreads, [&](int y0, int y1) {
             for (int y = y0; y < y1; ++y) {
                 const auto* row = static_cast<const float*>(in.pixeladdr(data.xbegin, y, data.zbegin));
                 auto* ind       = static_cast<float*>(indicators.pixeladdr(data.xbegin, y));
                 for (int x = 0; x < data.width(); ++x)
                     for (int i = 0; i < nind; ++i) {
-                        const float v = row[size_t(x) * size_t(nc) + size_t(channels[size_t(i)].first)];
+                        const float v = row[size_t(x) * ncs + size_t(channels[size_t(i)].first)];
                         ind[size_t(x) * size_t(nind) + size_t(i)]
                             = !std::isfinite(v) && kind(v) == channels[size_t(i)].second ? 1.0f : 0.0f;
                     }
             }
         });
-        KernelWeights support = kernels[j];
-        for (double& w : support.w)
-            w = w != 0.0 ? 1.0 : 0.0;
-        if (!convolve_spans_direct(reach, indicators, out, support.rx, support.ry,
-                                   kernel_spans(reflected(support)), border, nthreads)) {
-            dst.errorfmt("blur: where the non-finite values reach: {}", reach.geterror());
-            return false;
-        }
-        for (int i = 0; i < nind; ++i) {
-            std::vector<char>& r = reached[size_t(channels[size_t(i)].first)][size_t(channels[size_t(i)].second)];
-            r.assign(size_t(out.npixels()), 0);
-            for (OIIO::ImageBuf::ConstIterator<float> it(reach); !it.done(); ++it)
-                r[size_t(it.y() - out.ybegin) * size_t(out.width()) + size_t(it.x() - out.xbegin)] = it[i] > 0.0f;
+        for (const double sign : { 1.0, -1.0 }) {
+            KernelWeights support = kernels[j];
+            bool any              = false;
+            for (double& w : support.w) {
+                w   = w * sign > 0.0 ? 1.0 : 0.0;
+                any = any || w > 0.0;
+            }
+            if (!any)
+                continue;
+            const std::vector<Span> spans = kernel_spans(reflected(support));
+            const bool by_fft = fft_convolve_cost_ns(out.width(), out.height(), nind, support.rx, support.ry)
+                                < nind * spans_cost_ns(out.width(), out.height(), spans);
+            OIIO::ImageBuf reach;
+            const bool ok = by_fft ? convolve_fft_direct(reach, indicators, out, { support },
+                                                         std::vector<int>(size_t(nind), 0), border, nthreads)
+                                   : convolve_spans_direct(reach, indicators, out, support.rx, support.ry, spans,
+                                                           border, nthreads);
+            if (!ok) {
+                dst.errorfmt("blur: where the non-finite values reach: {}", reach.geterror());
+                return false;
+            }
+            for (int i = 0; i < nind; ++i) {
+                const auto [c, kd] = channels[size_t(i)];
+                const int as       = sign > 0.0 || kd == 0 ? kd : 3 - kd;  // -inf through a negative weight: +inf
+                std::vector<char>& r = reached[size_t(3 * c + as)];
+                r.resize(npx, 0);
+                parallel_rows(out, nthreads, [&](int y0, int y1) {
+                    for (int y = y0; y < y1; ++y) {
+                        const auto* v = static_cast<const float*>(reach.pixeladdr(out.xbegin, y));
+                        char* hit     = r.data() + size_t(y - out.ybegin) * size_t(out.width());
+                        for (int x = 0; x < out.width(); ++x)
+                            hit[x] = char(hit[x] | (v[size_t(x) * size_t(nind) + size_t(i)] > 0.5f));
+                    }
+                });
+            }
         }
     }
     constexpr float kInf = std::numeric_limits<float>::infinity();
@@ -985,11 +1037,11 @@ bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::ve
                 for (int c = 0; c < nc; ++c) {
                     const size_t p = size_t(y - out.ybegin) * size_t(out.width()) + size_t(x);
                     auto hit       = [&](int kd) {
-                        const std::vector<char>& r = reached[size_t(c)][size_t(kd)];
+                        const std::vector<char>& r = reached[size_t(3 * c + kd)];
                         return !r.empty() && r[p];
                     };
                     const bool nan = hit(0), pos = hit(1), neg = hit(2);
-                    float& v       = row[size_t(x) * size_t(nc) + size_t(c)];
+                    float& v       = row[size_t(x) * ncs + size_t(c)];
                     if (nan || (pos && neg))
                         v = std::numeric_limits<float>::quiet_NaN();
                     else if (pos || neg)
@@ -1146,8 +1198,9 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     const OIIO::ImageBuf& in = float_source(src, holder);
     if (any_nonfinite(in, nthreads))
         return blur_nonfinite(dst, in, { kernel_weights(k, nthreads) }, std::vector<int>(size_t(in.nchannels()), 0),
-                              opts.border, [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& zeroed) {
-                                  return blur(out, zeroed, k, opts, roi, nthreads);
+                              opts.border, opts.iris != 0.0f,
+                              [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& replaced) {
+                                  return blur(out, replaced, k, opts, roi, nthreads);
                               }, nthreads);
     // Before the exact weights, which it does not need at full size.
     if (method == BlurMethod::Reduced)

@@ -335,6 +335,12 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
             dst.errorfmt("blur: kernel image channel {} sums to {}; it must be positive", c, sum);
             return false;
         }
+        // A weighted mean of exp(k x) with negative weights can fall to 0 or below, whose log
+        // is NaN or -inf: iris mode takes kernels without them.
+        if (opts.iris != 0.0f && *std::min_element(k.w.begin(), k.w.end()) < 0.0) {
+            dst.errorfmt("blur: iris mode needs a kernel image without negative weights (channel {} has some)", c);
+            return false;
+        }
         for (double& v : k.w)
             v /= sum;
     }
@@ -353,9 +359,9 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
         roi = opts.grow ? grown(in.roi(), rx, ry) : in.roi();
     // The FFT would spread a NaN or an infinity over its whole tile.
     if (any_nonfinite(in, nthreads))
-        return blur_nonfinite(dst, in, kernels, kernel_of, opts.border,
-                              [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& zeroed) {
-                                  return convolve_image(out, zeroed, kernel, opts, roi, nthreads);
+        return blur_nonfinite(dst, in, kernels, kernel_of, opts.border, opts.iris != 0.0f,
+                              [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& replaced) {
+                                  return convolve_image(out, replaced, kernel, opts, roi, nthreads);
                               }, nthreads);
     if (opts.iris == 0.0f)
         return convolve_fft_direct(dst, in, roi, kernels, kernel_of, opts.border, nthreads);

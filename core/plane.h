@@ -260,11 +260,12 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
                            int rx, int ry, std::vector<Span> spans, Border border, int nthreads);
 
 /// A blur with NaN and infinite source values kept within their footprint (blur.cpp):
-/// `clean` blurs `in` with them read as 0 into `dst`; then each output whose kernel
-/// (kernels[kernel_of[c]] for channel c) has weight on one of them takes what the
-/// brute-force convolution gives it (+inf, -inf or NaN).
+/// `clean` blurs `in` with them replaced (by 0; by the channel's least finite value with
+/// `keep_range`, for iris mode) into `dst`; then each output whose kernel
+/// (kernels[kernel_of[c]] for channel c) has weight on one of them takes what the linear
+/// convolution gives it (+inf, -inf or NaN).
 bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::vector<KernelWeights>& kernels,
-                    const std::vector<int>& kernel_of, Border border,
+                    const std::vector<int>& kernel_of, Border border, bool keep_range,
                     const std::function<bool(OIIO::ImageBuf&, const OIIO::ImageBuf&)>& clean, int nthreads);
 
 /// Predicted single-thread time in ns of the FFT convolution of a w x h output of nc

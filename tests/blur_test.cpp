@@ -147,7 +147,9 @@ std::vector<double> channel_sums(const OIIO::ImageBuf& img)
 // a sky of +inf at the right edge (clamp and mirror repeat it); the same with them as 0;
 // an indicator image of each kind (NaN, +inf, -inf).
 struct NonFiniteImage {
-    OIIO::ImageBuf src, zeroed, kinds[3];
+    OIIO::ImageBuf src, zeroed, floored, kinds[3];  // floored: each channel's least finite value
+    // The image the blur runs on in place of src: iris mode keeps its range.
+    const OIIO::ImageBuf& replaced(float iris) const { return iris != 0.0f ? floored : zeroed; }
 };
 
 NonFiniteImage nonfinite_image()
@@ -183,6 +185,16 @@ NonFiniteImage nonfinite_image()
                 b.kinds[kind].setpixel(it.x(), it.y(), one);
                 it[c] = 0.0f;
             }
+    b.floored = b.src;
+    for (int c = 0; c < 4; ++c) {
+        float least = std::numeric_limits<float>::infinity();
+        for (OIIO::ImageBuf::ConstIterator<float> it(b.src); !it.done(); ++it)
+            if (std::isfinite(it[c]))
+                least = std::min(least, it[c]);
+        for (OIIO::ImageBuf::Iterator<float> it(b.floored); !it.done(); ++it)
+            if (!std::isfinite(it[c]))
+                it[c] = least;
+    }
     return b;
 }
 
@@ -439,7 +451,7 @@ TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
                 o.reduction = method == BlurMethod::Reduced ? 2.0f : 0.0f;
                 OIIO::ImageBuf got, clean, reach[3];
                 ASSERT_TRUE(blur(got, b.src, n.k, o)) << got.geterror();
-                ASSERT_TRUE(blur(clean, b.zeroed, n.k, o, got.roi())) << clean.geterror();
+                ASSERT_TRUE(blur(clean, b.replaced(iris), n.k, o, got.roi())) << clean.geterror();
                 BlurOptions plain = o;
                 plain.iris        = 0.0f;
                 for (int kind = 0; kind < 3; ++kind)
@@ -1943,6 +1955,40 @@ TEST(BlurIris, ExactMethodsMatchTheBruteForceOfExpMeanLog)
     RecordProperty("worst_relative_error", std::to_string(worst));  // 6.9e-5 measured
 }
 
+TEST(BlurIris, NonFiniteValuesDoNotWidenTheRange)
+{
+    // Iris mode checks |k| times each channel's range against its limit. The blur runs with
+    // the non-finite values replaced, by the channel's least finite value in iris mode (by 0
+    // the range here would be 0 .. 1019, far past the limit, and the blur refused).
+    OIIO::ImageBuf src(OIIO::ImageSpec(40, 30, 4, OIIO::TypeFloat));
+    for (int y = 0; y < 30; ++y)
+        for (int x = 0; x < 40; ++x) {
+            const float px[4] = { 1000.0f + float((x + y) % 20), 1000.0f, 1005.0f, 1.0f };
+            src.setpixel(x, y, px);
+        }
+    const float bad[4] = { std::numeric_limits<float>::quiet_NaN(), 1000.0f, 1005.0f, 1.0f };
+    src.setpixel(10, 10, bad);
+    Kernel disk;
+    disk.shape    = KernelShape::Disk;
+    disk.width_px = disk.height_px = 9;
+    BlurOptions o;
+    o.border = Border::Clamp;
+    o.iris   = 1.0f;
+    OIIO::ImageBuf got;
+    ASSERT_TRUE(blur(got, src, disk, o)) << got.geterror();
+    for (OIIO::ImageBuf::ConstIterator<float> it(got); !it.done(); ++it) {
+        const int d2 = (it.x() - 10) * (it.x() - 10) + (it.y() - 10) * (it.y() - 10);
+        if (d2 <= 9) {
+            EXPECT_TRUE(std::isnan(it[0])) << it.x() << ", " << it.y();
+        }
+        if (d2 > 25) {
+            EXPECT_GE(it[0], 1000.0f) << it.x() << ", " << it.y();
+            EXPECT_LE(it[0], 1019.0f) << it.x() << ", " << it.y();
+        }
+        EXPECT_TRUE(std::isfinite(it[1]) && std::isfinite(it[2]));
+    }
+}
+
 TEST(BlurIris, DepthStaysLinear)
 {
     // Z is blurred plainly in iris mode, as alpha is: its range (here 2 .. 70, 68 times
@@ -2073,18 +2119,20 @@ TEST(BlurImageKernel, EnergyTranslationMirrorAndALonePixel)
 TEST(BlurImageKernel, NonFiniteValuesStayWithinTheirFootprint)
 {
     // As for the uniform kernels (Blur.NonFiniteValuesStayWithinTheirFootprint): the FFT
-    // runs on the image with them as 0, and their footprints are the kernel channels'
-    // supports. A one-channel kernel and a colour one (each channel its own support: the
-    // third channel's ring, the fourth source channel the channels' mean).
+    // runs on the image with them replaced, and their footprints are the kernel channels'
+    // supports. A one-channel kernel, a colour one (each channel its own support: the
+    // third channel's ring, the fourth source channel the channels' mean), and one with
+    // negative weights (a sharpening ring), through which an infinity changes sign.
     const NonFiniteImage b = nonfinite_image();
     // 9 x 7 kernels: a ring, a filled ellipse, a ramp heavier to the right.
     auto weight = [](int kc, int dx, int dy) {
         const int r2 = dx * dx + dy * dy;
         return kc == 0 ? (r2 >= 6 && r2 <= 14 ? 1.0f + 0.1f * float(dx) : 0.0f)
                : kc == 1 ? (4 * dx * dx + 9 * dy * dy <= 60 ? 1.0f : 0.0f)
-                         : 1.0f + 0.25f * float(dx + 4);
+               : kc == 2 ? 1.0f + 0.25f * float(dx + 4)
+                         : (r2 <= 2 ? 3.0f : std::abs(dx) == 4 ? -0.5f : 0.0f);
     };
-    auto kernel = [&](int nchannels) {
+    auto kernel = [&](int nchannels, int first = 0) {
         OIIO::ImageSpec spec(9, 7, nchannels, OIIO::TypeFloat);
         spec.x = -4;
         spec.y = -3;
@@ -2093,7 +2141,7 @@ TEST(BlurImageKernel, NonFiniteValuesStayWithinTheirFootprint)
             for (int dx = -4; dx <= 4; ++dx) {
                 float px[3];
                 for (int kc = 0; kc < nchannels; ++kc)
-                    px[kc] = weight(kc, dx, dy);
+                    px[kc] = weight(first + kc, dx, dy);
                 img.setpixel(dx, dy, px);
             }
         return img;
@@ -2102,7 +2150,7 @@ TEST(BlurImageKernel, NonFiniteValuesStayWithinTheirFootprint)
         const char* name;
         OIIO::ImageBuf kernel;
     };
-    for (const Case& k : { Case{ "ring", kernel(1) }, Case{ "colour", kernel(3) } })
+    for (const Case& k : { Case{ "ring", kernel(1) }, Case{ "colour", kernel(3) }, Case{ "signed", kernel(1, 3) } })
         for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
             for (float iris : { 0.0f, 0.05f }) {
                 SCOPED_TRACE(testing::Message() << k.name << " border " << int(border) << " iris " << iris);
@@ -2111,32 +2159,47 @@ TEST(BlurImageKernel, NonFiniteValuesStayWithinTheirFootprint)
                 o.grow   = border == Border::Black;
                 o.iris   = iris;
                 OIIO::ImageBuf got, clean, reach[3];
+                if (iris != 0.0f && std::string(k.name) == "signed") {
+                    // A mean of exp(k x) with negative weights can fall to 0 or below: refused.
+                    EXPECT_FALSE(convolve_image(got, b.src, k.kernel, o));
+                    EXPECT_NE(got.geterror().find("without negative weights"), std::string::npos) << got.geterror();
+                    continue;
+                }
                 ASSERT_TRUE(convolve_image(got, b.src, k.kernel, o)) << got.geterror();
-                ASSERT_TRUE(convolve_image(clean, b.zeroed, k.kernel, o, got.roi())) << clean.geterror();
-                // The brute force on the indicators, channel by channel with its kernel.
+                ASSERT_TRUE(convolve_image(clean, b.replaced(iris), k.kernel, o, got.roi())) << clean.geterror();
+                // The brute force on the indicators, channel by channel with its kernel, its
+                // positive and negative weights apart: an infinity through a negative weight
+                // changes sign.
                 BlurOptions plain = o;
                 plain.iris        = 0.0f;
                 const int knc     = k.kernel.nchannels();
                 for (int kind = 0; kind < 3; ++kind) {
                     reach[kind] = OIIO::ImageBuf(OIIO::ImageSpec(got.roi(), OIIO::TypeFloat));
-                    for (int c = 0; c < 4; ++c) {
+                    OIIO::ImageBufAlgo::zero(reach[kind]);
+                }
+                for (int c = 0; c < 4; ++c)
+                    for (const double sign : { 1.0, -1.0 }) {
                         KernelWeights w{ 4, 3, std::vector<double>(63, 0.0) };
                         for (int kc = 0; kc < knc; ++kc)
                             if (knc == 1 || kc == c || c >= knc)
                                 for (int dy = -3; dy <= 3; ++dy)
                                     for (int dx = -4; dx <= 4; ++dx)
                                         w.w[size_t((dy + 3) * 9 + dx + 4)] += k.kernel.getchannel(dx, dy, 0, kc);
-                        OIIO::ImageBuf one, out;
-                        one = OIIO::ImageBufAlgo::channels(b.kinds[kind], 1, { c });
-                        ASSERT_TRUE(convolve_reference(out, one, w, plain, got.roi()));
-                        ASSERT_TRUE(out.roi().xbegin == reach[kind].roi().xbegin && out.roi().xend == reach[kind].roi().xend
-                                    && out.roi().ybegin == reach[kind].roi().ybegin
-                                    && out.roi().yend == reach[kind].roi().yend);
-                        OIIO::ImageBuf::ConstIterator<float> from(out);
-                        for (OIIO::ImageBuf::Iterator<float> to(reach[kind]); !to.done(); ++to, ++from)
-                            to[c] = from[0];
+                        for (double& v : w.w)
+                            v = std::max(0.0, sign * v);
+                        for (int kind = 0; kind < 3; ++kind) {
+                            const int as = sign > 0.0 || kind == 0 ? kind : 3 - kind;
+                            OIIO::ImageBuf out;
+                            ASSERT_TRUE(convolve_reference(out, OIIO::ImageBufAlgo::channels(b.kinds[kind], 1, { c }), w,
+                                                           plain, got.roi()));
+                            ASSERT_TRUE(out.roi().xbegin == reach[as].roi().xbegin && out.roi().xend == reach[as].roi().xend
+                                        && out.roi().ybegin == reach[as].roi().ybegin
+                                        && out.roi().yend == reach[as].roi().yend);
+                            OIIO::ImageBuf::ConstIterator<float> from(out);
+                            for (OIIO::ImageBuf::Iterator<float> to(reach[as]); !to.done(); ++to, ++from)
+                                to[c] = to[c] + from[0];
+                        }
                     }
-                }
                 expect_footprint(got, clean, reach);
             }
 }

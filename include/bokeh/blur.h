@@ -140,8 +140,10 @@ KernelWeights three_box_weights(const Kernel& k);
 /// `roi` (default: the source data window, grown if asked) is the region computed.
 /// NaN and infinite source values (infinite depth, say) reach exactly the outputs whose
 /// exact kernel has weight on them, as in the brute-force convolution: +inf or -inf where
-/// all they reach have that sign, NaN otherwise; every other output is the blur with them
-/// read as 0, whatever the method (they are looked for in one pass over the source).
+/// all they reach have that sign, NaN otherwise (the same rule in iris mode, where
+/// exp(k * -inf) = 0 would otherwise drop a -inf); every other output is the blur with them
+/// read as 0 (in iris mode as the channel's least finite value, so its range stays the
+/// data's), whatever the method (they are looked for in one pass over the source).
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
           const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts = {},
@@ -153,9 +155,10 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// channel; otherwise source channel c uses kernel channel c, and source channels past
 /// the kernel's (alpha, say) use the mean of the kernel's channels. Each kernel channel
 /// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
-/// kernel value, is refused. NaN and infinite source values reach exactly the outputs
-/// whose kernel channel has weight on them, as for blur(). opts.method and opts.bands are
-/// ignored; opts.iris applies.
+/// kernel value, is refused, and in iris mode a kernel with negative weights (its mean
+/// of exp(k x) could fall to 0 or below). NaN and infinite source values reach exactly the
+/// outputs whose kernel channel has weight on them, as for blur() (an infinity through a
+/// negative weight changes sign). opts.method and opts.bands are ignored; opts.iris applies.
 /// Computed in overlap-save tiles (core/blur_fft.cpp) in double.
 bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
                     const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
