@@ -461,6 +461,60 @@ TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
     }
 }
 
+TEST(Blur, NonFiniteFootprintsOfLargeKernels)
+{
+    // Large kernels, where the footprints are found by FFT rather than row spans (counts to
+    // within rounding, read as reached from 0.5): each output is checked against the
+    // kernel's weights at its offset from each bad pixel (black border, grown window).
+    OIIO::ImageBuf src = test_image(150, 110);
+    const float inf    = std::numeric_limits<float>::infinity();
+    struct Bad {
+        int x, y, c;
+        float v;
+    };
+    const Bad bads[] = { { 30, 40, 0, std::numeric_limits<float>::quiet_NaN() }, { 100, 60, 1, inf },
+                         { 120, 20, 1, -inf }, { 75, 100, 3, inf } };
+    for (const Bad& b : bads) {
+        float px[4];
+        src.getpixel(b.x, b.y, px);
+        px[b.c] = b.v;
+        src.setpixel(b.x, b.y, px);
+    }
+    for (float size : { 101.0f, 151.0f }) {
+        Kernel k;
+        k.shape    = KernelShape::Disk;
+        k.width_px = k.height_px = size;
+        const KernelWeights w    = kernel_weights(k);
+        BlurOptions o;
+        o.grow = true;
+        for (BlurMethod m : { BlurMethod::Auto, BlurMethod::Fast }) {
+            SCOPED_TRACE(testing::Message() << size << method_name(m));
+            o.method = m;
+            OIIO::ImageBuf got;
+            ASSERT_TRUE(blur(got, src, k, o)) << got.geterror();
+            int wrong = 0;
+            for (OIIO::ImageBuf::ConstIterator<float> it(got); !it.done(); ++it)
+                for (int c = 0; c < 4; ++c) {
+                    bool nan = false, pos = false, neg = false;
+                    for (const Bad& b : bads) {
+                        const int dx = it.x() - b.x, dy = it.y() - b.y;
+                        if (b.c != c || std::abs(dx) > w.rx || std::abs(dy) > w.ry || w.at(dx, dy) <= 0.0)
+                            continue;
+                        nan = nan || std::isnan(b.v);
+                        pos = pos || b.v == inf;
+                        neg = neg || b.v == -inf;
+                    }
+                    const bool ok = nan || (pos && neg) ? std::isnan(it[c])
+                                    : pos || neg       ? it[c] == (pos ? inf : -inf)
+                                                       : std::isfinite(it[c]);
+                    if (!ok && wrong++ < 3)
+                        ADD_FAILURE() << "(" << it.x() << ", " << it.y() << ") channel " << c << ": " << it[c];
+                }
+            EXPECT_EQ(wrong, 0);
+        }
+    }
+}
+
 TEST(Blur, WideImagesMatchTheBruteForceReferenceStripByStrip)
 {
     // Wider than the fused methods' column strips (box: column_chunks, two up to 2879 px,
