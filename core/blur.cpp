@@ -62,8 +62,8 @@
 
 #include <algorithm>
 #include <array>
-#include <functional>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -897,6 +897,11 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     return true;
 }
 
+bool fft_cheaper_than_spans(int w, int h, int nc, int rx, int ry, const std::vector<Span>& spans)
+{
+    return fft_convolve_cost_ns(w, h, nc, rx, ry) < 1.2 * nc * spans_cost_ns(w, h, spans);
+}
+
 // Non-finite source values (DESIGN.md, "bad values": never beyond the pixel's footprint).
 // The running and prefix sums would carry a NaN or an infinity along the rest of its row
 // and down the columns (and inf - inf is NaN), the FFT over its tile. So the blur runs on
@@ -908,8 +913,8 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
 // there; one rule is kept for both.) Which outputs they reach: an indicator per channel
 // and kind, convolved with the kernel's support (1 where its weight is positive; the
 // negative weights of an image kernel, likewise, apart) by row spans, which leave exact
-// whole counts, or by the FFT where its cost model says it is cheaper (counts to within
-// 1e-9, read as reached from 0.5). Infinite depth (+inf in Z, "no depth") is the common case.
+// whole counts, or by the FFT where the exact blur would take it (fft_cheaper_than_spans;
+// counts to within 1e-9, read as reached from 0.5). Infinite depth (+inf in Z, "no depth") is the common case.
 bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::vector<KernelWeights>& kernels,
                     const std::vector<int>& kernel_of, Border border, bool keep_range,
                     const std::function<bool(OIIO::ImageBuf&, const OIIO::ImageBuf&)>& clean, int nthreads)
@@ -1002,8 +1007,7 @@ bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::ve
             if (!any)
                 continue;
             const std::vector<Span> spans = kernel_spans(reflected(support));
-            const bool by_fft = fft_convolve_cost_ns(out.width(), out.height(), nind, support.rx, support.ry)
-                                < nind * spans_cost_ns(out.width(), out.height(), spans);
+            const bool by_fft = fft_cheaper_than_spans(out.width(), out.height(), nind, support.rx, support.ry, spans);
             OIIO::ImageBuf reach;
             const bool ok = by_fft ? convolve_fft_direct(reach, indicators, out, { support },
                                                          std::vector<int>(size_t(nind), 0), border, nthreads)
@@ -1142,7 +1146,7 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
 KernelWeights three_box_weights(const Kernel& k)
 {
     const auto [bx, by] = gaussian_boxes(k);
-    auto thrice         = [](const std::vector<double>& b) {
+    auto thrice         = [](const std::vector<double>& b) {  // b * b * b
         std::vector<double> w{ 1.0 };
         for (int pass = 0; pass < 3; ++pass) {
             std::vector<double> next(w.size() + b.size() - 1, 0.0);
@@ -1153,13 +1157,7 @@ KernelWeights three_box_weights(const Kernel& k)
         }
         return w;
     };
-    const std::vector<double> wx = thrice(bx), wy = thrice(by);
-    KernelWeights kw{ int(wx.size() / 2), int(wy.size() / 2), {} };
-    kw.w.reserve(wx.size() * wy.size());
-    for (double y : wy)
-        for (double x : wx)
-            kw.w.push_back(x * y);
-    return kw;
+    return outer(thrice(bx), thrice(by));
 }
 
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
@@ -1290,9 +1288,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
                                         ? kernel_spans(reflected(weights))
                                         : std::vector<Span>{};
     if (shape && method == BlurMethod::Exact && !weights.is_identity())
-        method = fft_ns() < 1.2 * nc * spans_cost_ns(roi.width(), roi.height(), spans)
-                     ? BlurMethod::Fft
-                     : BlurMethod::Spans;
+        method = fft_cheaper_than_spans(roi.width(), roi.height(), nc, rx, ry, spans) ? BlurMethod::Fft
+                                                                                       : BlurMethod::Spans;
     if (k.shape == KernelShape::Gaussian && method == BlurMethod::Exact && !weights.is_identity())
         method = fft_ns() < 0.85 * nc * separable_cost_ns(roi.width(), roi.height(), 2 * rx + 1, 2 * ry + 1)
                      ? BlurMethod::Fft

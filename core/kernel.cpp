@@ -19,6 +19,8 @@
 #include <bokeh/blur.h>
 #include <bokeh/parallel.h>
 
+#include "plane.h"
+
 #include <algorithm>
 #include <cmath>
 #include <vector>
@@ -96,9 +98,7 @@ std::vector<double> gaussian_weights_1d(double sigma)
     return w;
 }
 
-namespace {
-
-KernelWeights outer(const std::vector<double>& wx, const std::vector<double>& wy)
+KernelWeights detail::outer(const std::vector<double>& wx, const std::vector<double>& wy)
 {
     KernelWeights kw;
     kw.rx = int(wx.size() / 2);
@@ -108,6 +108,8 @@ KernelWeights outer(const std::vector<double>& wx, const std::vector<double>& wy
             kw.w.push_back(x * y);
     return kw;
 }
+
+namespace {
 
 // Drop all-zero outer rows and columns (symmetrically), so a kernel that covers one
 // pixel becomes the identity and the brute-force reference does no wasted work.
@@ -301,10 +303,10 @@ KernelWeights kernel_weights(const Kernel& k, int nthreads)
     if (k.width_px <= 0.0f && k.height_px <= 0.0f && k.sigma_px <= 0.0f)
         return KernelWeights{ 0, 0, { 1.0 } };
     switch (k.shape) {
-    case KernelShape::Box: return outer(box_weights_1d(k.width_px), box_weights_1d(k.height_px));
+    case KernelShape::Box: return detail::outer(box_weights_1d(k.width_px), box_weights_1d(k.height_px));
     case KernelShape::Gaussian: {
         const auto [sx, sy] = gaussian_sigma(k);
-        return outer(gaussian_weights_1d(sx), gaussian_weights_1d(sy));
+        return detail::outer(gaussian_weights_1d(sx), gaussian_weights_1d(sy));
     }
     case KernelShape::Disk:
     case KernelShape::Polygon:

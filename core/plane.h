@@ -239,6 +239,9 @@ void row_prefix(double* p, const float* v, size_t npx, int nc);
 /// and prefix[y][c] = 0; rows of (in.w + 1) * nc values (blur.cpp).
 void row_prefix_sums(const Plane& in, double* prefix, int nthreads);
 
+/// The separable kernel wx (x) wy, each of odd length, centred (kernel.cpp).
+KernelWeights outer(const std::vector<double>& wx, const std::vector<double>& wy);
+
 /// The weights point-reflected, so that out(x) = sum_d w(d) in(x - d) (blur.cpp).
 KernelWeights reflected(const KernelWeights& k);
 
@@ -282,6 +285,11 @@ bool convolve_fft_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OI
 /// less the kernels' reach on each side.
 Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
                    const std::vector<int>& kernel_of, int nthreads);
+
+/// Whether the FFT tiles are the cheaper exact convolution of nc channels over a w x h
+/// output, against the row spans `spans` reaching rx, ry (blur.cpp: both cost models, the
+/// FFT taken below 1.2 times the spans', as measured).
+bool fft_cheaper_than_spans(int w, int h, int nc, int rx, int ry, const std::vector<Span>& spans);
 
 /// Predicted single-thread time in ns of one channel of convolve_spans_direct over a
 /// w x h output with the kernel's `spans` (blur.cpp's cost model).
