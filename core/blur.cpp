@@ -1113,15 +1113,20 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         // passes); 27 against 35 / 55 at 63 px (session 9, docs/benchmarks.md). Session 14,
         // the sheared sweep at 7 and 25 degrees, 63 px: 28 and 24 ms against the reduced
         // buffer's 19 (one run, a slow phase of the machine): still the reduction.
+        // A hard-edged Gaussian is oiiotool's, cut at 2 sigma: three boxes stand for the
+        // whole one.
         m = opts.iris != 0.0f ? BlurMethod::Exact
-            : gaussian        ? BlurMethod::ThreeBoxes
+            : gaussian        ? (k.edge == KernelEdge::Hard ? BlurMethod::Exact : BlurMethod::ThreeBoxes)
             : shape && k.edge == KernelEdge::Antialiased && reduction_factor(k) > 1.0
                 ? BlurMethod::Reduced
             : is_hexagon(k)           ? BlurMethod::Parallelograms  // or Exact: see blur()
             : shape && k.hole == 0.0f ? BlurMethod::Bands           // or Exact: see blur()
                                       : BlurMethod::Exact;  // box: running sums are the fast method
         return true;
-    case BlurMethod::ThreeBoxes: return named(gaussian, "method=boxes3 is for the gaussian kernel");
+    case BlurMethod::ThreeBoxes:
+        return named(gaussian && k.edge == KernelEdge::Antialiased,
+                     "method=boxes3 is for the anti-aliased gaussian kernel (edge=hard is oiiotool's, cut at 2 "
+                     "sigma: method=exact)");
     case BlurMethod::Parallelograms:
         return named(is_hexagon(k), "method=parallelograms needs a hexagon (6 straight blades, no hole)");
     case BlurMethod::Bands:
@@ -1304,8 +1309,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // iris mode transforms a padded plane, so it keeps the plane path.
     if (method == BlurMethod::Exact && opts.iris == 0.0f && !weights.is_identity()) {
         if (k.shape == KernelShape::Box)
-            return box_direct(dst, in, roi, BoxPass(box_weights_1d(k.width_px)),
-                              BoxPass(box_weights_1d(k.height_px)), opts.border, nthreads);
+            return box_direct(dst, in, roi, BoxPass(separable_weights(k).first),
+                              BoxPass(separable_weights(k).second), opts.border, nthreads);
     }
     if ((method == BlurMethod::Spans || method == BlurMethod::BilinearTaps) && opts.iris == 0.0f
         && !weights.is_identity())
@@ -1365,12 +1370,14 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     case BlurMethod::Spans: out = convolve_spans(p, weights, nthreads); break;
     case BlurMethod::Fft: out = convolve_fft(p, { weights }, one_kernel, nthreads); break;
     case BlurMethod::Separable: {
-        const auto [sx, sy] = gaussian_sigma(k);
-        out = convolve_separable(p, gaussian_weights_1d(sx), gaussian_weights_1d(sy), nthreads);
+        const auto [wx, wy] = separable_weights(k);
+        out = convolve_separable(p, wx, wy, nthreads);
         break;
     }
-    default:  // Exact: the box (the shapes and the Gaussian took their methods above)
-        out = box_blur(p, box_weights_1d(k.width_px), box_weights_1d(k.height_px), nthreads);
+    default: {  // Exact: the box (the shapes and the Gaussian took their methods above)
+        const auto [wx, wy] = separable_weights(k);
+        out = box_blur(p, wx, wy, nthreads);
+    }
     }
     if (opts.iris != 0.0f)
         iris.inverse(out, nthreads);

@@ -5,6 +5,11 @@
 // density integrated over each pixel (erf differences), out to 4 sigma, renormalised.
 // Disk and polygon: the area of each pixel square inside the shape (anti-aliased) or the
 // pixel-centre test (hard; OIIO's make_kernel("disk") is `(x/(w/2))^2 + (y/(h/2))^2 < 1`).
+// Hard-edged box and Gaussian are OIIO's make_kernel("box" | "gaussian", w, h) (its filters'
+// documented formulas, Filter2D in OIIO's filter.h): the filter's value at whole offsets,
+// normalised; box 1 where |x| <= w/2 (an 8 px box is 9 equal taps), Gaussian
+// exp(-2 (2x/w)^2) where |2x/w| < 1, i.e. sigma = w/4 cut at 2 sigma (8.9 % of a 2-D
+// Gaussian's mass lies past it), so `--blur:edge=hard` gives oiiotool's kernels.
 // Polygon with N blades: the edge distance at polar angle phi from an edge's normal is
 // cos(pi/N) / cos(phi) (circumradius 1); curved blades blend it toward the circle,
 // d = d_poly + curvature (1 - d_poly), an approximation of real curved blades, which are
@@ -96,6 +101,47 @@ std::vector<double> gaussian_weights_1d(double sigma)
     for (double& v : w)
         v /= sum;
     return w;
+}
+
+namespace {
+
+// Samples of a filter at whole offsets |i| within `reach` (inclusive or not), normalised.
+template<class Fn>
+std::vector<double> sampled_1d(double reach, bool inclusive, Fn&& value)
+{
+    const int r = std::max(0, int(std::floor(reach)) - (!inclusive && std::floor(reach) == reach ? 1 : 0));
+    std::vector<double> w(size_t(2 * r + 1));
+    double sum = 0.0;
+    for (int i = -r; i <= r; ++i)
+        sum += w[size_t(i + r)] = value(double(i));
+    for (double& v : w)
+        v /= sum;
+    return w;
+}
+
+}  // namespace
+
+std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kernel& k)
+{
+    const bool hard = k.edge == KernelEdge::Hard;
+    if (k.shape == KernelShape::Box) {
+        auto box = [&](double width) {
+            return hard ? sampled_1d(0.5 * std::max(0.0, width), true, [](double) { return 1.0; })
+                        : box_weights_1d(width);
+        };
+        return { box(k.width_px), box(k.height_px) };
+    }
+    if (k.shape == KernelShape::Gaussian) {
+        const auto [sx, sy] = gaussian_sigma(k);
+        auto gauss = [&](double sigma, double footprint) {
+            if (!hard || !(sigma > 0.0))
+                return gaussian_weights_1d(sigma);
+            const double reach = 0.5 * (footprint > 0.0 ? footprint : 4.0 * sigma);
+            return sampled_1d(reach, false, [&](double x) { return std::exp(-x * x / (2.0 * sigma * sigma)); });
+        };
+        return { gauss(sx, k.width_px), gauss(sy, k.height_px) };
+    }
+    return { { 1.0 }, { 1.0 } };
 }
 
 KernelWeights detail::outer(const std::vector<double>& wx, const std::vector<double>& wy)
@@ -303,10 +349,10 @@ KernelWeights kernel_weights(const Kernel& k, int nthreads)
     if (k.width_px <= 0.0f && k.height_px <= 0.0f && k.sigma_px <= 0.0f)
         return KernelWeights{ 0, 0, { 1.0 } };
     switch (k.shape) {
-    case KernelShape::Box: return detail::outer(box_weights_1d(k.width_px), box_weights_1d(k.height_px));
+    case KernelShape::Box:
     case KernelShape::Gaussian: {
-        const auto [sx, sy] = gaussian_sigma(k);
-        return detail::outer(gaussian_weights_1d(sx), gaussian_weights_1d(sy));
+        const auto [wx, wy] = separable_weights(k);
+        return detail::outer(wx, wy);
     }
     case KernelShape::Disk:
     case KernelShape::Polygon:

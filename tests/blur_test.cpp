@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <tuple>
 
 #include <OpenImageIO/imagebufalgo.h>
 
@@ -58,6 +59,9 @@ std::vector<Named> kernels()
     add("box 8x1", KernelShape::Box, 8, 1);
     add("gaussian 9x9", KernelShape::Gaussian, 9, 9);
     add("gaussian sigma 1.3", KernelShape::Gaussian, 0, 0)->sigma_px = 1.3f;
+    add("box hard 8x5.5 (oiiotool's: 9 x 5 taps)", KernelShape::Box, 8, 5.5f)->edge = KernelEdge::Hard;
+    add("gaussian hard 7.5x11 (oiiotool's, cut at the footprint)", KernelShape::Gaussian, 7.5f, 11)->edge =
+        KernelEdge::Hard;
     add("disk 15", KernelShape::Disk, 15, 15);
     add("disk 9 (the seed's bilinear taps too)", KernelShape::Disk, 9, 9);
     add("disk 10.5", KernelShape::Disk, 10.5f, 10.5f);
@@ -98,7 +102,7 @@ std::vector<BlurMethod> approximations(const Kernel& k)
         m.push_back(BlurMethod::Bands);
     if (k.shape == KernelShape::Polygon && k.blades == 6 && k.curvature == 0.0f && k.hole == 0.0f)
         m.push_back(BlurMethod::Parallelograms);
-    if (k.shape == KernelShape::Gaussian)
+    if (k.shape == KernelShape::Gaussian && k.edge == KernelEdge::Antialiased)
         m.push_back(BlurMethod::ThreeBoxes);
     if (k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased && k.hole == 0.0f
         && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f))
@@ -357,7 +361,7 @@ TEST(Blur, SymmetricKernelsGiveSymmetricResults)
         std::vector<BlurMethod> methods = exact_methods(n.k);
         if ((n.k.shape == KernelShape::Disk || n.k.shape == KernelShape::Polygon) && n.k.hole == 0.0f)
             methods.push_back(BlurMethod::Bands);
-        if (n.k.shape == KernelShape::Gaussian)
+        if (n.k.shape == KernelShape::Gaussian && n.k.edge == KernelEdge::Antialiased)
             methods.push_back(BlurMethod::ThreeBoxes);
         for (BlurMethod m : methods)
             for (bool in_x : { true, false })
@@ -752,28 +756,107 @@ TEST(Blur, FftTilesGiveTheKernelFromALone1e6PixelAndNothingElsewhere)
     EXPECT_LE(worst_far, 1e-6) << "0.3 away from the bright pixel, to float's precision";
 }
 
-TEST(Blur, HardDiskEqualsOiioDiskConvolution)
+// OIIO's kernels, by the names oiiotool's --blur takes, and ours with a hard edge.
+struct OiioKernel {
+    const char* name;
+    KernelShape shape;
+};
+constexpr OiioKernel kOiioKernels[] = { { "disk", KernelShape::Disk },
+                                        { "box", KernelShape::Box },
+                                        { "gaussian", KernelShape::Gaussian } };
+
+TEST(Blur, HardEdgeWeightsAreOiiosMakeKernel)
+{
+    // Every weight of make_kernel(name, w, h) at its offset (its window is ceil(w) | 1
+    // wide, centred on 0), and none past it; OIIO computes in float (its gaussian by an
+    // approximate exp: 1.5e-6 apart at worst, 1x4), so to 5e-6 of the weights' sum.
+    for (const OiioKernel& o : kOiioKernels)
+        for (auto [w, h] : { std::pair{ 7.0f, 7.0f }, { 8.0f, 8.0f }, { 5.0f, 3.0f }, { 7.5f, 11.0f },
+                             { 6.3f, 2.2f }, { 1.0f, 4.0f }, { 31.0f, 31.0f } }) {
+            SCOPED_TRACE(testing::Message() << o.name << " " << w << "x" << h);
+            Kernel k;
+            k.shape     = o.shape;
+            k.width_px  = w;
+            k.height_px = h;
+            k.edge      = KernelEdge::Hard;
+            const KernelWeights ours    = kernel_weights(k);
+            const OIIO::ImageBuf theirs = OIIO::ImageBufAlgo::make_kernel(o.name, w, h);
+            ASSERT_FALSE(theirs.has_error()) << theirs.geterror();
+            const OIIO::ROI r = theirs.roi();
+            ASSERT_LE(ours.rx, -r.xbegin);
+            ASSERT_LE(ours.ry, -r.ybegin);
+            double worst = 0.0;
+            for (int y = r.ybegin; y < r.yend; ++y)
+                for (int x = r.xbegin; x < r.xend; ++x) {
+                    const double w_ours = std::abs(x) <= ours.rx && std::abs(y) <= ours.ry ? ours.at(x, y) : 0.0;
+                    worst = std::max(worst, std::abs(w_ours - double(theirs.getchannel(x, y, 0, 0))));
+                }
+            EXPECT_LE(worst, 5e-6);
+        }
+}
+
+TEST(Blur, HardEdgeEqualsOiioConvolution)
 {
     // Values in [0, 1], as the 1e-5 of the requirement assumes (OIIO sums in float).
     const OIIO::ImageBuf src = test_image(53, 41, 0, 0, false);
-    for (auto [w, h] : { std::pair{ 7, 7 }, { 6, 6 }, { 5, 3 }, { 12, 9 }, { 31, 31 } }) {
-        SCOPED_TRACE(std::to_string(w) + "x" + std::to_string(h));
-        Kernel k;
-        k.shape     = KernelShape::Disk;
-        k.width_px  = float(w);
-        k.height_px = float(h);
-        k.edge      = KernelEdge::Hard;
-        OIIO::ImageBuf ours;
-        ASSERT_TRUE(blur(ours, src, k));
-        const OIIO::ImageBuf kernel = OIIO::ImageBufAlgo::make_kernel("disk", float(w), float(h));
-        const OIIO::ImageBuf theirs = OIIO::ImageBufAlgo::convolve(src, kernel);
-        // OIIO treats the image border its own way; away from it the two must agree.
-        OIIO::ROI inner = src.roi();
-        inner.xbegin += w / 2, inner.xend -= w / 2, inner.ybegin += h / 2, inner.yend -= h / 2;
-        EXPECT_LE(bokeh_test::max_difference(OIIO::ImageBufAlgo::cut(ours, inner),
-                                             OIIO::ImageBufAlgo::cut(theirs, inner)),
-                  1e-5);
-    }
+    for (const OiioKernel& o : kOiioKernels)
+        for (auto [w, h] : { std::pair{ 7, 7 }, { 6, 6 }, { 5, 3 }, { 12, 9 }, { 31, 31 } }) {
+            SCOPED_TRACE(testing::Message() << o.name << " " << w << "x" << h);
+            Kernel k;
+            k.shape     = o.shape;
+            k.width_px  = float(w);
+            k.height_px = float(h);
+            k.edge      = KernelEdge::Hard;
+            for (BlurMethod m : exact_methods(k)) {
+                SCOPED_TRACE(method_name(m));
+                BlurOptions opts;
+                opts.method = m;
+                OIIO::ImageBuf ours;
+                ASSERT_TRUE(blur(ours, src, k, opts));
+                const OIIO::ImageBuf kernel = OIIO::ImageBufAlgo::make_kernel(o.name, float(w), float(h));
+                const OIIO::ImageBuf theirs = OIIO::ImageBufAlgo::convolve(src, kernel);
+                // OIIO treats the image border its own way; away from it the two must agree.
+                OIIO::ROI inner = src.roi();
+                inner.xbegin += w / 2, inner.xend -= w / 2, inner.ybegin += h / 2, inner.yend -= h / 2;
+                EXPECT_LE(bokeh_test::max_difference(OIIO::ImageBufAlgo::cut(ours, inner),
+                                                     OIIO::ImageBufAlgo::cut(theirs, inner)),
+                          1e-5);
+            }
+        }
+}
+
+TEST(Blur, HardGaussianIsCutAtItsFootprint)
+{
+    // oiiotool's Gaussian: sigma = W / 4, nothing at |x| >= W / 2; with a sigma of its
+    // own, cut at the footprint given, or at 2 sigma without one. `fast` computes it
+    // exactly (three boxes stand for the whole Gaussian, and are refused by name).
+    Kernel k;
+    k.shape    = KernelShape::Gaussian;
+    k.width_px = k.height_px = 8.0f;
+    k.edge     = KernelEdge::Hard;
+    auto [wx, wy] = separable_weights(k);
+    ASSERT_EQ(wx.size(), 7u);  // |x| < 4
+    EXPECT_NEAR(wx[2] / wx[3], std::exp(-1.0 / (2.0 * 4.0)), 1e-12);  // sigma 2
+    k.sigma_px = 1.0f;
+    std::tie(wx, wy) = separable_weights(k);
+    ASSERT_EQ(wx.size(), 7u);
+    EXPECT_NEAR(wx[0] / wx[3], std::exp(-4.5), 1e-12);
+    k.width_px = k.height_px = 0.0f;
+    std::tie(wx, wy) = separable_weights(k);
+    EXPECT_EQ(wx.size(), 3u);  // |x| < 2 sigma
+    k.sigma_px = 0.0f;
+    k.width_px = k.height_px = 9.0f;
+    const OIIO::ImageBuf src = test_image(40, 30, 0, 0, false);
+    BlurOptions fast;
+    fast.method = BlurMethod::Fast;
+    OIIO::ImageBuf a, b;
+    ASSERT_TRUE(blur(a, src, k, fast));
+    ASSERT_TRUE(blur(b, src, k));
+    EXPECT_EQ(bokeh_test::max_difference(a, b), 0.0);
+    BlurOptions boxes;
+    boxes.method = BlurMethod::ThreeBoxes;
+    EXPECT_FALSE(blur(a, src, k, boxes));
+    EXPECT_NE(a.geterror().find("anti-aliased gaussian"), std::string::npos) << a.geterror();
 }
 
 TEST(Blur, BordersOnAConstantImage)
@@ -908,7 +991,7 @@ TEST(Blur, BadParametersAreRefused)
         EXPECT_NE(out.geterror().find(what), std::string::npos) << out.geterror();
     };
     method_refused(BlurMethod::Parallelograms, "needs a hexagon");
-    method_refused(BlurMethod::ThreeBoxes, "for the gaussian");
+    method_refused(BlurMethod::ThreeBoxes, "for the anti-aliased gaussian");
     method_refused(BlurMethod::BilinearTaps, "9x9 or 17x17");
     BlurOptions bad;
     bad.bands = -1;

@@ -17,7 +17,8 @@ namespace bokeh {
 
 enum class KernelShape {
     Box,       ///< rectangle, exact area weights for fractional sizes
-    Gaussian,  ///< sigma = width / 4 as in oiiotool (or Kernel::sigma_px), not truncated
+    Gaussian,  ///< sigma = width / 4 as in oiiotool (or Kernel::sigma_px); anti-aliased:
+               ///< not truncated; hard edge: oiiotool's, truncated at the footprint
     Disk,      ///< circle / ellipse
     Polygon,   ///< N straight or curved blades
 };
@@ -25,7 +26,9 @@ enum class KernelShape {
 /// How the kernel's edge is sampled.
 enum class KernelEdge {
     Antialiased,  ///< each pixel weighted by the area of it inside the shape
-    Hard,         ///< 0/1 by the pixel centre: OIIO's make_kernel("disk") rule
+    Hard,         ///< the shape sampled at whole-pixel offsets, OIIO's make_kernel rule:
+                  ///< disk, polygon and box 0/1 by the pixel centre, the Gaussian its
+                  ///< value there, cut at the footprint (|x| < width / 2)
 };
 
 /// Which algorithm computes the blur. Auto, Exact and Reference give the kernel's exact
@@ -120,6 +123,12 @@ KernelWeights kernel_weights(const Kernel& k, int nthreads = 0);
 /// One-dimensional weights of the separable shapes, centred, sum 1.
 std::vector<double> box_weights_1d(double width_px);
 std::vector<double> gaussian_weights_1d(double sigma_px);
+/// The box's or the Gaussian's weights along x and along y under its edge rule (each
+/// centred, sum 1): anti-aliased, box_weights_1d and gaussian_weights_1d; hard, OIIO's
+/// make_kernel("box" | "gaussian", width, height) factors: samples at whole offsets, the
+/// box's where |i| <= width / 2, the Gaussian's exp(-i^2 / 2 sigma^2) where |i| < width / 2
+/// (no width: 4 sigma). Other shapes are not separable: {1}, {1}.
+std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kernel& k);
 
 /// The effective kernel of BlurMethod::Bands: the exact kernel's rows grouped into at
 /// most `bands` bands per half, each band one anti-aliased interval of the band's mean

@@ -141,12 +141,12 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
     };
     c.options = {
         OptionSpec::Choice("kernel", { "gaussian", "box", "disk", "hex", "polygon", "image" },
-                           "kernel shape (gaussian: sigma = W/4 as oiiotool, not truncated; "
+                           "kernel shape (gaussian: sigma = W/4 as oiiotool, not truncated unless edge=hard; "
                            "image: the top image of the stack, resized to WxH, blurs the one "
                            "below it, as --convolve)"),
         OptionSpec::Choice("edge", { "aa", "hard" },
-                           "aa: area-weighted edge; hard: pixel-centre test (= oiiotool's disk; with "
-                           "border=clamp, oiiotool's --blur to 1e-5)"),
+                           "aa: area-weighted edge; hard: sampled at pixel centres as oiiotool's kernels "
+                           "(disk, box; gaussian cut at WxH; with border=clamp, oiiotool's --blur to 1e-5)"),
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps", "reduced", "spans", "fft", "separable" },
