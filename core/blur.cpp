@@ -1095,6 +1095,7 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
     const BlurMethod asked = opts.method;
     const bool gaussian = k.shape == KernelShape::Gaussian;
     const bool shape    = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
+    const bool filter   = k.shape == KernelShape::Filter;
     // A method asked for by name: taken where it applies to `k`, else refused with `why`.
     auto named = [&](bool applies, const char* why) {
         m = asked;
@@ -1115,8 +1116,9 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         // buffer's 19 (one run, a slow phase of the machine): still the reduction.
         // A hard-edged Gaussian is oiiotool's, cut at 2 sigma: three boxes stand for the
         // whole one.
-        m = opts.iris != 0.0f ? BlurMethod::Exact
-            : gaussian        ? (k.edge == KernelEdge::Hard ? BlurMethod::Exact : BlurMethod::ThreeBoxes)
+        // OIIO's filters have no approximation here: exact.
+        m = opts.iris != 0.0f || filter ? BlurMethod::Exact
+            : gaussian                  ? (k.edge == KernelEdge::Hard ? BlurMethod::Exact : BlurMethod::ThreeBoxes)
             : shape && k.edge == KernelEdge::Antialiased && reduction_factor(k) > 1.0
                 ? BlurMethod::Reduced
             : is_hexagon(k)           ? BlurMethod::Parallelograms  // or Exact: see blur()
@@ -1133,9 +1135,11 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         return named(shape && k.hole == 0.0f, "method=bands is for disk and polygon kernels without a hole");
     case BlurMethod::Reduced: m = asked; return true;
     case BlurMethod::Spans: return named(shape, "method=spans is for disk and polygon kernels");
-    case BlurMethod::Separable: return named(gaussian, "method=separable is for the gaussian kernel");
+    case BlurMethod::Separable:
+        return named(gaussian || (filter && is_separable(k)),
+                     "method=separable is for the gaussian kernel and OIIO's separable filters");
     case BlurMethod::Fft:
-        return named(shape || gaussian, "method=fft is for disk, polygon and gaussian kernels");
+        return named(shape || gaussian || filter, "method=fft is for disk, polygon, gaussian and OIIO's filter kernels");
     case BlurMethod::BilinearTaps:
         return named(k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased
                          && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f)
@@ -1194,6 +1198,15 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         dst.errorfmt("blur: method=reduced does not take iris (a block's mean of exp(k x) "
                      "widens every highlight by up to a block); use an exact method");
         return false;
+    }
+    if (k.shape == KernelShape::Filter && opts.iris != 0.0f) {
+        // As for image kernels: a weighted mean of exp(k x) with negative weights can fall
+        // to 0 or below, whose log is NaN.
+        const KernelWeights w = kernel_weights(k, nthreads);
+        if (std::any_of(w.w.begin(), w.w.end(), [](double v) { return v < 0.0; })) {
+            dst.errorfmt("blur: iris mode needs a kernel without negative weights ({} has some)", k.filter);
+            return false;
+        }
     }
     if (!check_source(dst, src))
         return false;
@@ -1295,10 +1308,14 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (shape && method == BlurMethod::Exact && !weights.is_identity())
         method = fft_cheaper_than_spans(roi.width(), roi.height(), nc, rx, ry, spans) ? BlurMethod::Fft
                                                                                        : BlurMethod::Spans;
-    if (k.shape == KernelShape::Gaussian && method == BlurMethod::Exact && !weights.is_identity())
+    // OIIO's separable filters likewise (rows and columns, any signs); the others by FFT.
+    const bool separable = k.shape == KernelShape::Gaussian || (k.shape == KernelShape::Filter && is_separable(k));
+    if (separable && method == BlurMethod::Exact && !weights.is_identity())
         method = fft_ns() < 0.85 * nc * separable_cost_ns(roi.width(), roi.height(), 2 * rx + 1, 2 * ry + 1)
                      ? BlurMethod::Fft
                      : BlurMethod::Separable;
+    if (k.shape == KernelShape::Filter && method == BlurMethod::Exact && !weights.is_identity())
+        method = BlurMethod::Fft;
     if (opts.method == BlurMethod::Fft && !std::isfinite(fft_ns())) {  // chosen, it is finite
         dst.errorfmt("blur: method=fft takes kernels under 8192 px across; this one reaches {}x{}",
                      2 * rx + 1, 2 * ry + 1);

@@ -10,6 +10,10 @@
 // normalised; box 1 where |x| <= w/2 (an 8 px box is 9 equal taps), Gaussian
 // exp(-2 (2x/w)^2) where |2x/w| < 1, i.e. sigma = w/4 cut at 2 sigma (8.9 % of a 2-D
 // Gaussian's mass lies past it), so `--blur:edge=hard` gives oiiotool's kernels.
+// Filter (oiiotool's other --blur kernels: triangle, bspline, lanczos3, ...): OIIO's own
+// make_kernel is called, not reimplemented, so its weights are oiiotool's by construction;
+// only their normalisation is redone in double. A separable one's factors are the kernel's
+// column and row sums (for a product kernel, each factor scaled to sum 1).
 // Polygon with N blades: the edge distance at polar angle phi from an edge's normal is
 // cos(pi/N) / cos(phi) (circumradius 1); curved blades blend it toward the circle,
 // d = d_poly + curvature (1 - d_poly), an approximation of real curved blades, which are
@@ -28,8 +32,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <vector>
 
+#include <OpenImageIO/filter.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
 
 namespace bokeh {
@@ -62,7 +69,57 @@ bool validate(const Kernel& k, std::string& err)
         err = format("hole {} is outside 0..<1", k.hole);
         return false;
     }
+    if (k.shape == KernelShape::Filter) {
+        const std::vector<std::string> names = oiio_filter_names();
+        if (std::find(names.begin(), names.end(), k.filter) == names.end()) {
+            err = format("'{}' is not one of OIIO's filters ({})", k.filter, OIIO::Strutil::join(names, ", "));
+            return false;
+        }
+        // make_kernel's binomial has ceil(W) weights for a ceil(W) | 1 wide window: past
+        // them, at even or fractional sizes, it reads memory it never wrote.
+        auto odd_whole = [](float v) { return v == 0.0f || (v == std::floor(v) && int(v) % 2 == 1); };
+        if (k.filter == "binomial" && (!odd_whole(k.width_px) || !odd_whole(k.height_px))) {
+            err = format("binomial takes odd whole sizes, not {}x{} (OIIO's own kernel is undefined there)",
+                         k.width_px, k.height_px);
+            return false;
+        }
+        const OIIO::ImageBuf K =
+            OIIO::ImageBufAlgo::make_kernel(k.filter, std::max(k.width_px, 1.0f), std::max(k.height_px, 1.0f));
+        const auto stats = OIIO::ImageBufAlgo::computePixelStats(K);
+        if (K.has_error() || stats.sum.empty() || !(stats.sum[0] > 0.0) || stats.nancount[0] || stats.infcount[0]) {
+            err = format("filter {} at {}x{} has no positive sum of weights to normalise", k.filter, k.width_px,
+                         k.height_px);
+            return false;
+        }
+    }
     return true;
+}
+
+std::vector<std::string> oiio_filter_names()
+{
+    std::vector<std::string> names;
+    for (int i = 0; i < OIIO::Filter2D::num_filters(); ++i) {
+        const OIIO::FilterDesc& d = OIIO::Filter2D::get_filterdesc(i);
+        const std::string name    = d.name;
+        if (name != "box" && name != "gaussian" && name != "disk")
+            names.push_back(name);
+    }
+    names.push_back("binomial");
+    return names;
+}
+
+bool is_separable(const Kernel& k)
+{
+    if (k.shape == KernelShape::Box || k.shape == KernelShape::Gaussian)
+        return true;
+    if (k.shape != KernelShape::Filter)
+        return false;
+    if (k.filter == "binomial")
+        return true;
+    std::unique_ptr<OIIO::Filter2D, void (*)(OIIO::Filter2D*)> f(
+        OIIO::Filter2D::create(k.filter, std::max(k.width_px, 1.0f), std::max(k.height_px, 1.0f)),
+        OIIO::Filter2D::destroy);
+    return f && f->separable();
 }
 
 std::pair<double, double> gaussian_sigma(const Kernel& k)
@@ -140,6 +197,16 @@ std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kern
             return sampled_1d(reach, false, [&](double x) { return std::exp(-x * x / (2.0 * sigma * sigma)); });
         };
         return { gauss(sx, k.width_px), gauss(sy, k.height_px) };
+    }
+    if (is_separable(k)) {  // a Filter
+        const KernelWeights kw = kernel_weights(k);
+        std::vector<double> wx(size_t(2 * kw.rx + 1), 0.0), wy(size_t(2 * kw.ry + 1), 0.0);
+        for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+            for (int dx = -kw.rx; dx <= kw.rx; ++dx) {
+                wx[size_t(dx + kw.rx)] += kw.at(dx, dy);
+                wy[size_t(dy + kw.ry)] += kw.at(dx, dy);
+            }
+        return { wx, wy };
     }
     return { { 1.0 }, { 1.0 } };
 }
@@ -342,6 +409,32 @@ KernelWeights shape_weights(const Kernel& k, int nthreads)
     return trimmed(kw);
 }
 
+// make_kernel(k.filter, w, h) (a side of 0 is one pixel: 0 x 0 is the identity, as for
+// every shape), normalised in double. Its window is ceil(w) | 1 wide.
+KernelWeights filter_weights(const Kernel& k)
+{
+    const OIIO::ImageBuf K =
+        OIIO::ImageBufAlgo::make_kernel(k.filter, std::max(k.width_px, 1.0f), std::max(k.height_px, 1.0f));
+    const OIIO::ROI r = K.roi();
+    // validate() refuses every name and size that could fail here.
+    if (K.has_error() || r.xbegin != -(r.width() / 2) || r.ybegin != -(r.height() / 2))
+        return KernelWeights{ 0, 0, { 1.0 } };
+    KernelWeights kw;
+    kw.rx = r.width() / 2;
+    kw.ry = r.height() / 2;
+    double sum = 0.0;
+    for (int y = r.ybegin; y < r.yend; ++y)
+        for (int x = r.xbegin; x < r.xend; ++x) {
+            kw.w.push_back(double(K.getchannel(x, y, 0, 0)));
+            sum += kw.w.back();
+        }
+    if (!(sum > 0.0))
+        return KernelWeights{ 0, 0, { 1.0 } };
+    for (double& v : kw.w)
+        v /= sum;
+    return trimmed(kw);
+}
+
 }  // namespace
 
 KernelWeights kernel_weights(const Kernel& k, int nthreads)
@@ -359,6 +452,7 @@ KernelWeights kernel_weights(const Kernel& k, int nthreads)
         if (k.width_px <= 0.0f || k.height_px <= 0.0f)
             return KernelWeights{ 0, 0, { 1.0 } };
         return shape_weights(k, nthreads);
+    case KernelShape::Filter: return filter_weights(k);
     }
     return KernelWeights{ 0, 0, { 1.0 } };
 }

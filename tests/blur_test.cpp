@@ -78,6 +78,11 @@ std::vector<Named> kernels()
     p->blades = 7, p->curvature = 1.0f;
     p = add("octagon 21 with a hole", KernelShape::Polygon, 21, 21);
     p->blades = 8, p->hole = 0.3f, p->rotation_deg = 11;
+    // OIIO's filters (oiiotool's other --blur kernels): negative lobes, a fractional size,
+    // one that is not separable.
+    add("OIIO lanczos3 7x7 (negative lobes)", KernelShape::Filter, 7, 7)->filter = "lanczos3";
+    add("OIIO triangle 6.5x9", KernelShape::Filter, 6.5f, 9)->filter = "triangle";
+    add("OIIO radial-lanczos3 9x9 (not separable)", KernelShape::Filter, 9, 9)->filter = "radial-lanczos3";
     return list;
 }
 
@@ -88,6 +93,10 @@ std::vector<BlurMethod> exact_methods(const Kernel& k)
     if (k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon)
         return { BlurMethod::Auto, BlurMethod::Spans, BlurMethod::Fft };
     if (k.shape == KernelShape::Gaussian)
+        return { BlurMethod::Auto, BlurMethod::Fft };
+    if (k.shape == KernelShape::Filter && is_separable(k))
+        return { BlurMethod::Auto, BlurMethod::Separable, BlurMethod::Fft };
+    if (k.shape == KernelShape::Filter)
         return { BlurMethod::Auto, BlurMethod::Fft };
     return { BlurMethod::Auto };
 }
@@ -126,6 +135,7 @@ std::string method_name(BlurMethod m)
            : m == BlurMethod::Parallelograms ? " (parallelograms)"
            : m == BlurMethod::ThreeBoxes   ? " (three boxes)"
            : m == BlurMethod::BilinearTaps ? " (taps)"
+           : m == BlurMethod::Separable    ? " (separable)"
                                            : "";
 }
 
@@ -454,12 +464,38 @@ TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
                 o.grow      = border == Border::Black;
                 o.reduction = method == BlurMethod::Reduced ? 2.0f : 0.0f;
                 OIIO::ImageBuf got, clean, reach[3];
+                const KernelWeights kw = kernel_weights(n.k);
+                const bool is_signed   = std::any_of(kw.w.begin(), kw.w.end(), [](double v) { return v < 0.0; });
+                if (iris != 0.0f && is_signed) {
+                    // A mean of exp(k x) with negative weights can fall to 0 or below: refused.
+                    EXPECT_FALSE(blur(got, b.src, n.k, o));
+                    EXPECT_NE(got.geterror().find("without negative weights"), std::string::npos) << got.geterror();
+                    continue;
+                }
                 ASSERT_TRUE(blur(got, b.src, n.k, o)) << got.geterror();
                 ASSERT_TRUE(blur(clean, b.replaced(iris), n.k, o, got.roi())) << clean.geterror();
+                // The brute force on the indicators, the positive and negative weights apart
+                // (OIIO's lanczos3, say): an infinity through a negative weight changes sign.
                 BlurOptions plain = o;
                 plain.iris        = 0.0f;
-                for (int kind = 0; kind < 3; ++kind)
-                    ASSERT_TRUE(convolve_reference(reach[kind], b.kinds[kind], kernel_weights(n.k), plain, got.roi()));
+                for (int kind = 0; kind < 3; ++kind) {
+                    reach[kind] = OIIO::ImageBuf(OIIO::ImageSpec(got.roi(), OIIO::TypeFloat));
+                    OIIO::ImageBufAlgo::zero(reach[kind]);
+                }
+                for (const double sign : { 1.0, -1.0 }) {
+                    KernelWeights part = kw;
+                    for (double& v : part.w)
+                        v = std::max(0.0, sign * v);
+                    if (sign < 0.0 && !is_signed)
+                        continue;
+                    for (int kind = 0; kind < 3; ++kind) {
+                        const int as = sign > 0.0 || kind == 0 ? kind : 3 - kind;
+                        OIIO::ImageBuf out;
+                        ASSERT_TRUE(convolve_reference(out, b.kinds[kind], part, plain, got.roi()));
+                        ASSERT_EQ(out.roi(), reach[as].roi());
+                        ASSERT_TRUE(OIIO::ImageBufAlgo::add(reach[as], reach[as], out));
+                    }
+                }
                 expect_footprint(got, clean, reach);
             }
     }
@@ -823,6 +859,74 @@ TEST(Blur, HardEdgeEqualsOiioConvolution)
                           1e-5);
             }
         }
+}
+
+TEST(Blur, OiioFiltersEqualOiioConvolution)
+{
+    // oiiotool's other --blur kernels, every one OIIO names: make_kernel(name, w, h)'s
+    // weights, each exact method against IBA::convolve away from the border (1e-5, values
+    // 0..1), the separable ones' factors reproducing the whole kernel.
+    const OIIO::ImageBuf src = test_image(53, 41, 0, 0, false);
+    const std::vector<std::string> names = oiio_filter_names();
+    ASSERT_GE(names.size(), 10u);
+    for (const std::string& name : names)
+        for (auto [w, h] : { std::pair{ 5.0f, 5.0f }, { 7.5f, 11.0f } }) {
+            if (name == "binomial" && w != std::floor(w))
+                continue;  // odd whole sizes only (refused below)
+            SCOPED_TRACE(testing::Message() << name << " " << w << "x" << h);
+            Kernel k;
+            k.shape     = KernelShape::Filter;
+            k.filter    = name;
+            k.width_px  = w;
+            k.height_px = h;
+            const KernelWeights kw = kernel_weights(k);
+            if (is_separable(k)) {
+                const auto [wx, wy] = separable_weights(k);
+                ASSERT_EQ(wx.size(), size_t(2 * kw.rx + 1));
+                ASSERT_EQ(wy.size(), size_t(2 * kw.ry + 1));
+                double worst = 0.0;
+                for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+                    for (int dx = -kw.rx; dx <= kw.rx; ++dx)
+                        worst = std::max(worst, std::abs(wx[size_t(dx + kw.rx)] * wy[size_t(dy + kw.ry)] - kw.at(dx, dy)));
+                EXPECT_LE(worst, 1e-7) << "not a product of its row and column";
+            }
+            const OIIO::ImageBuf theirs = OIIO::ImageBufAlgo::convolve(src, OIIO::ImageBufAlgo::make_kernel(name, w, h));
+            for (BlurMethod m : exact_methods(k)) {
+                SCOPED_TRACE(method_name(m));
+                BlurOptions opts;
+                opts.method = m;
+                OIIO::ImageBuf ours;
+                ASSERT_TRUE(blur(ours, src, k, opts)) << ours.geterror();
+                OIIO::ROI inner = src.roi();
+                inner.xbegin += kw.rx, inner.xend -= kw.rx, inner.ybegin += kw.ry, inner.yend -= kw.ry;
+                EXPECT_LE(bokeh_test::max_difference(OIIO::ImageBufAlgo::cut(ours, inner),
+                                                     OIIO::ImageBufAlgo::cut(theirs, inner)),
+                          1e-5);
+            }
+        }
+    // Refused, each with its reason: an unknown name, binomial past its odd whole sizes
+    // (OIIO's own kernel reads weights it never wrote there), the separable method on a
+    // radial filter, iris mode with negative lobes.
+    Kernel k;
+    k.shape    = KernelShape::Filter;
+    k.width_px = k.height_px = 8.0f;
+    auto refused = [&](const char* why, BlurOptions o = {}) {
+        OIIO::ImageBuf out;
+        EXPECT_FALSE(blur(out, src, k, o)) << why;
+        EXPECT_NE(out.geterror().find(why), std::string::npos) << out.geterror();
+    };
+    k.filter = "laplacian";
+    refused("is not one of OIIO's filters");
+    k.filter = "binomial";
+    refused("odd whole sizes");
+    k.filter = "radial-lanczos3";
+    BlurOptions separable;
+    separable.method = BlurMethod::Separable;
+    refused("OIIO's separable filters", separable);
+    k.filter = "lanczos3";
+    BlurOptions iris;
+    iris.iris = 0.1f;
+    refused("without negative weights (lanczos3 has some)", iris);
 }
 
 TEST(Blur, HardGaussianIsCutAtItsFootprint)
@@ -2063,6 +2167,14 @@ TEST(BlurIris, ExactMethodsMatchTheBruteForceOfExpMeanLog)
                     o.border = border;
                     o.iris   = k;
                     OIIO::ImageBuf got;
+                    const KernelWeights kw = kernel_weights(n.k);
+                    if (std::any_of(kw.w.begin(), kw.w.end(), [](double v) { return v < 0.0; })) {
+                        // Its mean of exp(k x) could fall to 0 or below (log: NaN): refused.
+                        EXPECT_FALSE(blur(got, src, n.k, o));
+                        EXPECT_NE(got.geterror().find("without negative weights"), std::string::npos)
+                            << got.geterror();
+                        continue;
+                    }
                     ASSERT_TRUE(blur(got, src, n.k, o)) << got.geterror();
                     OIIO::ImageBuf e = src, mean_e, plain, inside;
                     for (OIIO::ImageBuf::Iterator<float> it(e); !it.done(); ++it)

@@ -332,9 +332,9 @@ TEST(Cli, HardEdgeIsOiiotoolsBlur)
     // A user switching from `oiiotool --blur:kernel=K WxH` gets the same picture from
     // `--blur:kernel=K:edge=hard:border=clamp WxH` (OIIO's convolve repeats the edge
     // pixels) for K = disk, box and gaussian (oiiotool's default, so also without
-    // :kernel=): every pixel within 1e-5 (values 0..1, float output), square, even,
-    // fractional and elliptical sizes. oiiotool comes with the project's dependencies
-    // (openimageio-tools).
+    // :kernel=), and OIIO's other filters by name (:edge does not apply to them): every
+    // pixel within 1e-5 (values 0..1, float output), square, even, fractional and
+    // elliptical sizes. oiiotool comes with the project's dependencies (openimageio-tools).
     if (std::system("command -v oiiotool >/dev/null 2>&1") != 0)
         GTEST_SKIP() << "oiiotool is not installed (make deps installs it)";
     const std::string dir = fresh_dir("cli_oiio_disk");
@@ -346,8 +346,15 @@ TEST(Cli, HardEdgeIsOiiotoolsBlur)
             src.setpixel(x, y, px);
         }
     ASSERT_TRUE(src.write(dir + "/in.exr"));
-    for (const char* kernel : { ":kernel=disk", ":kernel=box", ":kernel=gaussian", "" })
-        for (const char* size : { "9x9", "8x8", "15x7", "21x21", "7.5x5.2" }) {
+    const std::vector<const char*> sizes{ "9x9", "8x8", "15x7", "21x21", "7.5x5.2" }, fewer{ "8x8", "7.5x5.2" };
+    const std::pair<const char*, std::vector<const char*>> cases[] = {
+        { ":kernel=disk", sizes },      { ":kernel=box", sizes },      { ":kernel=gaussian", sizes },
+        { "", sizes },                  { ":kernel=lanczos3", fewer }, { ":kernel=bspline", fewer },
+        { ":kernel=radial-lanczos3", fewer },
+        { ":kernel=binomial", { "9x9" } },  // odd whole sizes only: OIIO's is undefined past them
+    };
+    for (const auto& [kernel, kernel_sizes] : cases)
+        for (const char* size : kernel_sizes) {
             SCOPED_TRACE(std::string(kernel) + " " + size);
             // A file name per case: ImageBuf reads through OIIO's cache, which keeps a name's first pixels.
             const std::string tag  = std::string(*kernel ? kernel + 8 : "default") + "_" + size;
@@ -493,7 +500,7 @@ TEST(Cli, BlurMethodsAndConvolve)
     expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --convolve -o {2}", in, dir, out)),
                          "kernel image channel 0 sums to 0", out);
     expect_clean_failure(bokehtool(format("{0} --blur:kernel=box:method=fft 9 -o {1}", in, out)),
-                         "method=fft is for disk, polygon and gaussian kernels", out);
+                         "method=fft is for disk, polygon, gaussian and OIIO's filter kernels", out);
     // --blur:kernel=image takes the kernel from the stack too, resized to WxH: at its own
     // size it is --convolve; a flat 3x3 image stretched to 9x9 is the 9x9 box; size 0 is
     // the image itself, as for every kernel.

@@ -21,6 +21,10 @@ enum class KernelShape {
                ///< not truncated; hard edge: oiiotool's, truncated at the footprint
     Disk,      ///< circle / ellipse
     Polygon,   ///< N straight or curved blades
+    Filter,    ///< one of OIIO's named filters (Kernel::filter, oiio_filter_names()): the
+               ///< weights of make_kernel(filter, width, height), as oiiotool's
+               ///< `--blur:kernel=NAME`; exact methods only (separable ones by rows and
+               ///< columns, the others by FFT)
 };
 
 /// How the kernel's edge is sampled.
@@ -72,7 +76,11 @@ struct Kernel {
     float curvature    = 0.0f;  ///< Polygon: 0 straight blades .. 1 a circle
     float hole         = 0.0f;  ///< Disk/Polygon: catadioptric hole, fraction of the radius
     KernelEdge edge    = KernelEdge::Antialiased;
+    std::string filter;  ///< Filter: its name (triangle, lanczos3, ...; see oiio_filter_names())
 };
+/// The names KernelShape::Filter takes: OIIO's 2-D filters and make_kernel's "binomial",
+/// less those the other shapes are (box, gaussian, disk: theirs with a hard edge).
+std::vector<std::string> oiio_filter_names();
 
 struct BlurOptions {
     Border border     = Border::Black;
@@ -127,8 +135,11 @@ std::vector<double> gaussian_weights_1d(double sigma_px);
 /// centred, sum 1): anti-aliased, box_weights_1d and gaussian_weights_1d; hard, OIIO's
 /// make_kernel("box" | "gaussian", width, height) factors: samples at whole offsets, the
 /// box's where |i| <= width / 2, the Gaussian's exp(-i^2 / 2 sigma^2) where |i| < width / 2
-/// (no width: 4 sigma). Other shapes are not separable: {1}, {1}.
+/// (no width: 4 sigma); a separable Filter, its make_kernel weights' column and row sums.
+/// Shapes that are not separable (is_separable): {1}, {1}.
 std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kernel& k);
+/// Box, Gaussian, and the Filters OIIO calls separable (and binomial).
+bool is_separable(const Kernel& k);
 
 /// The effective kernel of BlurMethod::Bands: the exact kernel's rows grouped into at
 /// most `bands` bands per half, each band one anti-aliased interval of the band's mean

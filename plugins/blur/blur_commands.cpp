@@ -72,10 +72,12 @@ bool blur_command(CommandContext& c)
     const std::string& shape = c.options.get_string("kernel");
     if (shape == "image")
         return blur_with_image_command(c, k.width_px, k.height_px);
-    k.shape = shape == "box"        ? bokeh::KernelShape::Box
-              : shape == "gaussian" ? bokeh::KernelShape::Gaussian
-              : shape == "disk"     ? bokeh::KernelShape::Disk
-                                    : bokeh::KernelShape::Polygon;
+    k.shape = shape == "box"                            ? bokeh::KernelShape::Box
+              : shape == "gaussian"                     ? bokeh::KernelShape::Gaussian
+              : shape == "disk"                         ? bokeh::KernelShape::Disk
+              : shape == "hex" || shape == "polygon"    ? bokeh::KernelShape::Polygon
+                                                        : bokeh::KernelShape::Filter;
+    k.filter = shape;
     k.blades       = shape == "hex" ? 6 : c.options.get_int("blades");
     k.sigma_px     = float(c.options.get_float("sigma"));
     k.rotation_deg = float(c.options.get_float("rotation"));
@@ -139,11 +141,15 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
                           "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
     };
+    std::vector<std::string> kernels = { "gaussian", "box", "disk", "hex", "polygon", "image" };
+    const std::vector<std::string> oiio_filters = bokeh::oiio_filter_names();
+    kernels.insert(kernels.end(), oiio_filters.begin(), oiio_filters.end());
     c.options = {
-        OptionSpec::Choice("kernel", { "gaussian", "box", "disk", "hex", "polygon", "image" },
+        OptionSpec::Choice("kernel", kernels,
                            "kernel shape (gaussian: sigma = W/4 as oiiotool, not truncated unless edge=hard; "
                            "image: the top image of the stack, resized to WxH, blurs the one "
-                           "below it, as --convolve)"),
+                           "below it, as --convolve; the names after it are OIIO's filters, "
+                           "oiiotool's make_kernel weights, computed exactly)"),
         OptionSpec::Choice("edge", { "aa", "hard" },
                            "aa: area-weighted edge; hard: sampled at pixel centres as oiiotool's kernels "
                            "(disk, box; gaussian cut at WxH; with border=clamp, oiiotool's --blur to 1e-5)"),
