@@ -1133,7 +1133,9 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         return named(is_hexagon(k), "method=parallelograms needs a hexagon (6 straight blades, no hole)");
     case BlurMethod::Bands:
         return named(shape && k.hole == 0.0f, "method=bands is for disk and polygon kernels without a hole");
-    case BlurMethod::Reduced: m = asked; return true;
+    case BlurMethod::Reduced:
+        return named(!filter, "method=reduced is not offered for OIIO's filters (no approximation of them is "
+                              "measured); use an exact method");
     case BlurMethod::Spans: return named(shape, "method=spans is for disk and polygon kernels");
     case BlurMethod::Separable:
         return named(gaussian || (filter && is_separable(k)),

@@ -33,6 +33,7 @@
 #include <algorithm>
 #include <cmath>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include <OpenImageIO/filter.h>
@@ -44,6 +45,62 @@ namespace bokeh {
 using OIIO::Strutil::fmt::format;
 
 constexpr double kPi = 3.14159265358979323846;
+
+namespace {
+
+// make_kernel's binomial has ceil(W) weights for a ceil(W) | 1 wide window (past them, at
+// even or fractional sizes, it reads memory it never wrote), and they sum to 2^(W - 1) in
+// float (infinite past 128).
+bool binomial_size(float v) { return v == 0.0f || (v == std::floor(v) && int(v) % 2 == 1 && v <= 127.0f); }
+
+// OIIO's make_kernel(name, w, h) (a side of 0 is one pixel) in double, normalised, or none
+// where it has no positive finite sum (validate() names the cause).
+std::optional<KernelWeights> oiio_kernel(const std::string& name, float w, float h)
+{
+    if (name == "binomial" && !(binomial_size(w) && binomial_size(h)))
+        return std::nullopt;
+    const OIIO::ImageBuf K = OIIO::ImageBufAlgo::make_kernel(name, std::max(w, 1.0f), std::max(h, 1.0f));
+    const OIIO::ROI r      = K.roi();
+    if (K.has_error() || r.xbegin != -(r.width() / 2) || r.ybegin != -(r.height() / 2))
+        return std::nullopt;
+    KernelWeights kw;
+    kw.rx = r.width() / 2;
+    kw.ry = r.height() / 2;
+    kw.w.reserve(r.npixels());
+    double sum = 0.0;
+    for (OIIO::ImageBuf::ConstIterator<float> it(K); !it.done(); ++it) {
+        kw.w.push_back(double(it[0]));
+        sum += kw.w.back();
+    }
+    if (!(sum > 0.0) || !std::isfinite(sum))
+        return std::nullopt;
+    for (double& v : kw.w)
+        v /= sum;
+    return kw;
+}
+
+// Zero weights at both ends, dropped in pairs (the kernel stays centred).
+std::vector<double> trimmed_1d(std::vector<double> w)
+{
+    while (w.size() > 1 && w.front() == 0.0 && w.back() == 0.0) {
+        w.pop_back();
+        w.erase(w.begin());
+    }
+    return w;
+}
+
+// A separable Filter's factors: make_kernel(name, w, 1)'s row and make_kernel(name, 1, h)'s
+// column (its 2-D kernel is their product, in float), without the N^2 kernel.
+std::optional<std::pair<std::vector<double>, std::vector<double>>> filter_factors(const Kernel& k)
+{
+    const std::optional<KernelWeights> row = oiio_kernel(k.filter, k.width_px, 1.0f);
+    const std::optional<KernelWeights> col = oiio_kernel(k.filter, 1.0f, k.height_px);
+    if (!row || !col)
+        return std::nullopt;
+    return std::pair{ trimmed_1d(row->w), trimmed_1d(col->w) };
+}
+
+}  // namespace
 
 bool validate(const Kernel& k, std::string& err)
 {
@@ -75,19 +132,19 @@ bool validate(const Kernel& k, std::string& err)
             err = format("'{}' is not one of OIIO's filters ({})", k.filter, OIIO::Strutil::join(names, ", "));
             return false;
         }
-        // make_kernel's binomial has ceil(W) weights for a ceil(W) | 1 wide window: past
-        // them, at even or fractional sizes, it reads memory it never wrote.
-        auto odd_whole = [](float v) { return v == 0.0f || (v == std::floor(v) && int(v) % 2 == 1); };
-        if (k.filter == "binomial" && (!odd_whole(k.width_px) || !odd_whole(k.height_px))) {
-            err = format("binomial takes odd whole sizes, not {}x{} (OIIO's own kernel is undefined there)",
+        if (k.filter == "sinc") {
+            err = "OIIO's sinc is not scaled to the kernel's size: 0 at every whole offset, so the identity "
+                  "(up to rounding) at any size; lanczos3 is the windowed sinc that blurs";
+            return false;
+        }
+        if (k.filter == "binomial" && (!binomial_size(k.width_px) || !binomial_size(k.height_px))) {
+            err = format("binomial takes odd whole sizes up to 127 px, not {}x{} (OIIO's make_kernel reads weights it "
+                         "never wrote at even or fractional sizes; past 127 its weights overflow float)",
                          k.width_px, k.height_px);
             return false;
         }
-        const OIIO::ImageBuf K =
-            OIIO::ImageBufAlgo::make_kernel(k.filter, std::max(k.width_px, 1.0f), std::max(k.height_px, 1.0f));
-        const auto stats = OIIO::ImageBufAlgo::computePixelStats(K);
-        if (K.has_error() || stats.sum.empty() || !(stats.sum[0] > 0.0) || stats.nancount[0] || stats.infcount[0]) {
-            err = format("filter {} at {}x{} has no positive sum of weights to normalise", k.filter, k.width_px,
+        if (is_separable(k) ? !filter_factors(k) : !oiio_kernel(k.filter, k.width_px, k.height_px)) {
+            err = format("filter {} at {}x{} has no positive finite sum of weights to normalise", k.filter, k.width_px,
                          k.height_px);
             return false;
         }
@@ -198,15 +255,9 @@ std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kern
         };
         return { gauss(sx, k.width_px), gauss(sy, k.height_px) };
     }
-    if (is_separable(k)) {  // a Filter
-        const KernelWeights kw = kernel_weights(k);
-        std::vector<double> wx(size_t(2 * kw.rx + 1), 0.0), wy(size_t(2 * kw.ry + 1), 0.0);
-        for (int dy = -kw.ry; dy <= kw.ry; ++dy)
-            for (int dx = -kw.rx; dx <= kw.rx; ++dx) {
-                wx[size_t(dx + kw.rx)] += kw.at(dx, dy);
-                wy[size_t(dy + kw.ry)] += kw.at(dx, dy);
-            }
-        return { wx, wy };
+    if (is_separable(k)) {  // a Filter (validate() has seen its factors made)
+        if (const auto f = filter_factors(k))
+            return *f;
     }
     return { { 1.0 }, { 1.0 } };
 }
@@ -409,30 +460,16 @@ KernelWeights shape_weights(const Kernel& k, int nthreads)
     return trimmed(kw);
 }
 
-// make_kernel(k.filter, w, h) (a side of 0 is one pixel: 0 x 0 is the identity, as for
-// every shape), normalised in double. Its window is ceil(w) | 1 wide.
+// A Filter's weights: its factors' product where it is separable (no N^2 make_kernel),
+// else OIIO's whole kernel; validate() has seen them made.
 KernelWeights filter_weights(const Kernel& k)
 {
-    const OIIO::ImageBuf K =
-        OIIO::ImageBufAlgo::make_kernel(k.filter, std::max(k.width_px, 1.0f), std::max(k.height_px, 1.0f));
-    const OIIO::ROI r = K.roi();
-    // validate() refuses every name and size that could fail here.
-    if (K.has_error() || r.xbegin != -(r.width() / 2) || r.ybegin != -(r.height() / 2))
-        return KernelWeights{ 0, 0, { 1.0 } };
-    KernelWeights kw;
-    kw.rx = r.width() / 2;
-    kw.ry = r.height() / 2;
-    double sum = 0.0;
-    for (int y = r.ybegin; y < r.yend; ++y)
-        for (int x = r.xbegin; x < r.xend; ++x) {
-            kw.w.push_back(double(K.getchannel(x, y, 0, 0)));
-            sum += kw.w.back();
-        }
-    if (!(sum > 0.0))
-        return KernelWeights{ 0, 0, { 1.0 } };
-    for (double& v : kw.w)
-        v /= sum;
-    return trimmed(kw);
+    if (is_separable(k)) {
+        const auto [wx, wy] = separable_weights(k);
+        return detail::outer(wx, wy);
+    }
+    const std::optional<KernelWeights> kw = oiio_kernel(k.filter, k.width_px, k.height_px);
+    return kw ? trimmed(*kw) : KernelWeights{ 0, 0, { 1.0 } };
 }
 
 }  // namespace

@@ -9,6 +9,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <numeric>
 #include <tuple>
 
 #include <OpenImageIO/imagebufalgo.h>
@@ -451,7 +452,8 @@ TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
         std::vector<std::pair<BlurMethod, float>> methods;  // (method, iris)
         for (BlurMethod m : every_method(n.k))
             methods.push_back({ m, 0.0f });
-        methods.push_back({ BlurMethod::Reduced, 0.0f });
+        if (n.k.shape != KernelShape::Filter)  // OIIO's filters are not reduced (refused)
+            methods.push_back({ BlurMethod::Reduced, 0.0f });
         methods.push_back({ BlurMethod::Auto, 0.05f });
         for (const auto& [method, iris] : methods)
             for (Border border : { Border::Black, Border::Clamp, Border::Mirror }) {
@@ -871,8 +873,8 @@ TEST(Blur, OiioFiltersEqualOiioConvolution)
     ASSERT_GE(names.size(), 10u);
     for (const std::string& name : names)
         for (auto [w, h] : { std::pair{ 5.0f, 5.0f }, { 7.5f, 11.0f } }) {
-            if (name == "binomial" && w != std::floor(w))
-                continue;  // odd whole sizes only (refused below)
+            if ((name == "binomial" && w != std::floor(w)) || name == "sinc")
+                continue;  // odd whole sizes only; sinc is the identity (both refused below)
             SCOPED_TRACE(testing::Message() << name << " " << w << "x" << h);
             Kernel k;
             k.shape     = KernelShape::Filter;
@@ -917,8 +919,17 @@ TEST(Blur, OiioFiltersEqualOiioConvolution)
     };
     k.filter = "laplacian";
     refused("is not one of OIIO's filters");
+    k.filter = "sinc";
+    refused("not scaled to the kernel's size");
     k.filter = "binomial";
-    refused("odd whole sizes");
+    refused("odd whole sizes up to 127");
+    k.width_px = k.height_px = 129.0f;
+    refused("odd whole sizes up to 127");
+    k.filter = "triangle";
+    BlurOptions reduced;
+    reduced.method = BlurMethod::Reduced;
+    refused("method=reduced is not offered for OIIO's filters", reduced);
+    k.width_px = k.height_px = 8.0f;
     k.filter = "radial-lanczos3";
     BlurOptions separable;
     separable.method = BlurMethod::Separable;
@@ -927,6 +938,38 @@ TEST(Blur, OiioFiltersEqualOiioConvolution)
     BlurOptions iris;
     iris.iris = 0.1f;
     refused("without negative weights (lanczos3 has some)", iris);
+}
+
+TEST(Blur, LargeBinomialIsPascalsRow)
+{
+    // Past 65 px OIIO's 2-D binomial kernel sums past float's range (oiiotool's picture
+    // turns black); ours is made from the 1-D rows, so a 101 x 3 binomial is C(100, i) /
+    // 2^100 along x and (1, 2, 1) / 4 along y, to float's precision.
+    Kernel k;
+    k.shape     = KernelShape::Filter;
+    k.filter    = "binomial";
+    k.width_px  = 101.0f;
+    k.height_px = 3.0f;
+    std::string err;
+    ASSERT_TRUE(validate(k, err)) << err;
+    const auto [wx, wy] = separable_weights(k);
+    ASSERT_EQ(wy.size(), 3u);
+    EXPECT_NEAR(wy[1], 0.5, 1e-7);
+    double c = 1.0, worst = 0.0;  // C(100, i) / 2^100, built up along the row
+    std::vector<double> want;
+    for (int i = 0; i <= 100; ++i) {
+        want.push_back(c / std::pow(2.0, 100.0));
+        c = c * double(100 - i) / double(i + 1);
+    }
+    // The row's far tails are below float's reach next to its peak (C(100, 0) / C(100, 50)
+    // is 1e-29) and trimmed only where exactly zero: compare where both have weight.
+    ASSERT_LE(wx.size(), want.size());
+    const size_t off = (want.size() - wx.size()) / 2;
+    for (size_t i = 0; i < wx.size(); ++i)
+        worst = std::max(worst, std::abs(wx[i] - want[i + off]) / want[50]);
+    EXPECT_LE(worst, 1e-6);
+    const KernelWeights kw = kernel_weights(k);
+    EXPECT_NEAR(std::accumulate(kw.w.begin(), kw.w.end(), 0.0), 1.0, 1e-12);
 }
 
 TEST(Blur, HardGaussianIsCutAtItsFootprint)

@@ -40,11 +40,13 @@ enum class KernelEdge {
 /// (BilinearTaps: fixed sizes); bokeh-bench charts what each one costs and loses.
 enum class BlurMethod {
     Auto,            ///< the fastest exact method for the shape
-    Exact,           ///< box: running sums; Gaussian: separable convolution or FFT tiles;
+    Exact,           ///< box: running sums; Gaussian and OIIO's separable filters: separable
+                     ///< convolution or FFT tiles; other filters: FFT tiles;
                      ///< disk and polygon: row spans or FFT tiles; whichever the cost model
                      ///< says is cheaper (on the project's machine at 1080p: FFT from
                      ///< ~100 px for a disk, sigma ~7 for a Gaussian)
-    Fast,            ///< the cheapest method at >= 40 dB: Gaussian -> three boxes; disk
+    Fast,            ///< the cheapest method at >= 40 dB: anti-aliased Gaussian -> three
+                     ///< boxes (a hard-edged one and OIIO's filters: Exact); disk
                      ///< and polygon (hexagon too) -> reduced where its automatic factor
                      ///< exceeds 1; below that, bands (the hexagon: parallelograms) or
                      ///< Exact, whichever the cost models say is cheaper, with the fewest
@@ -55,12 +57,12 @@ enum class BlurMethod {
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
     Bands,           ///< disk, polygon: rows grouped into BlurOptions::bands bands, by running sums
     BilinearTaps,    ///< disk: the seed's 9x9 (25 fetches) or 17x17 (81 fetches) kernel
-    Reduced,         ///< any kernel: blurred exactly at 1/N resolution (area reduction, the
+    Reduced,         ///< any shape but OIIO's filters: blurred exactly at 1/N resolution (area reduction, the
                      ///< kernel scaled by 1/N) and enlarged back bilinearly (SEEDS.md
                      ///< sections 4 and 6); N = BlurOptions::reduction, any real >= 1
     Spans,           ///< disk, polygon: exact, by row spans of prefix sums
-    Fft,             ///< disk, polygon, Gaussian: exact, by FFT in overlap-save tiles
-    Separable,       ///< Gaussian: exact, by the separable convolution
+    Fft,             ///< disk, polygon, Gaussian, OIIO's filters: exact, by FFT in overlap-save tiles
+    Separable,       ///< Gaussian, OIIO's separable filters: exact, by the separable convolution
 };
 
 /// Pixels outside the source's data window.

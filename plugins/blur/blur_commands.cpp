@@ -156,14 +156,15 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps", "reduced", "spans", "fft", "separable" },
-                           "exact: disk/polygon by spans or fft, gaussian separable or fft, whichever is cheaper; "
+                           "exact: disk/polygon by spans or fft, gaussian and OIIO's separable filters "
+                           "separable or fft, whichever is cheaper (other filters: fft); "
                            "fast: the cheapest method measured at >= 40 dB "
-                           "(gaussian: boxes3; disk/polygon/hex: reduced from 37.5/45 px, "
+                           "(gaussian: boxes3, edge=hard: exact; disk/polygon/hex: reduced from 37.5/45 px, "
                            "below that bands (hex: parallelograms) or exact, whichever costs "
-                           "less, with the fewest bands that keep 40 dB; with iris: exact); "
+                           "less, with the fewest bands that keep 40 dB; OIIO's filters and iris: exact); "
                            "taps: the seed's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
-                           "bilinearly; reference: brute force"),
+                           "bilinearly (not for OIIO's filters); reference: brute force"),
         OptionSpec::Int("bands", 0, 0, 64,
                         "method=bands or fast: bands per half kernel (a kernel not symmetric "
                         "in y, a pentagon: twice that over its height); 0: the method's choice "
