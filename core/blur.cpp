@@ -115,18 +115,18 @@ BOKEH_HOT void box_row(float* out, const double* hi, const double* lo, double in
 
 // --- weighted sums of rows (separable passes, brute force) ------------------------
 
-// Each row y of `out` = sum_j w[j] * source(y, j), accumulated in double.
+// Each row y of `out` = sum_j w[j] * source(y, j), accumulated in double (weighted_sum:
+// 16 sums in registers over every tap; a row of double sums, added to once a tap, was
+// load- and store-bound, 61 KiB a 1080p RGBA row, past L1).
 template<class Source>
 void weighted_rows(Plane& out, const std::vector<double>& w, Source source, int nthreads)
 {
     parallel_for_chunks(0, out.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        const size_t n = out.stride();
-        std::vector<double> acc(n);
+        std::vector<const float*> taps(w.size());
         for (int y = int(y0); y < int(y1); ++y) {
-            std::fill(acc.begin(), acc.end(), 0.0);
             for (size_t j = 0; j < w.size(); ++j)
-                add_scaled(acc.data(), source(y, j), w[j], n);
-            to_float(out.row(y), acc.data(), n);
+                taps[j] = source(y, j);
+            weighted_sum(out.row(y), taps.data(), w.data(), w.size(), out.stride());
         }
     });
 }
@@ -509,6 +509,59 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
     return true;
 }
 
+// The separable convolution straight from the source to `dst` (the Gaussian's and OIIO's
+// separable filters' exact method outside iris mode): each task walks down a strip of
+// output columns, filters each padded source row along x into a ring of the last 2 ry + 1
+// rows, and sums the ring's rows along y into the output row, each value's taps in the
+// order convolve_separable adds them (the same bits). Before, a padded plane, a middle
+// and an output plane (fresh pages: their zeroing took a quarter of the time) and a copy
+// into `dst`.
+bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                      const std::vector<double>& wx, const std::vector<double>& wy, Border border, int nthreads)
+{
+    prepare_destination(dst, in, roi);
+    const size_t ncs = size_t(in.nchannels());
+    const int w = roi.width(), h = roi.height();
+    const int rx = int(wx.size() / 2), ry = int(wy.size() / 2), ring = 2 * ry + 1;
+    const int nstrips = column_chunks(w);
+    const int strip   = (w + nstrips - 1) / nstrips;
+    parallel_for_chunks(0, nstrips, 1, nthreads, [&](int64_t s, int64_t) {
+        const int xs = int(s) * strip, xe = std::min(w, xs + strip);
+        if (xe <= xs)
+            return;
+        const size_t n = size_t(xe - xs) * ncs;
+        const int x0 = roi.xbegin + xs - rx, x1 = roi.xbegin + xe + rx;
+        Plane rows(xe - xs, ring, int(ncs));  // written before read, or marked black
+        std::vector<char> slot_black(size_t(ring), 0);
+        std::vector<float> row(size_t(x1 - x0) * ncs), black(n, 0.0f), out_row(n);
+        std::vector<const float*> taps(std::max(wx.size(), wy.size()));
+        // Padded row j (source row roi.ybegin - ry + j) along x into its ring slot.
+        auto horizontal = [&](int j) {
+            const int sy = roi.ybegin - ry + j;
+            const RowSpan span = bordered_row_span(in, sy, x0, x1, border, row.data());
+            slot_black[size_t(j % ring)] = !span.p;
+            if (!span.p)
+                return;
+            const float* v = span.lo == 0 && span.hi == x1 - x0 ? span.p
+                                                                 : bordered_row_view(in, sy, x0, x1, border, row.data());
+            for (size_t t = 0; t < wx.size(); ++t)
+                taps[t] = v + t * ncs;
+            weighted_sum(rows.row(j % ring), taps.data(), wx.data(), wx.size(), n);
+        };
+        for (int j = 0; j < 2 * ry; ++j)
+            horizontal(j);
+        for (int y = 0; y < h; ++y) {
+            horizontal(y + 2 * ry);
+            for (int t = 0; t < ring; ++t)
+                taps[size_t(t)] = slot_black[size_t((y + t) % ring)] ? black.data() : rows.row((y + t) % ring);
+            weighted_sum(out_row.data(), taps.data(), wy.data(), wy.size(), n);
+            stream_floats(static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + y)), out_row.data(), n);
+        }
+        stream_fence();
+    });
+    return true;
+}
+
 // Box width whose variance is `variance` (bisection: variance grows with width).
 double box_width_for_variance(double variance)
 {
@@ -643,7 +696,10 @@ double spans_cost_ns(int w, int h, const std::vector<Span>& spans)
 // ~0.4 ns per tap of the two passes, plus ~2 for the padded plane and the copy out.
 // Fitted to Gaussians at 1080p on the project's machine (sigma = size / 4, 8 sigma + 1
 // taps per pass; 2 threads: 114, 213, 407 ms at sizes 15, 31, 63; the model errs low
-// above, 2250 ms measured at 255 against 1700).
+// above, 2250 ms measured at 255 against 1700). Session 16 (separable_direct, this
+// machine): 43, 54, 71, 88, 116 ms at sizes 11, 15, 19, 23, 31 against the FFT tiles' 78,
+// 60, 64, 93, 96 (medians of 9, one run): the crossover still falls between 19 and 31, so
+// the model, which puts it at sigma ~7 (size 28), is left as it is.
 double separable_cost_ns(int w, int h, int taps_x, int taps_y)
 {
     return double(w) * double(h) * (0.4 * double(taps_x + taps_y) + 2.0);
@@ -1334,6 +1390,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if ((method == BlurMethod::Spans || method == BlurMethod::BilinearTaps) && opts.iris == 0.0f
         && !weights.is_identity())
         return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry, spans, opts.border, nthreads);
+    if (method == BlurMethod::Separable && opts.iris == 0.0f && !weights.is_identity()) {
+        const auto [wx, wy] = separable_weights(k);
+        return separable_direct(dst, in, roi, wx, wy, opts.border, nthreads);
+    }
     if (method == BlurMethod::Fft && opts.iris == 0.0f && !weights.is_identity())
         return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads);
     if (method == BlurMethod::ThreeBoxes && opts.iris == 0.0f && !weights.is_identity()) {

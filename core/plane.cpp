@@ -549,6 +549,29 @@ BOKEH_HOT void add_scaled(double* acc, const float* src, double w, size_t n)
         acc[i] += w * double(src[i]);
 }
 
+BOKEH_HOT void weighted_sum(float* out, const float* const* src, const double* w, size_t taps, size_t n)
+{
+    constexpr size_t kBlock = 16;
+    size_t i = 0;
+    for (; i + kBlock <= n; i += kBlock) {
+        double acc[kBlock] = {};
+        for (size_t j = 0; j < taps; ++j) {
+            const float* s = src[j] + i;
+            const double wj = w[j];
+            for (size_t k = 0; k < kBlock; ++k)
+                acc[k] += wj * double(s[k]);
+        }
+        for (size_t k = 0; k < kBlock; ++k)
+            out[i + k] = float(acc[k]);
+    }
+    for (; i < n; ++i) {
+        double acc = 0.0;
+        for (size_t j = 0; j < taps; ++j)
+            acc += w[j] * double(src[j][i]);
+        out[i] = float(acc);
+    }
+}
+
 BOKEH_HOT void to_float(float* out, const double* acc, size_t n)
 {
     for (size_t i = 0; i < n; ++i)

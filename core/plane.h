@@ -231,6 +231,9 @@ void start_and_finish_rows(double* fresh, double* last, float* out, const double
 void add_scaled(double* acc, const float* src, double w, size_t n);
 /// out[i] = float(acc[i]).
 void to_float(float* out, const double* acc, size_t n);
+/// out[i] = float(sum_j w[j] * src[j][i]) for i < n, each in double with its taps in order
+/// j, 16 values at a time held in registers over every tap.
+void weighted_sum(float* out, const float* const* src, const double* w, size_t taps, size_t n);
 
 /// p[(x + 1) nc + c] = sum of v[0 .. x] in channel c, p[c] = 0, for x < npx.
 void row_prefix(double* p, const float* v, size_t npx, int nc);
