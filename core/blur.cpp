@@ -562,6 +562,108 @@ bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO:
     return true;
 }
 
+// One box along a row: `span` (a padded row of npx + 2 b.radius pixels, black outside its
+// [lo, hi)) into `out` (npx pixels); a running sum for 1, 3 or 4 channels, else the row's
+// prefix sums, over `full()` (the row with its black pixels filled in).
+template<class FullRow>
+void box_along_row(float* out, const RowSpan& span, const float* black, int npx, int nc, const BoxPass& b,
+                   double* prefix, FullRow full)
+{
+    if (box_row_running(out, span, black, npx, nc, b.radius, b.full, b.inner, b.end))
+        return;
+    const size_t ncs = size_t(nc), n = size_t(npx) * ncs;
+    const float* v   = full();
+    row_prefix(prefix, v, size_t(npx + 2 * b.radius), nc);
+    // Output x sums padded [x + radius - full, x + radius + full].
+    const double* hi = prefix + size_t(b.radius + b.full + 1) * ncs;
+    const double* lo = prefix + size_t(b.radius - b.full) * ncs;
+    const bool ends  = b.end != 0.0;
+    box_row(out, hi, lo, b.inner, ends ? v : nullptr, ends ? v + size_t(2 * b.radius) * ncs : nullptr, b.end, n);
+}
+
+// BlurMethod::ThreeBoxes straight from the source to `dst`: each task walks down a strip
+// of output columns; a padded row is boxed three times along x in L1, then goes down
+// three running sums along y, each holding a ring of the rows it reads (the box's
+// 2 radius + 2), the rows of one fed to the next. Before (sessions 9-15), three box_direct
+// passes over whole frames, each into a fresh image (two of them, zeroed page by page).
+// The same arithmetic in another order (all x boxes before the y boxes): float rounding.
+bool three_boxes_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi, const BoxPass& bx,
+                        const BoxPass& by, Border border, int nthreads)
+{
+    prepare_destination(dst, in, roi);
+    const int nc = in.nchannels();
+    const size_t ncs = size_t(nc);
+    const int w = roi.width(), h = roi.height(), rx = bx.radius, ry = by.radius;
+    const int ring = 2 * ry + 2;
+    const int nstrips = column_chunks(w);
+    const int strip   = (w + nstrips - 1) / nstrips;
+    parallel_for_chunks(0, nstrips, 1, nthreads, [&](int64_t s, int64_t) {
+        const int xs = int(s) * strip, xe = std::min(w, xs + strip);
+        if (xe <= xs)
+            return;
+        const int npx = xe - xs;
+        const size_t n = size_t(npx) * ncs;
+        const int x0 = roi.xbegin + xs - 3 * rx, x1 = roi.xbegin + xe + 3 * rx;
+        std::vector<float> row(size_t(x1 - x0) * ncs), once(size_t(npx + 4 * rx) * ncs),
+            twice(size_t(npx + 2 * rx) * ncs), black(size_t(x1 - x0) * ncs, 0.0f), out_row(n);
+        std::vector<double> prefix(size_t(x1 - x0 + 1) * ncs);
+        // The three vertical boxes: stage k's ring holds its input rows, `count` of them so
+        // far; its output row q reads input rows q .. q + 2 ry (the box centred on q + ry).
+        struct Stage {
+            Plane rows;
+            std::vector<double> sum;
+            int count = 0;
+        };
+        std::array<Stage, 3> stages;
+        for (Stage& st : stages) {
+            st.rows = Plane(npx, ring, nc);  // each slot written before it is read
+            st.sum.assign(n, 0.0);
+        }
+        const bool ends = by.end != 0.0;
+        // Row `in_row` enters stage k; the stage's output row goes on to stage k + 1, the
+        // last one's to dst row y.
+        std::function<void(int, const float*)> push = [&](int k, const float* in_row) {
+            Stage& st = stages[size_t(k)];
+            const int r = st.count++;
+            std::copy_n(in_row, n, st.rows.row(r % ring));
+            if (r < 2 * ry)
+                return;
+            const int q = r - 2 * ry, centre = q + ry;
+            auto at = [&](int j) { return st.rows.row(j % ring); };
+            if (q == 0) {
+                for (int j = -by.full; j <= by.full; ++j)
+                    add_scaled(st.sum.data(), at(centre + j), 1.0, n);
+            } else {
+                slide(st.sum.data(), at(centre + by.full), at(centre - 1 - by.full), n);
+            }
+            box_out(out_row.data(), st.sum.data(), by.inner, ends ? at(centre - by.full - 1) : nullptr,
+                    ends ? at(centre + by.full + 1) : nullptr, by.end, n);
+            if (k < 2)
+                push(k + 1, out_row.data());
+            else
+                stream_floats(static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + q)), out_row.data(), n);
+        };
+        for (int j = 0; j < h + 6 * ry; ++j) {
+            const int sy       = roi.ybegin - 3 * ry + j;
+            const RowSpan span = bordered_row_span(in, sy, x0, x1, border, row.data());
+            if (!span.p) {
+                push(0, black.data());
+                continue;
+            }
+            box_along_row(once.data(), span, black.data(), npx + 4 * rx, nc, bx, prefix.data(), [&] {
+                return span.lo == 0 && span.hi == x1 - x0 ? span.p : bordered_row_view(in, sy, x0, x1, border, row.data());
+            });
+            box_along_row(twice.data(), RowSpan{ once.data(), 0, npx + 4 * rx }, black.data(), npx + 2 * rx, nc, bx,
+                          prefix.data(), [&] { return once.data(); });
+            box_along_row(out_row.data(), RowSpan{ twice.data(), 0, npx + 2 * rx }, black.data(), npx, nc, bx,
+                          prefix.data(), [&] { return twice.data(); });
+            push(0, out_row.data());
+        }
+        stream_fence();
+    });
+    return true;
+}
+
 // Box width whose variance is `variance` (bisection: variance grows with width).
 double box_width_for_variance(double variance)
 {
@@ -1397,13 +1499,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (method == BlurMethod::Fft && opts.iris == 0.0f && !weights.is_identity())
         return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads);
     if (method == BlurMethod::ThreeBoxes && opts.iris == 0.0f && !weights.is_identity()) {
-        // Three direct boxes, each writing the region the next one reads (the border rule
-        // acts in the first alone): three reads and writes of the frame, no padded plane.
-        const BoxPass bx(box3x), by(box3y);
-        OIIO::ImageBuf once, twice;
-        return box_direct(once, in, grown(roi, 2 * bx.radius, 2 * by.radius), bx, by, opts.border, nthreads)
-               && box_direct(twice, once, grown(roi, bx.radius, by.radius), bx, by, opts.border, nthreads)
-               && box_direct(dst, twice, roi, bx, by, opts.border, nthreads);
+        return three_boxes_direct(dst, in, roi, BoxPass(box3x), BoxPass(box3y), opts.border, nthreads);
     }
     if (method == BlurMethod::Bands && opts.iris == 0.0f && !weights.is_identity())
         return convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
