@@ -566,7 +566,7 @@ bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO:
 // [lo, hi)) into `out` (npx pixels); a running sum for 1, 3 or 4 channels, else the row's
 // prefix sums, over `full()` (the row with its black pixels filled in). box_direct keeps
 // its own copy of these lines: calling this from it measured 5-8 % slower on the box
-// (A/B both ways round, 21 runs; the same instructions, placed differently).
+// (A/B both ways round, 21 runs; the cause not found).
 template<class FullRow>
 void box_along_row(float* out, const RowSpan& span, const float* black, int npx, int nc, const BoxPass& b,
                    double* prefix, FullRow full)
