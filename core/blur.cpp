@@ -1427,7 +1427,15 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // identity); the exact weights of a large polygon (supersampled) cost tens of ms.
     const bool no_weights = method == BlurMethod::Parallelograms && !exact_weights
                             && std::min(k.width_px, k.height_px) >= 2.0f;
-    const KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
+    // Separable kernels (box, Gaussian, OIIO's separable filters) run from their 1-D
+    // factors on every path but the brute force and the FFT, so their N^2 weights are made
+    // only for those (below, once the FFT is chosen): a Gaussian of sigma 1024 made 8193^2
+    // doubles, 1.2 GB, to read its reach.
+    const auto factors = is_separable(k) && method != BlurMethod::Reference && method != BlurMethod::Fft
+                             ? std::optional{ separable_weights(k) }
+                             : std::nullopt;
+    KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
+                            : factors  ? KernelWeights{ int(factors->first.size() / 2), int(factors->second.size() / 2), {} }
                                   : method == BlurMethod::Bands && exact_weights
                                       ? banded_from(*exact_weights, bands)
                                   : method == BlurMethod::Bands        ? banded_weights(k, bands, nthreads)
@@ -1478,6 +1486,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
                      : BlurMethod::Separable;
     if (k.shape == KernelShape::Filter && method == BlurMethod::Exact && !weights.is_identity())
         method = BlurMethod::Fft;
+    if (method == BlurMethod::Fft && weights.w.empty() && !weights.is_identity())
+        weights = kernel_weights(k, nthreads);
     if (opts.method == BlurMethod::Fft && !std::isfinite(fft_ns())) {  // chosen, it is finite
         dst.errorfmt("blur: method=fft takes kernels under 8192 px across; this one reaches {}x{}",
                      2 * rx + 1, 2 * ry + 1);

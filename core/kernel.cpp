@@ -267,6 +267,7 @@ KernelWeights detail::outer(const std::vector<double>& wx, const std::vector<dou
     KernelWeights kw;
     kw.rx = int(wx.size() / 2);
     kw.ry = int(wy.size() / 2);
+    kw.w.reserve(wx.size() * wy.size());
     for (double y : wy)
         for (double x : wx)
             kw.w.push_back(x * y);

@@ -1089,6 +1089,38 @@ TEST(Blur, ThreeBoxesComputeTheirKernelExactly)
                     EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
                 }
         }
+    // The direct path's other cases: 2 and 5 channels (the row's prefix sums, not the
+    // running sum), a reach past the image (sigma 12 on 23 x 17: three boxes reach ~40 px),
+    // fractional box ends, a data window off the origin.
+    for (int nc : { 2, 5 })
+        for (float sigma : { 1.3f, 12.0f }) {
+            OIIO::ImageSpec spec(23, 17, nc, OIIO::TypeFloat);
+            spec.x = 7;
+            spec.y = -4;
+            OIIO::ImageBuf img(spec);
+            for (OIIO::ImageBuf::Iterator<float> it(img); !it.done(); ++it)
+                for (int c = 0; c < nc; ++c)
+                    it[c] = float((it.x() * 7 + it.y() * 13 + c * 5) % 11) + (it.x() == 12 && it.y() == 3 ? 100.0f : 0.0f);
+            Kernel k;
+            k.shape     = KernelShape::Gaussian;
+            k.width_px  = 4.0f * sigma;
+            k.height_px = 3.1f * sigma;
+            const KernelWeights w = three_box_weights(k);
+            for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
+                for (bool grow : { false, true }) {
+                    SCOPED_TRACE(testing::Message() << nc << " channels, sigma " << sigma << " border "
+                                                    << int(border) << " grow " << grow);
+                    BlurOptions o;
+                    o.method = BlurMethod::ThreeBoxes;
+                    o.border = border;
+                    o.grow   = grow;
+                    OIIO::ImageBuf got, ref;
+                    ASSERT_TRUE(blur(got, img, k, o)) << got.geterror();
+                    ASSERT_TRUE(convolve_reference(ref, img, w, o));
+                    ASSERT_EQ(got.roi(), ref.roi());
+                    EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
+                }
+        }
 }
 
 TEST(Blur, ThreadCountDoesNotChangeResults)
