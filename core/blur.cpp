@@ -1,7 +1,9 @@
-// blur.cpp — uniform blurs: box by running sums, Gaussian by separable convolution or
-// three boxes, disk and polygon by row spans, and the brute-force reference.
+// blur.cpp — uniform blurs: box by running sums, Gaussian (and OIIO's separable filters,
+// oiiotool's other --blur kernels) by separable convolution, the Gaussian also by three
+// boxes, disk and polygon by row spans, and the brute-force reference.
 //
-// The exact box and row-span methods (and the bands of blur_approx.cpp) read the source
+// The exact box, separable and row-span methods, the three boxes (and the bands and
+// parallelograms of blur_approx.cpp) read the source
 // ImageBuf and write the destination directly, tile by tile ("direct" paths below); the
 // others, and every method in iris mode, work as a "valid" convolution of a padded plane:
 // the source region the output needs, grown by the kernel radius and filled past the data
@@ -28,7 +30,13 @@
 // * Bands: their own running sums per column strip (convolve_bands_direct, blur_approx.cpp).
 // * Parallelograms: one sweep down the rows (hexagon_direct, blur_approx.cpp), in a frame
 //   with sheared columns or rows at rotations off multiples of 30 degrees.
-// * Gaussian by three boxes: three box passes, each writing the region the next reads.
+// * Gaussian by three boxes (session 16): per column strip, each padded row boxed three
+//   times along x, then three running sums down the rows, each with its ring
+//   (three_boxes_direct; before, three whole-frame box passes into two fresh images).
+// * Separable convolution (the Gaussian below the FFT's crossover, OIIO's separable
+//   filters; session 16): per column strip, each padded row filtered along x into a ring
+//   of 2 ry + 1 rows, the ring's rows summed along y into `dst`, 16 sums held in registers
+//   over every tap (separable_direct, weighted_sum; the same bits as the plane path).
 // Known limits: the span cost still grows linearly with the diameter (about 2.6 spans per
 // kernel row: 161 at 63 px); a tile recomputes the prefix sums of its kernel-high margin
 // (tile height >= twice the kernel height, so under half a row more per output row).
