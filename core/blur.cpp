@@ -543,9 +543,23 @@ bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO:
         std::vector<char> slot_black(size_t(ring), 0);
         std::vector<float> row(size_t(x1 - x0) * ncs), black(n, 0.0f), out_row(n);
         std::vector<const float*> taps(std::max(wx.size(), wy.size()));
+        // The source row the previous padded row read, and its slot: past an edge under the
+        // clamp border every padded row reads the same one, filtered once (a sigma 512
+        // Gaussian on a 960 x 64 image: 13 s before, filtering each copy again).
+        int last_source = kOutside, last_slot = 0;
         // Padded row j (source row roi.ybegin - ry + j) along x into its ring slot.
         auto horizontal = [&](int j) {
-            const int sy = roi.ybegin - ry + j;
+            const int sy     = roi.ybegin - ry + j;
+            const int source = border_index(sy, in.roi().ybegin, in.roi().yend, border);
+            if (source != kOutside && source == last_source) {
+                slot_black[size_t(j % ring)] = slot_black[size_t(last_slot)];
+                if (last_slot != j % ring)
+                    std::copy_n(rows.row(last_slot), n, rows.row(j % ring));
+                last_slot = j % ring;
+                return;
+            }
+            last_source        = source;
+            last_slot          = j % ring;
             const RowSpan span = bordered_row_span(in, sy, x0, x1, border, row.data());
             slot_black[size_t(j % ring)] = !span.p;
             if (!span.p)
