@@ -543,23 +543,27 @@ bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO:
         std::vector<char> slot_black(size_t(ring), 0);
         std::vector<float> row(size_t(x1 - x0) * ncs), black(n, 0.0f), out_row(n);
         std::vector<const float*> taps(std::max(wx.size(), wy.size()));
-        // The source row the previous padded row read, and its slot: past an edge under the
-        // clamp border every padded row reads the same one, filtered once (a sigma 512
-        // Gaussian on a 960 x 64 image: 13 s before, filtering each copy again).
-        int last_source = kOutside, last_slot = 0;
+        // The last padded row that read each source row: past an edge the clamp and mirror
+        // borders read source rows again, and one still in the ring is copied, not filtered
+        // again (a sigma 512 Gaussian on a 960 x 64 image: 13 s under clamp and 7 s under
+        // mirror before, 1.1 and ~1 s after; the same bits).
+        const int src_y0 = in.roi().ybegin;
+        std::vector<int> last_read(size_t(in.roi().height()), std::numeric_limits<int>::min());
         // Padded row j (source row roi.ybegin - ry + j) along x into its ring slot.
         auto horizontal = [&](int j) {
             const int sy     = roi.ybegin - ry + j;
-            const int source = border_index(sy, in.roi().ybegin, in.roi().yend, border);
-            if (source != kOutside && source == last_source) {
-                slot_black[size_t(j % ring)] = slot_black[size_t(last_slot)];
-                if (last_slot != j % ring)
-                    std::copy_n(rows.row(last_slot), n, rows.row(j % ring));
-                last_slot = j % ring;
-                return;
+            const int source = border_index(sy, src_y0, in.roi().yend, border);
+            if (source != kOutside) {
+                int& prev = last_read[size_t(source - src_y0)];
+                if (prev != std::numeric_limits<int>::min() && j - prev < ring) {
+                    slot_black[size_t(j % ring)] = slot_black[size_t(prev % ring)];
+                    if (prev % ring != j % ring)
+                        std::copy_n(rows.row(prev % ring), n, rows.row(j % ring));
+                    prev = j;
+                    return;
+                }
+                prev = j;
             }
-            last_source        = source;
-            last_slot          = j % ring;
             const RowSpan span = bordered_row_span(in, sy, x0, x1, border, row.data());
             slot_black[size_t(j % ring)] = !span.p;
             if (!span.p)
