@@ -244,6 +244,46 @@ void expect_footprint(const OIIO::ImageBuf& got, const OIIO::ImageBuf& clean, co
     EXPECT_GT(bad, 0) << "the bad values reach some outputs";
 }
 
+// reach[0..2] over `roi`: how much of the brute force with `w` falls on the NaN, +inf and
+// -inf pixels of b.kinds, per channel, the positive and negative weights apart (through a
+// negative weight an infinity counts as the other sign). `kernel_of(c)` gives channel c's
+// weights, or, given `all`, one set for every channel at once.
+template<class KernelOf>
+void brute_force_reach(OIIO::ImageBuf (&reach)[3], const NonFiniteImage& b, const BlurOptions& plain, OIIO::ROI roi,
+                       bool all, KernelOf kernel_of)
+{
+    for (int kind = 0; kind < 3; ++kind) {
+        reach[kind] = OIIO::ImageBuf(OIIO::ImageSpec(roi, OIIO::TypeFloat));
+        OIIO::ImageBufAlgo::zero(reach[kind]);
+    }
+    const int nc = b.src.nchannels();
+    for (int c = 0; c < (all ? 1 : nc); ++c) {
+        const KernelWeights w = kernel_of(c);
+        const bool is_signed  = std::any_of(w.w.begin(), w.w.end(), [](double v) { return v < 0.0; });
+        for (const double sign : { 1.0, -1.0 }) {
+            if (sign < 0.0 && !is_signed)
+                continue;
+            KernelWeights part = w;
+            for (double& v : part.w)
+                v = std::max(0.0, sign * v);
+            for (int kind = 0; kind < 3; ++kind) {
+                const int as = sign > 0.0 || kind == 0 ? kind : 3 - kind;
+                OIIO::ImageBuf out;
+                ASSERT_TRUE(convolve_reference(out, all ? b.kinds[kind] : OIIO::ImageBufAlgo::channels(b.kinds[kind], 1, { c }),
+                                               part, plain, roi));
+                ASSERT_EQ(out.roi().xbegin, reach[as].roi().xbegin);
+                ASSERT_EQ(out.roi().xend, reach[as].roi().xend);
+                ASSERT_EQ(out.roi().ybegin, reach[as].roi().ybegin);
+                ASSERT_EQ(out.roi().yend, reach[as].roi().yend);
+                OIIO::ImageBuf::ConstIterator<float> from(out);
+                for (OIIO::ImageBuf::Iterator<float> to(reach[as]); !to.done(); ++to, ++from)
+                    for (int k = 0; k < (all ? nc : 1); ++k)
+                        to[all ? k : c] = to[all ? k : c] + from[k];
+            }
+        }
+    }
+}
+
 }  // namespace
 
 TEST(Blur, EveryKernelMatchesTheBruteForceReference)
@@ -483,24 +523,9 @@ TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
                 // (OIIO's lanczos3, say): an infinity through a negative weight changes sign.
                 BlurOptions plain = o;
                 plain.iris        = 0.0f;
-                for (int kind = 0; kind < 3; ++kind) {
-                    reach[kind] = OIIO::ImageBuf(OIIO::ImageSpec(got.roi(), OIIO::TypeFloat));
-                    OIIO::ImageBufAlgo::zero(reach[kind]);
-                }
-                for (const double sign : { 1.0, -1.0 }) {
-                    KernelWeights part = kw;
-                    for (double& v : part.w)
-                        v = std::max(0.0, sign * v);
-                    if (sign < 0.0 && !is_signed)
-                        continue;
-                    for (int kind = 0; kind < 3; ++kind) {
-                        const int as = sign > 0.0 || kind == 0 ? kind : 3 - kind;
-                        OIIO::ImageBuf out;
-                        ASSERT_TRUE(convolve_reference(out, b.kinds[kind], part, plain, got.roi()));
-                        ASSERT_EQ(out.roi(), reach[as].roi());
-                        ASSERT_TRUE(OIIO::ImageBufAlgo::add(reach[as], reach[as], out));
-                    }
-                }
+                brute_force_reach(reach, b, plain, got.roi(), true, [&](int) { return kw; });
+                if (testing::Test::HasFatalFailure())
+                    return;
                 expect_footprint(got, clean, reach);
             }
     }
@@ -2531,33 +2556,17 @@ TEST(BlurImageKernel, NonFiniteValuesStayWithinTheirFootprint)
                 BlurOptions plain = o;
                 plain.iris        = 0.0f;
                 const int knc     = k.kernel.nchannels();
-                for (int kind = 0; kind < 3; ++kind) {
-                    reach[kind] = OIIO::ImageBuf(OIIO::ImageSpec(got.roi(), OIIO::TypeFloat));
-                    OIIO::ImageBufAlgo::zero(reach[kind]);
-                }
-                for (int c = 0; c < 4; ++c)
-                    for (const double sign : { 1.0, -1.0 }) {
-                        KernelWeights w{ 4, 3, std::vector<double>(63, 0.0) };
-                        for (int kc = 0; kc < knc; ++kc)
-                            if (knc == 1 || kc == c || c >= knc)
-                                for (int dy = -3; dy <= 3; ++dy)
-                                    for (int dx = -4; dx <= 4; ++dx)
-                                        w.w[size_t((dy + 3) * 9 + dx + 4)] += k.kernel.getchannel(dx, dy, 0, kc);
-                        for (double& v : w.w)
-                            v = std::max(0.0, sign * v);
-                        for (int kind = 0; kind < 3; ++kind) {
-                            const int as = sign > 0.0 || kind == 0 ? kind : 3 - kind;
-                            OIIO::ImageBuf out;
-                            ASSERT_TRUE(convolve_reference(out, OIIO::ImageBufAlgo::channels(b.kinds[kind], 1, { c }), w,
-                                                           plain, got.roi()));
-                            ASSERT_TRUE(out.roi().xbegin == reach[as].roi().xbegin && out.roi().xend == reach[as].roi().xend
-                                        && out.roi().ybegin == reach[as].roi().ybegin
-                                        && out.roi().yend == reach[as].roi().yend);
-                            OIIO::ImageBuf::ConstIterator<float> from(out);
-                            for (OIIO::ImageBuf::Iterator<float> to(reach[as]); !to.done(); ++to, ++from)
-                                to[c] = to[c] + from[0];
-                        }
-                    }
+                brute_force_reach(reach, b, plain, got.roi(), false, [&](int c) {
+                    KernelWeights w{ 4, 3, std::vector<double>(63, 0.0) };
+                    for (int kc = 0; kc < knc; ++kc)
+                        if (knc == 1 || kc == c || c >= knc)
+                            for (int dy = -3; dy <= 3; ++dy)
+                                for (int dx = -4; dx <= 4; ++dx)
+                                    w.w[size_t((dy + 3) * 9 + dx + 4)] += k.kernel.getchannel(dx, dy, 0, kc);
+                    return w;
+                });
+                if (testing::Test::HasFatalFailure())
+                    return;
                 expect_footprint(got, clean, reach);
             }
 }
