@@ -1428,9 +1428,9 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     const bool no_weights = method == BlurMethod::Parallelograms && !exact_weights
                             && std::min(k.width_px, k.height_px) >= 2.0f;
     // Separable kernels (box, Gaussian, OIIO's separable filters) run from their 1-D
-    // factors on every path but the brute force and the FFT, so their N^2 weights are made
-    // only for those (below, once the FFT is chosen): a Gaussian of sigma 1024 made 8193^2
-    // doubles, 1.2 GB, to read its reach.
+    // factors, made once here, on every path but the brute force and the FFT, so their N^2
+    // weights are made only for those (below, once the FFT is chosen): a Gaussian of sigma
+    // 1024 made 8193^2 doubles, 1.2 GB, to read its reach.
     const auto factors = is_separable(k) && method != BlurMethod::Reference && method != BlurMethod::Fft
                              ? std::optional{ separable_weights(k) }
                              : std::nullopt;
@@ -1498,16 +1498,14 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // iris mode transforms a padded plane, so it keeps the plane path.
     if (method == BlurMethod::Exact && opts.iris == 0.0f && !weights.is_identity()) {
         if (k.shape == KernelShape::Box)
-            return box_direct(dst, in, roi, BoxPass(separable_weights(k).first),
-                              BoxPass(separable_weights(k).second), opts.border, nthreads);
+            return box_direct(dst, in, roi, BoxPass(factors->first), BoxPass(factors->second), opts.border,
+                              nthreads);
     }
     if ((method == BlurMethod::Spans || method == BlurMethod::BilinearTaps) && opts.iris == 0.0f
         && !weights.is_identity())
         return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry, spans, opts.border, nthreads);
-    if (method == BlurMethod::Separable && opts.iris == 0.0f && !weights.is_identity()) {
-        const auto [wx, wy] = separable_weights(k);
-        return separable_direct(dst, in, roi, wx, wy, opts.border, nthreads);
-    }
+    if (method == BlurMethod::Separable && opts.iris == 0.0f && !weights.is_identity())
+        return separable_direct(dst, in, roi, factors->first, factors->second, opts.border, nthreads);
     if (method == BlurMethod::Fft && opts.iris == 0.0f && !weights.is_identity())
         return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads);
     if (method == BlurMethod::ThreeBoxes && opts.iris == 0.0f && !weights.is_identity()) {
@@ -1556,15 +1554,9 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     case BlurMethod::BilinearTaps:
     case BlurMethod::Spans: out = convolve_spans(p, weights, nthreads); break;
     case BlurMethod::Fft: out = convolve_fft(p, { weights }, one_kernel, nthreads); break;
-    case BlurMethod::Separable: {
-        const auto [wx, wy] = separable_weights(k);
-        out = convolve_separable(p, wx, wy, nthreads);
-        break;
-    }
-    default: {  // Exact: the box (the shapes and the Gaussian took their methods above)
-        const auto [wx, wy] = separable_weights(k);
-        out = box_blur(p, wx, wy, nthreads);
-    }
+    case BlurMethod::Separable: out = convolve_separable(p, factors->first, factors->second, nthreads); break;
+    default:  // Exact: the box (the shapes and the Gaussian took their methods above)
+        out = box_blur(p, factors->first, factors->second, nthreads);
     }
     if (opts.iris != 0.0f)
         iris.inverse(out, nthreads);
