@@ -619,47 +619,50 @@ bool three_boxes_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OII
             st.sum.assign(n, 0.0);
         }
         const bool ends = by.end != 0.0;
-        // Row `in_row` enters stage k; the stage's output row goes on to stage k + 1, the
-        // last one's to dst row y.
-        std::function<void(int, const float*)> push = [&](int k, const float* in_row) {
-            Stage& st = stages[size_t(k)];
-            const int r = st.count++;
-            std::copy_n(in_row, n, st.rows.row(r % ring));
-            if (r < 2 * ry)
-                return;
-            const int q = r - 2 * ry, centre = q + ry;
-            auto at = [&](int j) { return st.rows.row(j % ring); };
-            if (q == 0) {
-                for (int j = -by.full; j <= by.full; ++j)
-                    add_scaled(st.sum.data(), at(centre + j), 1.0, n);
-            } else {
-                slide(st.sum.data(), at(centre + by.full), at(centre - 1 - by.full), n);
+        // Where the row entering stage k is written: its ring's next slot.
+        auto entry = [&](int k) { return stages[size_t(k)].rows.row(stages[size_t(k)].count % ring); };
+        // A row has entered stage 0: each stage with a new output row (q reads its input
+        // rows q .. q + 2 ry) writes it into the next stage's entry, the last into dst.
+        auto advance = [&] {
+            for (int k = 0; k < 3; ++k) {
+                Stage& st = stages[size_t(k)];
+                const int r = st.count++;
+                if (r < 2 * ry)
+                    return;
+                const int q = r - 2 * ry, centre = q + ry;
+                auto at = [&](int j) { return st.rows.row(j % ring); };
+                if (q == 0) {
+                    for (int j = -by.full; j <= by.full; ++j)
+                        add_scaled(st.sum.data(), at(centre + j), 1.0, n);
+                } else {
+                    slide(st.sum.data(), at(centre + by.full), at(centre - 1 - by.full), n);
+                }
+                float* o = k < 2 ? entry(k + 1) : out_row.data();
+                box_out(o, st.sum.data(), by.inner, ends ? at(centre - by.full - 1) : nullptr,
+                        ends ? at(centre + by.full + 1) : nullptr, by.end, n);
+                if (k == 2)
+                    stream_floats(static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + q)), o, n);
             }
-            box_out(out_row.data(), st.sum.data(), by.inner, ends ? at(centre - by.full - 1) : nullptr,
-                    ends ? at(centre + by.full + 1) : nullptr, by.end, n);
-            if (k < 2)
-                push(k + 1, out_row.data());
-            else
-                stream_floats(static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + q)), out_row.data(), n);
+        };
+        // Each along x: a running sum (1, 3, 4 channels) or the row's prefix sums.
+        auto box_x = [&](float* out, const RowSpan& v, int npx_out, auto full_row) {
+            if (!box_row_running(out, v, black.data(), npx_out, nc, rx, bx.full, bx.inner, bx.end))
+                box_row_by_prefix_sums(out, full_row(), npx_out, nc, bx, prefix.data());
         };
         for (int j = 0; j < h + 6 * ry; ++j) {
             const int sy       = roi.ybegin - 3 * ry + j;
             const RowSpan span = bordered_row_span(in, sy, x0, x1, border, row.data());
             if (!span.p) {
-                push(0, black.data());
-                continue;
+                std::fill_n(entry(0), n, 0.0f);
+            } else {
+                box_x(once.data(), span, npx + 4 * rx, [&] {
+                    return span.lo == 0 && span.hi == x1 - x0 ? span.p
+                                                               : bordered_row_view(in, sy, x0, x1, border, row.data());
+                });
+                box_x(twice.data(), RowSpan{ once.data(), 0, npx + 4 * rx }, npx + 2 * rx, [&] { return once.data(); });
+                box_x(entry(0), RowSpan{ twice.data(), 0, npx + 2 * rx }, npx, [&] { return twice.data(); });
             }
-            // Each along x: a running sum (1, 3, 4 channels) or the row's prefix sums.
-            auto box_x = [&](float* out, const RowSpan& v, int npx_out, auto full_row) {
-                if (!box_row_running(out, v, black.data(), npx_out, nc, rx, bx.full, bx.inner, bx.end))
-                    box_row_by_prefix_sums(out, full_row(), npx_out, nc, bx, prefix.data());
-            };
-            box_x(once.data(), span, npx + 4 * rx, [&] {
-                return span.lo == 0 && span.hi == x1 - x0 ? span.p : bordered_row_view(in, sy, x0, x1, border, row.data());
-            });
-            box_x(twice.data(), RowSpan{ once.data(), 0, npx + 4 * rx }, npx + 2 * rx, [&] { return once.data(); });
-            box_x(out_row.data(), RowSpan{ twice.data(), 0, npx + 2 * rx }, npx, [&] { return twice.data(); });
-            push(0, out_row.data());
+            advance();
         }
         stream_fence();
     });
