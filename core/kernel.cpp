@@ -12,8 +12,9 @@
 // Gaussian's mass lies past it), so `--blur:edge=hard` gives oiiotool's kernels.
 // Filter (oiiotool's other --blur kernels: triangle, bspline, lanczos3, ...): OIIO's own
 // make_kernel is called, not reimplemented, so its weights are oiiotool's by construction;
-// only their normalisation is redone in double. A separable one's factors are the kernel's
-// column and row sums (for a product kernel, each factor scaled to sum 1).
+// only their normalisation is redone in double. A separable one runs from its factors,
+// make_kernel(name, w, 1)'s row and make_kernel(name, 1, h)'s column (its 2-D kernel is
+// their product), so its N^2 kernel is made only where the brute force or the FFT asks.
 // Polygon with N blades: the edge distance at polar angle phi from an edge's normal is
 // cos(pi/N) / cos(phi) (circumradius 1); curved blades blend it toward the circle,
 // d = d_poly + curvature (1 - d_poly), an approximation of real curved blades, which are
