@@ -40,9 +40,20 @@ OIIO::ImageBuf test_image(int w, int h, int x0 = 0, int y0 = 0, bool bright = tr
 }
 
 struct Named {
-    const char* name;
+    std::string name;
     Kernel k;
 };
+
+Kernel hexagon(float w, float h, float rotation = 0.0f)
+{
+    Kernel k;
+    k.shape        = KernelShape::Polygon;
+    k.blades       = 6;
+    k.width_px     = w;
+    k.height_px    = h;
+    k.rotation_deg = rotation;
+    return k;
+}
 
 std::vector<Named> kernels()
 {
@@ -1065,26 +1076,66 @@ TEST(Blur, HardGaussianIsCutAtItsFootprint)
     EXPECT_NE(a.geterror().find("anti-aliased gaussian"), std::string::npos) << a.geterror();
 }
 
-TEST(Blur, BordersOnAConstantImage)
+TEST(Blur, EveryMethodKeepsAConstantImageUnderClampAndMirror)
 {
-    OIIO::ImageBuf flat(OIIO::ImageSpec(30, 20, 1, OIIO::TypeFloat));
-    OIIO::ImageBufAlgo::fill(flat, { 0.75f });
+    // Under the clamp and mirror borders a constant image stays constant on every pixel,
+    // the frame's edges too: a method whose reach (the padding it is given) fell short of
+    // what it reads would take black there. The parallelograms read up to 5 px past the
+    // hexagon (each of a rhombus' two steep segments spreads by its shear's and unshear's
+    // taps) and were given 2: their edge pixels lost up to 7.7e-6 of the value at 9 px.
+    OIIO::ImageBuf flat(OIIO::ImageSpec(30, 20, 4, OIIO::TypeFloat));
+    const float value[4] = { 0.75f, 10.0f, 3.0f, 1.0f };
+    OIIO::ImageBufAlgo::fill(flat, value);
+    std::vector<Named> cases = kernels();
+    for (float size : { 3.0f, 5.0f, 7.5f, 9.0f, 11.0f, 20.0f, 31.0f })
+        for (float rotation : { 0.0f, 30.0f, 7.0f, 25.0f, 45.0f, 83.0f })
+            cases.push_back({ "hexagon " + std::to_string(size) + "@" + std::to_string(rotation),
+                              hexagon(size, size, rotation) });
+    for (const Named& n : cases)
+        for (BlurMethod m : every_method(n.k))
+            for (Border b : { Border::Clamp, Border::Mirror }) {
+                SCOPED_TRACE(n.name + method_name(m) + (b == Border::Clamp ? " clamp" : " mirror"));
+                BlurOptions o;
+                o.method = m;
+                o.border = b;
+                OIIO::ImageBuf out;
+                ASSERT_TRUE(blur(out, flat, n.k, o)) << out.geterror();
+                const auto st = OIIO::ImageBufAlgo::computePixelStats(out);
+                for (int c = 0; c < 4; ++c) {
+                    EXPECT_NEAR(st.min[size_t(c)], value[c], 1e-6 * value[c]) << "channel " << c;
+                    EXPECT_NEAR(st.max[size_t(c)], value[c], 1e-6 * value[c]) << "channel " << c;
+                }
+            }
+    OIIO::ImageBuf out;
     Kernel k;
     k.width_px = k.height_px = 11;
-    for (Border b : { Border::Clamp, Border::Mirror }) {
-        BlurOptions o;
-        o.border = b;
-        OIIO::ImageBuf out;
-        ASSERT_TRUE(blur(out, flat, k, o));
-        const auto st = OIIO::ImageBufAlgo::computePixelStats(out);
-        EXPECT_NEAR(st.min[0], 0.75f, 1e-6f);
-        EXPECT_NEAR(st.max[0], 0.75f, 1e-6f);
-    }
-    OIIO::ImageBuf out;
     ASSERT_TRUE(blur(out, flat, k));
-    float corner;
-    out.getpixel(0, 0, &corner);
-    EXPECT_LT(corner, 0.5f) << "black outside darkens the corner";
+    float corner[4];
+    out.getpixel(0, 0, corner);
+    EXPECT_LT(corner[0], 0.5f) << "black outside darkens the corner";
+}
+
+TEST(BlurApprox, ParallelogramsStayWithinTheirReach)
+{
+    // The reach a blur grows its window by holds everything the method spreads: the
+    // energy of lone pixels in opposite corners stays in the grown window at every size
+    // and rotation (the parallelograms spread up to 5 px past the hexagon; they were
+    // given 2).
+    OIIO::ImageBuf lone(OIIO::ImageSpec(9, 7, 4, OIIO::TypeFloat));
+    const float bright[4] = { 1e6f, 1e6f, 1e6f, 1e6f };
+    lone.setpixel(0, 0, bright);
+    lone.setpixel(8, 6, bright);
+    for (float size : { 2.5f, 3.0f, 5.0f, 7.5f, 9.0f, 11.0f, 15.0f, 20.0f, 31.0f, 47.0f })
+        for (float rotation : { 0.0f, 30.0f, 7.0f, 25.0f, 45.0f, 60.0f, 83.0f, 13.0f }) {
+            SCOPED_TRACE(testing::Message() << size << "@" << rotation);
+            BlurOptions o;
+            o.method = BlurMethod::Parallelograms;
+            o.grow   = true;
+            OIIO::ImageBuf out;
+            ASSERT_TRUE(blur(out, lone, hexagon(size, size, rotation), o)) << out.geterror();
+            for (double sum : channel_sums(out))
+                EXPECT_NEAR(sum, 2e6, 2e6 * 1e-6);
+        }
 }
 
 TEST(Blur, FastGaussianIsCloseToExact)
@@ -1246,17 +1297,6 @@ TEST(Blur, BadParametersAreRefused)
 // --- the approximations ---------------------------------------------------------------
 
 namespace {
-
-Kernel hexagon(float w, float h, float rotation = 0.0f)
-{
-    Kernel k;
-    k.shape        = KernelShape::Polygon;
-    k.blades       = 6;
-    k.width_px     = w;
-    k.height_px    = h;
-    k.rotation_deg = rotation;
-    return k;
-}
 
 // sum |a - b| over the kernel grid of the larger one (the L1 distance of two kernels,
 // 0..2; 2 = disjoint).
@@ -1429,8 +1469,9 @@ Geometry geometry(const OIIO::ImageBuf& src, const Kernel& k, bool grow)
         const double th = M_PI * (90.0 + k.rotation_deg + 60.0 * i) / 180.0;
         g.vx[i] = 0.5 * k.width_px * std::cos(th);
         g.vy[i] = -0.5 * k.height_px * std::sin(th);
-        g.rx    = std::max(g.rx, int(std::ceil(std::abs(g.vx[i]))) + 2);
-        g.ry    = std::max(g.ry, int(std::ceil(std::abs(g.vy[i]))) + 2);
+        // + 6: a rhombus' two steep segments each spread by two shears' taps (< 3 px).
+        g.rx    = std::max(g.rx, int(std::ceil(std::abs(g.vx[i]))) + 6);
+        g.ry    = std::max(g.ry, int(std::ceil(std::abs(g.vy[i]))) + 6);
     }
     g.roi = src.roi();
     if (grow) {
