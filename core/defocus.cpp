@@ -62,10 +62,11 @@ using OIIO::Strutil::fmt::format;
 // --- the image being defocused ------------------------------------------------------
 
 // Iris mode (SEEDS.md section 3) in the layers: colour is carried as
-// A exp(k (colour / A - shift)) (premultiplied exp-space colour), so each layer averages
-// exp(k x) weighted by coverage; every layer comes back by shift + log(mean) / k before it
-// is composited ("over" is linear). The shift (the channel's minimum for k > 0, maximum for
-// k < 0) keeps the exponents in [0, kIrisMaxExponent], as blur's Iris does.
+// A (exp(k (colour / A - shift)) - 1) (premultiplied exp-space colour), so each layer
+// averages exp(k x) weighted by coverage; every layer comes back by
+// shift + log(1 + mean) / k before it is composited ("over" is linear). The shift (the
+// channel's minimum for k > 0, maximum for k < 0) keeps the exponents in
+// [0, kIrisMaxExponent], and the 1 taken away keeps a small k's digits, as blur's Iris does.
 struct IrisSpace {
     float k = 0.0f;
     std::array<float, 3> shift{};
@@ -368,8 +369,9 @@ void from_iris_space(Plane& p, const IrisSpace& iris)
         for (int i = 0; i < p.w; ++i, px += nc) {
             const float a = px[3];
             for (int c = 0; c < 3; ++c)
-                // exp-space colour / coverage is >= exp(0) up to rounding.
-                px[c] = a > 0.0f ? a * (iris.shift[size_t(c)] + std::log(std::max(px[c] / a, 1e-30f)) / iris.k)
+                // exp-space colour / coverage is >= 0 up to rounding.
+                px[c] = a > 0.0f ? a * float(iris.shift[size_t(c)]
+                                             + std::log1p(std::max(double(px[c]) / a, 0.0)) / iris.k)
                                  : 0.0f;
         }
     }
@@ -855,7 +857,8 @@ bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
         for (int64_t i = b; i < e; ++i) {
             float* p = f.img.rgba.data() + size_t(i) * 4;
             for (size_t c = 0; c < 3; ++c)
-                p[c] = p[3] > 0.0f ? p[3] * std::exp(k * (p[c] / p[3] - f.iris.shift[c])) : 0.0f;
+                p[c] = p[3] > 0.0f ? p[3] * float(std::expm1(double(k) * (double(p[c]) / p[3] - f.iris.shift[c])))
+                                   : 0.0f;
         }
     });
     return true;

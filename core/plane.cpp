@@ -89,14 +89,17 @@ bool Iris::forward(Plane& p, std::string& err, int nthreads)
         shift[size_t(c)] = k > 0 ? lo : hi;
     }
     map_channels(p, alpha, z, nthreads,
-                 [&](float v, int c) { return float(std::exp(k * (v - shift[size_t(c)]))); });
+                 [&](float v, int c) { return float(std::expm1(k * (v - shift[size_t(c)]))); });
     return true;
 }
 
 void Iris::inverse(Plane& p, int nthreads) const
 {
     map_channels(p, alpha, z, nthreads,
-                 [&](float v, int c) { return float(shift[size_t(c)] + std::log(double(v)) / k); });
+                 [&](float v, int c) {
+                     // A mean of values >= 0 by weights >= 0 is >= 0; below it is rounding.
+                     return float(shift[size_t(c)] + std::log1p(std::max(double(v), 0.0)) / k);
+                 });
 }
 
 namespace {

@@ -2379,6 +2379,49 @@ TEST(BlurIris, ExactMethodsMatchTheBruteForceOfExpMeanLog)
     RecordProperty("worst_relative_error", std::to_string(worst));  // 6.9e-5 measured
 }
 
+TEST(BlurIris, ASmallExponentTendsToThePlainBlur)
+{
+    // As k -> 0, log(mean(exp(k x))) / k -> mean(x) + k var / 2: within |k| range^2 / 8 of
+    // the plain blur. Stored as a float exp(k d), d was kept only to 6e-8 / k (iris 1e-6
+    // on this 0..1 image erred by 0.075, and from 1e-7 every colour was the channel's
+    // minimum); stored as exp(k d) - 1 it keeps d's own digits. Every method that takes
+    // iris mode, both signs.
+    OIIO::ImageBuf src(OIIO::ImageSpec(48, 36, 4, OIIO::TypeFloat));
+    for (int y = 0; y < 36; ++y)
+        for (int x = 0; x < 48; ++x) {
+            const float v     = float((x * 37 + y * 91) % 101) / 100.0f;
+            const float px[4] = { v, 1.0f - v, (x + y) % 2 ? 1.0f : 0.0f, 1.0f };
+            src.setpixel(x, y, px);
+        }
+    src.specmod().alpha_channel = 3;
+    struct Case {
+        KernelShape shape;
+        BlurMethod method;
+    };
+    for (const Case& c : { Case{ KernelShape::Disk, BlurMethod::Spans }, Case{ KernelShape::Disk, BlurMethod::Fft },
+                           Case{ KernelShape::Disk, BlurMethod::Bands },
+                           Case{ KernelShape::Polygon, BlurMethod::Parallelograms },
+                           Case{ KernelShape::Gaussian, BlurMethod::ThreeBoxes },
+                           Case{ KernelShape::Box, BlurMethod::Exact } })
+        for (float k : { 1e-4f, 1e-6f, 1e-9f, -1e-7f, 1e-30f, -1e-4f, -1e-6f, -1e-9f, 1e-7f, -1e-5f, 1e-5f }) {
+            SCOPED_TRACE(testing::Message() << method_name(c.method) << " k " << k);
+            Kernel kern;
+            kern.shape    = c.shape;
+            kern.blades   = 6;
+            kern.width_px = kern.height_px = 9;
+            BlurOptions plain;
+            plain.method = c.method;
+            plain.border = Border::Clamp;
+            BlurOptions iris = plain;
+            iris.iris        = k;
+            OIIO::ImageBuf a, b;
+            ASSERT_TRUE(blur(a, src, kern, plain)) << a.geterror();
+            ASSERT_TRUE(blur(b, src, kern, iris)) << b.geterror();
+            // The k var / 2 term, and float rounding of the plain blur's and the log's.
+            EXPECT_LE(bokeh_test::max_difference(a, b), std::abs(k) / 8.0 + 1e-6);
+        }
+}
+
 TEST(BlurIris, NonFiniteValuesDoNotWidenTheRange)
 {
     // Iris mode checks |k| times each channel's range against its limit. The blur runs with

@@ -996,6 +996,35 @@ TEST(DefocusIris, UniformDepthEqualsTheBlursIrisMode)
     }
 }
 
+TEST(DefocusIris, ASmallExponentTendsToThePlainDefocus)
+{
+    // As k -> 0 the iris mean tends to the plain one (within |k| range^2 / 8): the layers
+    // carry exp(k d) - 1, which keeps d's digits where a float exp(k d) kept 6e-8 / k.
+    const OIIO::ImageBuf src = make_image(40, 32, [](int x, int y) {
+        Px p;
+        p.r = texture(x, y, 1);
+        p.g = texture(x, y, 2);
+        p.b = (x + y) % 2 ? 1.0f : 0.0f;
+        p.z = x < 20 ? 3.0f : 9.0f;
+        return p;
+    });
+    for (DefocusMethod m : { DefocusMethod::Reference, DefocusMethod::Layers }) {
+        const OIIO::ImageBuf plain = run(src, direct(m));
+        for (float k : { 1e-4f, 1e-7f, -1e-9f }) {
+            DefocusOptions o         = direct(m);
+            o.iris                   = k;
+            const OIIO::ImageBuf got = run(src, o);
+            double worst             = 0.0;
+            const OIIO::ROI d        = got.roi();
+            for (int y = d.ybegin; y < d.yend; ++y)
+                for (int x = d.xbegin; x < d.xend; ++x)
+                    for (int c = 0; c < 3; ++c)
+                        worst = std::max(worst, double(std::abs(at(got, x, y, c) - at(plain, x, y, c))));
+            EXPECT_LE(worst, std::abs(k) / 8.0 + 2e-6) << method_name(m) << " k " << k;
+        }
+    }
+}
+
 TEST(DefocusIris, RangeTooWideIsRefused)
 {
     const OIIO::ImageBuf src = make_image(16, 12, [](int x, int) { Px p; p.r = x == 3 ? 1e3f : 0.0f; p.z = 3.0f; return p; });
