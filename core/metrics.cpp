@@ -36,12 +36,16 @@ bool compare(ImageError& e, const OIIO::ImageBuf& result, const OIIO::ImageBuf& 
     }
     if (!roi.defined())
         roi = OIIO::roi_union(result.roi(), reference.roi());
-    // Per chunk of rows: squared error, tone-mapped squared error, max.
-    using Sums = std::array<double, 3>;
+    // Per chunk of rows: squared error, tone-mapped squared error, max, and the values
+    // whose difference is not finite (NaN or an infinity on one side only). Those would
+    // make the sums NaN, which compared as "no error" (999 dB) and fell out of the max:
+    // a result full of NaN read as identical to its reference. Equal values (the same
+    // infinity, or NaN on both sides) count as equal.
+    using Sums = std::array<double, 4>;
     const Sums s = parallel_reduce_chunks(
-        roi.ybegin, roi.yend, 8, nthreads, Sums{ 0.0, 0.0, 0.0 },
+        roi.ybegin, roi.yend, 8, nthreads, Sums{ 0.0, 0.0, 0.0, 0.0 },
         [&](int64_t y0, int64_t y1) {
-            Sums t{ 0.0, 0.0, 0.0 };
+            Sums t{ 0.0, 0.0, 0.0, 0.0 };
             std::vector<float> a(size_t(roi.width()) * size_t(nc)), b(a.size());
             for (int y = int(y0); y < int(y1); ++y) {
                 const OIIO::ROI row(roi.xbegin, roi.xend, y, y + 1, 0, 1, 0, nc);
@@ -50,6 +54,12 @@ bool compare(ImageError& e, const OIIO::ImageBuf& result, const OIIO::ImageBuf& 
                 reference.get_pixels(row, OIIO::TypeFloat, b.data());
                 for (size_t i = 0; i < a.size(); ++i) {
                     const double x = a[i], r = b[i];
+                    if (x == r || (std::isnan(x) && std::isnan(r)))
+                        continue;
+                    if (!std::isfinite(x - r)) {
+                        t[3] += 1.0;
+                        continue;
+                    }
                     const double tx = x / (1.0 + std::abs(x)), tr = r / (1.0 + std::abs(r));
                     t[0] += (x - r) * (x - r);
                     t[1] += (tx - tr) * (tx - tr);
@@ -62,9 +72,18 @@ bool compare(ImageError& e, const OIIO::ImageBuf& result, const OIIO::ImageBuf& 
             acc[0] += p[0];
             acc[1] += p[1];
             acc[2] = std::max(acc[2], p[2]);
+            acc[3] += p[3];
         });
     e.values      = int64_t(roi.width()) * roi.height() * nc;
     const double n = double(std::max<int64_t>(1, e.values));
+    e.nonfinite = int64_t(s[3]);
+    if (e.nonfinite > 0) {
+        const double inf = std::numeric_limits<double>::infinity();
+        e.rmse_linear    = inf;
+        e.psnr_db        = -inf;
+        e.max_abs        = inf;
+        return true;
+    }
     e.rmse_linear = std::sqrt(s[0] / n);
     e.psnr_db     = s[1] > 0.0 ? 10.0 * std::log10(n / s[1]) : 999.0;
     e.max_abs     = s[2];

@@ -984,6 +984,41 @@ EnlargementArtifacts artifacts(ResampleFilter f, int k)
 
 }  // namespace
 
+TEST(Metrics, CompareCallsNonFiniteMismatchesAnInfiniteError)
+{
+    // A NaN or an infinity on one side only made the sums NaN, which read as "no error"
+    // (999 dB) and fell out of the max: a result full of NaN compared as identical.
+    OIIO::ImageBuf ref(OIIO::ImageSpec(6, 4, 2, OIIO::TypeFloat));
+    OIIO::ImageBufAlgo::fill(ref, { 0.5f, 2.0f });
+    const float inf = std::numeric_limits<float>::infinity(), nan = std::numeric_limits<float>::quiet_NaN();
+    const float both[2] = { inf, nan };
+    ref.setpixel(1, 1, both);
+    std::string err;
+    ImageError e;
+    ASSERT_TRUE(compare(e, ref, ref, err)) << err;
+    EXPECT_EQ(e.nonfinite, 0) << "the same infinity and NaN on both sides are equal";
+    EXPECT_EQ(e.psnr_db, 999.0);
+    EXPECT_EQ(e.max_abs, 0.0);
+    for (const float bad : { nan, inf, -inf }) {
+        OIIO::ImageBuf got = ref;
+        const float px[2] = { bad, 2.0f };
+        got.setpixel(3, 2, px);
+        ASSERT_TRUE(compare(e, got, ref, err)) << err;
+        EXPECT_EQ(e.nonfinite, 1) << bad;
+        EXPECT_EQ(e.psnr_db, -std::numeric_limits<double>::infinity()) << bad;
+        EXPECT_EQ(e.rmse_linear, std::numeric_limits<double>::infinity()) << bad;
+        EXPECT_EQ(e.max_abs, std::numeric_limits<double>::infinity()) << bad;
+    }
+    // A finite difference elsewhere stays finite.
+    OIIO::ImageBuf got = ref;
+    const float px[2] = { 0.75f, 2.0f };
+    got.setpixel(0, 0, px);
+    ASSERT_TRUE(compare(e, got, ref, err)) << err;
+    EXPECT_EQ(e.nonfinite, 0);
+    EXPECT_DOUBLE_EQ(e.max_abs, 0.25);
+    EXPECT_TRUE(std::isfinite(e.psnr_db) && e.psnr_db < 999.0);
+}
+
 TEST(ResampleMetrics, MachBandsMeasureSlopeJumps)
 {
     // The metric itself: a linear ramp has no curvature (0), a parabola sampled at full

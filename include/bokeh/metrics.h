@@ -26,6 +26,9 @@ struct ImageError {
     double psnr_db     = 0.0;  ///< PSNR of the tone-mapped values, peak 1; 999 when identical
     double max_abs     = 0.0;  ///< largest absolute linear difference
     int64_t values     = 0;    ///< channel values compared
+    /// Values where one image holds NaN or an infinity and the other a different value.
+    /// When any, the error is infinite: rmse_linear and max_abs +inf, psnr_db -inf.
+    int64_t nonfinite = 0;
 };
 
 /// Compare `result` with `reference` channel by channel (same channel count) over `roi`

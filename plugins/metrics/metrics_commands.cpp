@@ -18,8 +18,10 @@ bool diff_command(bokeh::CommandContext& c)
     std::string err;
     if (!bokeh::compare(e, *c.inputs[1].buf, *c.inputs[0].buf, err, {}, c.nthreads))
         return c.fail(err);
-    c.message(format("diff {} vs {}: RMSE {:.6g}, PSNR {:.2f} dB (x/(1+x) tone map), max {:.6g}",
-                     c.inputs[1].origin, c.inputs[0].origin, e.rmse_linear, e.psnr_db, e.max_abs));
+    c.message(format("diff {} vs {}: RMSE {:.6g}, PSNR {:.2f} dB (x/(1+x) tone map), max {:.6g}{}",
+                     c.inputs[1].origin, c.inputs[0].origin, e.rmse_linear, e.psnr_db, e.max_abs,
+                     e.nonfinite > 0 ? format(" ({} values NaN or infinite on one side only)", e.nonfinite)
+                                     : std::string()));
     const double fail_db = c.options.get_float("fail");
     if (fail_db > 0.0 && e.psnr_db < fail_db)
         return c.fail(format("PSNR {:.2f} dB is below {:g} dB", e.psnr_db, fail_db));

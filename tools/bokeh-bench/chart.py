@@ -116,6 +116,12 @@ def read_rows(path):
                  "on a log axis, row skipped")
             continue
         psnr = values["psnr_db_tonemapped"]
+        if math.isnan(psnr) or psnr == -math.inf:
+            # bokeh-bench writes -inf where the result held NaN or an infinity the
+            # reference did not: no accuracy to draw, and never "exact".
+            note(f"{path}: line {line}: {row['method']} returned non-finite values "
+                 f"(PSNR {psnr}), row skipped")
+            continue
         rows.append({
             "task": task,
             "method": row["method"],
