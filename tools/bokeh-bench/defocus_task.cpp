@@ -7,6 +7,7 @@
 // bokeh::compare's (RMSE linear, PSNR after x/(1+x)).
 
 #include "defocus_task.h"
+#include "bench_common.h"
 #include "timing.h"
 
 #include <bokeh/defocus.h>
@@ -156,8 +157,8 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
             std::printf("%-16s %-34s %8.1f %10.1f %10.3g %8.1f\n", shot.name.c_str(), method.c_str(),
                         extreme, ms, e.rmse_linear, e.psnr_db);
             std::fflush(stdout);
-            rows.push_back(format("defocus {},{},,{:.1f},{},{:.3f},{},{:.6g},{:.2f}", shot.name, method,
-                                  extreme, a.threads, ms, n, e.rmse_linear, e.psnr_db));
+            rows.push_back(format("defocus {},{},,{:.1f},{},{:.3f},{},{}", shot.name, method, extreme,
+                                  a.threads, ms, n, error_fields(e)));
         };
         report(format("reference ({} layers)", rep.layer_coc_px.size()), ref_ms, 1, ref);
         if (!a.images_dir.empty()) {

@@ -10,6 +10,7 @@
 // the exact method in iris mode for that reason.
 
 #include "iris_task.h"
+#include "bench_common.h"
 
 #include <bokeh/blur.h>
 #include <bokeh/metrics.h>
@@ -76,9 +77,9 @@ bool run_iris_task(const OIIO::ImageBuf& crop, int threads, std::vector<std::str
                 }
                 std::printf("%-10g %-28s %6.0f %10.1f\n", span, m.name, size, e.psnr_db);
                 std::fflush(stdout);
-                rows.push_back(format("iris |k|xrange {:g},{},,{},{},,,{:.6g},{:.2f}", span,
+                rows.push_back(format("iris |k|xrange {:g},{},,{},{},,,{}", span,
                                       OIIO::Strutil::replace(m.name, ",", ""), size, threads,
-                                      e.rmse_linear, e.psnr_db));
+                                      error_fields(e)));
             }
     return true;
 }

@@ -1,19 +1,25 @@
 // bokeh-bench — speed and accuracy of OpenBokeh's methods, side by side with peers.
 //
-// Each case is timed in this process on a 1920x1080 RGBA float frame of the built-in
-// "lights" scene (the median of --reps runs, each after an untimed warm-up run, the cases'
-// runs interleaved in shuffled rounds: timing.h), and its error is measured
-// against the brute-force reference with the same kernel on a 240x135 crop (brute force
-// on the whole frame would take minutes for large kernels). Error: RMSE in linear light
-// and PSNR after the fixed tone map x / (1 + x) per channel (peak 1), stated in the CSV.
+// Each case is timed in this process on an RGBA float frame (the median of --reps runs,
+// each after an untimed warm-up run, the cases' runs interleaved in shuffled rounds:
+// timing.h), and its error is measured against the brute-force reference with the same
+// kernel on a crop of at most 240x135 (brute force on the whole frame would take minutes
+// for large kernels). Error: RMSE in linear light, PSNR after the fixed tone map
+// x / (1 + x) per channel (peak 1), and the largest absolute difference (bench_common.h).
+// Frames: the built-in scenes named by --scenes (default "lights", --size WxH, default
+// 1920x1080; its crop is the lights, the floor and the sphere's edge at 1920x1080, else
+// where brightness varies most) and each --image FILE (RGBA, or RGB given alpha 1; the
+// crop where brightness varies most). A frame other than "lights" names its rows' task
+// "<shape> (<frame>)", so the chart draws it apart.
 //
 // --task defocus runs the depth-defocus task instead (defocus_task.cpp); --task resample
 // the reduced-buffer and enlargement study (resample_task.cpp), which writes two more
 // tables beside --csv FILE: <FILE stem>_artifacts.csv and <FILE stem>_figures.csv.
 //
-//   bokeh-bench [--task blur|defocus|resample] [--threads N] [--reps N] [--csv FILE] [--quick]
-//               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b]
+//   bokeh-bench [--task blur|defocus|resample|iris] [--threads N] [--reps N] [--csv FILE] [--quick]
+//               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
 
+#include "bench_common.h"
 #include "defocus_task.h"
 #include "gegl_peer.h"
 #include "iris_task.h"
@@ -34,6 +40,7 @@
 #include <string>
 #include <vector>
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
 #include <OpenImageIO/timer.h>
@@ -84,6 +91,7 @@ int main(int argc, char* argv[])
     bool quick  = false;
     std::string csv, task = "blur";
     bokeh_bench::BenchArgs args;
+    std::vector<std::string> image_files;  // the blur task's frames from files
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         if (a == "--threads" && i + 1 < argc)
@@ -107,20 +115,22 @@ int main(int argc, char* argv[])
             reps = std::max(1, std::atoi(argv[++i]));
         else if (a == "--csv" && i + 1 < argc)
             csv = argv[++i];
+        else if (a == "--image" && i + 1 < argc)
+            image_files.push_back(argv[++i]);
         else if (a == "--quick")
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
                                  "usage: bokeh-bench [--task blur|defocus|resample|iris] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
-                                 "[--scenes a,b]\n",
+                                 "[--scenes a,b] [--image FILE]...\n",
                          a.c_str());
             return 1;
         }
     }
 
     std::vector<std::string> rows;
-    rows.push_back("task,method,peer,size_px,threads,median_ms,reps,rmse_linear,psnr_db_tonemapped");
+    rows.push_back(bokeh_bench::kCsvHeader);
     if (task == "defocus") {
         args.threads = threads;
         args.reps    = reps;
@@ -146,16 +156,62 @@ int main(int argc, char* argv[])
                           write_csv(beside("_figures.csv"), figures) });
     }
 
-    bokeh::SceneOptions so;
-    OIIO::ImageBuf scene;
-    bokeh::make_scene(scene, "lights", so, threads);
-    const OIIO::ImageBuf frame = IBA::channels(scene, 4, { 0, 1, 2, 3 });
-    OIIO::ROI crop(840, 1080, 300, 435, 0, 1, 0, 4);  // lights, floor, sphere edge
-    const OIIO::ImageBuf small = IBA::cut(frame, crop);
+    // The frames: built-in scenes, then files; each with the crop its errors are measured on.
+    struct Frame {
+        std::string name;
+        OIIO::ImageBuf pixels, small;  // small: the crop, its origin at 0, 0 (IBA::cut)
+        OIIO::ROI crop;
+    };
+    std::vector<Frame> frames;
+    const std::vector<std::string> scenes = args.only.empty() || task == "iris"
+                                                ? std::vector<std::string>{ "lights" }
+                                                : args.only;
+    for (const std::string& name : scenes) {
+        const std::vector<std::string> known = bokeh::scene_names();
+        if (std::find(known.begin(), known.end(), name) == known.end()) {
+            std::fprintf(stderr, "bokeh-bench: --scenes: no built-in scene '%s' (%s)\n", name.c_str(),
+                         OIIO::Strutil::join(known, ", ").c_str());
+            return 1;
+        }
+        bokeh::SceneOptions so;
+        so.width  = args.width;
+        so.height = args.height;
+        OIIO::ImageBuf scene;
+        if (!bokeh::make_scene(scene, name, so, threads)) {
+            std::fprintf(stderr, "bokeh-bench: scene %s: %s\n", name.c_str(), scene.geterror().c_str());
+            return 1;
+        }
+        Frame f{ name, IBA::channels(scene, 4, { 0, 1, 2, 3 }), {}, {} };
+        const bool curated = name == "lights" && args.width == 1920 && args.height == 1080;
+        f.crop  = curated ? OIIO::ROI(840, 1080, 300, 435)  // lights, floor, sphere edge
+                          : bokeh_bench::most_varied_crop(f.pixels, 240, 135, threads);
+        f.small = IBA::cut(f.pixels, f.crop);
+        frames.push_back(std::move(f));
+    }
     if (task == "iris") {
-        if (!bokeh_bench::run_iris_task(small, threads, rows))
+        if (!bokeh_bench::run_iris_task(frames[0].small, threads, rows))
             return 1;
         return write_csv(csv, rows);
+    }
+    for (const std::string& path : image_files) {
+        OIIO::ImageBuf file(path);
+        if (!file.read(0, 0, true, OIIO::TypeFloat)) {
+            std::fprintf(stderr, "bokeh-bench: --image %s: %s\n", path.c_str(), file.geterror().c_str());
+            return 1;
+        }
+        const int nc = file.nchannels();
+        if (nc < 3 || file.deep()) {
+            std::fprintf(stderr, "bokeh-bench: --image %s: needs RGB or RGBA pixels (it has %d channel%s%s)\n",
+                         path.c_str(), nc, nc == 1 ? "" : "s", file.deep() ? ", deep" : "");
+            return 1;
+        }
+        // RGBA as it is; RGB with alpha 1 (a plate).
+        Frame f{ OIIO::Filesystem::filename(path),
+                 nc >= 4 ? IBA::channels(file, 4, { 0, 1, 2, 3 }) : IBA::channels(file, 4, { 0, 1, 2, -1 }, { 0, 0, 0, 1 }),
+                 {}, {} };
+        f.crop  = bokeh_bench::most_varied_crop(f.pixels, 240, 135, threads);
+        f.small = IBA::cut(f.pixels, f.crop);
+        frames.push_back(std::move(f));
     }
 
     using S = bokeh::KernelShape;
@@ -229,84 +285,92 @@ int main(int argc, char* argv[])
         std::printf("(GEGL not built in: the gegl:lens-blur peer is left out)\n");
     }
 
-    // Per case: how a run on the frame is timed, and its error on the crop, measured once.
-    std::vector<std::function<void()>> runs;
-    std::vector<int> nreps;
-    std::vector<bool> warm_each;  // a warm-up before each timed run (all but the slow peers)
-    std::vector<bokeh::ImageError> errors;
-    for (const Case& c : cases) {
-        OIIO::ImageBuf result_small;
-        if (c.peer == "gegl") {
-            auto run = [threads, size = c.size](const OIIO::ImageBuf& in, OIIO::ImageBuf& out) {
-                out.reset(in.spec());
-                std::string err;
-                if (!bokeh_bench::gegl_lens_blur(static_cast<const float*>(in.localpixels()),
-                                                 in.spec().width, in.spec().height,
-                                                 0.5f * float(size - 1), threads,
-                                                 static_cast<float*>(out.localpixels()), &err)) {
-                    std::fprintf(stderr, "bokeh-bench: GEGL: %s\n", err.c_str());
-                    std::exit(1);
-                }
-            };
-            runs.push_back([run, &frame] {
-                OIIO::ImageBuf out;
-                run(frame, out);
-            });
-            run(small, result_small);
-            result_small.set_origin(small.spec().x, small.spec().y);
-        } else if (c.peer == "oiio") {
-            const OIIO::ImageBuf k = IBA::make_kernel("disk", float(c.size), float(c.size));
-            runs.push_back([k, &frame, threads] {
-                OIIO::ImageBuf out;
-                IBA::convolve(out, frame, k, true, {}, threads);
-            });
-            IBA::convolve(result_small, small, k, true, {}, threads);
-        } else if (c.method.rfind("FFT (image", 0) == 0) {
-            // The exact kernel handed over as an image, as a user's aperture image would be.
-            const bokeh::KernelWeights kw = bokeh::kernel_weights(c.kernel);
-            OIIO::ImageSpec ks(2 * kw.rx + 1, 2 * kw.ry + 1, 1, OIIO::TypeFloat);
-            ks.x = -kw.rx;
-            ks.y = -kw.ry;
-            OIIO::ImageBuf kimg(ks);
-            for (int dy = -kw.ry; dy <= kw.ry; ++dy)
-                for (int dx = -kw.rx; dx <= kw.rx; ++dx) {
-                    const float v = float(kw.at(dx, dy));
-                    kimg.setpixel(dx, dy, &v, 1);
-                }
-            runs.push_back([kimg, opts = c.options, &frame, threads] {
-                OIIO::ImageBuf out;
-                bokeh::convolve_image(out, frame, kimg, opts, {}, threads);
-            });
-            bokeh::convolve_image(result_small, small, kimg, c.options, {}, threads);
-        } else {
-            runs.push_back([k = c.kernel, opts = c.options, &frame, threads] {
-                OIIO::ImageBuf out;
-                bokeh::blur(out, frame, k, opts, {}, threads);
-            });
-            bokeh::blur(result_small, small, c.kernel, c.options, {}, threads);
+    for (const Frame& fr : frames) {
+        const OIIO::ImageBuf &frame = fr.pixels, &small = fr.small;
+        // The lights scene keeps the bare task names (the docs' charts); other frames are
+        // charted apart. (No comma: the CSV is unquoted.)
+        const std::string suffix = fr.name == "lights" ? "" : " (" + OIIO::Strutil::replace(fr.name, ",", " ", true) + ")";
+        const OIIO::ROI& crop = fr.crop;
+        std::printf("\n%s: %dx%d; errors on the %dx%d crop at (%d, %d)\n", fr.name.c_str(), frame.spec().width,
+                    frame.spec().height, crop.width(), crop.height(), crop.xbegin, crop.ybegin);
+        // Per case: how a run on the frame is timed, and its error on the crop, measured once.
+        std::vector<std::function<void()>> runs;
+        std::vector<int> nreps;
+        std::vector<bool> warm_each;  // a warm-up before each timed run (all but the slow peers)
+        std::vector<bokeh::ImageError> errors;
+        for (const Case& c : cases) {
+            OIIO::ImageBuf result_small;
+            if (c.peer == "gegl") {
+                auto run = [threads, size = c.size](const OIIO::ImageBuf& in, OIIO::ImageBuf& out) {
+                    out.reset(in.spec());
+                    std::string err;
+                    if (!bokeh_bench::gegl_lens_blur(static_cast<const float*>(in.localpixels()),
+                                                     in.spec().width, in.spec().height,
+                                                     0.5f * float(size - 1), threads,
+                                                     static_cast<float*>(out.localpixels()), &err)) {
+                        std::fprintf(stderr, "bokeh-bench: GEGL: %s\n", err.c_str());
+                        std::exit(1);
+                    }
+                };
+                runs.push_back([run, &frame] {
+                    OIIO::ImageBuf out;
+                    run(frame, out);
+                });
+                run(small, result_small);
+                result_small.set_origin(small.spec().x, small.spec().y);
+            } else if (c.peer == "oiio") {
+                const OIIO::ImageBuf k = IBA::make_kernel("disk", float(c.size), float(c.size));
+                runs.push_back([k, &frame, threads] {
+                    OIIO::ImageBuf out;
+                    IBA::convolve(out, frame, k, true, {}, threads);
+                });
+                IBA::convolve(result_small, small, k, true, {}, threads);
+            } else if (c.method.rfind("FFT (image", 0) == 0) {
+                // The exact kernel handed over as an image, as a user's aperture image would be.
+                const bokeh::KernelWeights kw = bokeh::kernel_weights(c.kernel);
+                OIIO::ImageSpec ks(2 * kw.rx + 1, 2 * kw.ry + 1, 1, OIIO::TypeFloat);
+                ks.x = -kw.rx;
+                ks.y = -kw.ry;
+                OIIO::ImageBuf kimg(ks);
+                for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+                    for (int dx = -kw.rx; dx <= kw.rx; ++dx) {
+                        const float v = float(kw.at(dx, dy));
+                        kimg.setpixel(dx, dy, &v, 1);
+                    }
+                runs.push_back([kimg, opts = c.options, &frame, threads] {
+                    OIIO::ImageBuf out;
+                    bokeh::convolve_image(out, frame, kimg, opts, {}, threads);
+                });
+                bokeh::convolve_image(result_small, small, kimg, c.options, {}, threads);
+            } else {
+                runs.push_back([k = c.kernel, opts = c.options, &frame, threads] {
+                    OIIO::ImageBuf out;
+                    bokeh::blur(out, frame, k, opts, {}, threads);
+                });
+                bokeh::blur(result_small, small, c.kernel, c.options, {}, threads);
+            }
+            nreps.push_back(c.reps > 0 ? c.reps : reps);
+            warm_each.push_back(c.peer != "oiio");
+            OIIO::ImageBuf ref;
+            bokeh::convolve_reference(ref, small, bokeh::kernel_weights(c.kernel), {}, {}, threads);
+            bokeh::ImageError e;
+            std::string err;
+            bokeh::compare(e, result_small, ref, err, {}, threads);
+            errors.push_back(e);
         }
-        nreps.push_back(c.reps > 0 ? c.reps : reps);
-        warm_each.push_back(c.peer != "oiio");
-        OIIO::ImageBuf ref;
-        bokeh::convolve_reference(ref, small, bokeh::kernel_weights(c.kernel), {}, {}, threads);
-        bokeh::ImageError e;
-        std::string err;
-        bokeh::compare(e, result_small, ref, err, {}, threads);
-        errors.push_back(e);
-    }
-    std::printf("timing %zu cases in interleaved rounds ...\n", runs.size());
-    std::fflush(stdout);
-    const std::vector<double> ms = bokeh_bench::interleaved_medians_ms(runs, nreps, warm_each);
+        std::printf("timing %zu cases in interleaved rounds ...\n", runs.size());
+        std::fflush(stdout);
+        const std::vector<double> ms = bokeh_bench::interleaved_medians_ms(runs, nreps, warm_each);
 
-    std::printf("%-9s %-32s %6s %10s %12s %10s\n", "task", "method", "size", "median ms",
-                "RMSE", "PSNR dB");
-    for (size_t i = 0; i < cases.size(); ++i) {
-        const Case& c = cases[i];
-        const double rmse = errors[i].rmse_linear, psnr = errors[i].psnr_db;
-        std::printf("%-9s %-32s %6.0f %10.2f %12.3g %10.1f\n", c.task.c_str(), c.method.c_str(),
-                    c.size, ms[i], rmse, psnr);
-        rows.push_back(format("{},{},{},{},{},{:.3f},{},{:.6g},{:.2f}", c.task, c.method, c.peer,
-                              c.size, threads, ms[i], nreps[i], rmse, psnr));
+        std::printf("%-9s %-32s %6s %10s %12s %10s %12s\n", "task", "method", "size", "median ms",
+                    "RMSE", "PSNR dB", "max error");
+        for (size_t i = 0; i < cases.size(); ++i) {
+            const Case& c = cases[i];
+            std::printf("%-9s %-32s %6.0f %10.2f %12.3g %10.1f %12.3g\n", c.task.c_str(), c.method.c_str(),
+                        c.size, ms[i], errors[i].rmse_linear, errors[i].psnr_db, errors[i].max_abs);
+            rows.push_back(format("{}{},{},{},{},{},{:.3f},{},{}", c.task, suffix, c.method, c.peer, c.size,
+                                  threads, ms[i], nreps[i], bokeh_bench::error_fields(errors[i])));
+        }
     }
     return write_csv(csv, rows);
 }

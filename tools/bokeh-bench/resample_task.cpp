@@ -24,6 +24,7 @@
 // two pipelines, so that the machine's slow phases hit both alike.
 
 #include "resample_task.h"
+#include "bench_common.h"
 #include "timing.h"
 
 #include <bokeh/blur.h>
@@ -118,38 +119,6 @@ bokeh::ResampleOptions with(F f)
     bokeh::ResampleOptions o;
     o.filter = f;
     return o;
-}
-
-// The crop (w x h, inside `img`'s data window) where the glare's brightness varies most:
-// a light and the gradient of its glare. Searched on 8 x 8 blocks of R + G + B.
-OIIO::ROI most_varied_crop(const OIIO::ImageBuf& img, int w, int h, int threads)
-{
-    constexpr int b = 8;
-    const OIIO::ImageBuf small = bokeh::reduce(img, b, {}, threads);
-    const OIIO::ROI r          = small.roi();
-    const int bw = w / b, bh = h / b;
-    std::vector<double> lum(size_t(r.width()) * size_t(r.height()));
-    for (OIIO::ImageBuf::ConstIterator<float> p(small); !p.done(); ++p)
-        lum[size_t(p.y() - r.ybegin) * size_t(r.width()) + size_t(p.x() - r.xbegin)] =
-            double(p[0]) + double(p[1]) + double(p[2]);
-    double best = -1.0;
-    int bx = 0, by = 0;
-    for (int y = 1; y + bh + 1 < r.height(); ++y)  // a block away from the edges
-        for (int x = 1; x + bw + 1 < r.width(); ++x) {
-            double lo = 1e30, hi = -1e30;
-            for (int j = 0; j < bh; ++j)
-                for (int i = 0; i < bw; ++i) {
-                    const double v = lum[size_t(y + j) * size_t(r.width()) + size_t(x + i)];
-                    lo = std::min(lo, v);
-                    hi = std::max(hi, v);
-                }
-            if (hi - lo > best) {
-                best = hi - lo;
-                bx = x, by = y;
-            }
-        }
-    const int x0 = (r.xbegin + bx) * b, y0 = (r.ybegin + by) * b;
-    return OIIO::ROI(x0, x0 + w, y0, y0 + h);
 }
 
 // The picture sheets: crops of the glare at 1/8 enlarged by each method, magnified with
@@ -320,7 +289,7 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
         // its own, the same for every method, that would hide their differences.
         OIIO::ROI inner = frame_roi;
         inner.xbegin += kMargin, inner.xend -= kMargin, inner.ybegin += kMargin, inner.yend -= kMargin;
-        rows.push_back(format("enlarge {} pipeline,full-resolution blur (reference),,1,{},{:.3f},{},0,999",
+        rows.push_back(format("enlarge {} pipeline,full-resolution blur (reference),,1,{},{:.3f},{},0,999,0",
                               eff.name, threads, ref_ms, a.reps));
         std::printf("\n%s: %s %g px at full resolution: %.1f ms (the reference)\n", eff.name.c_str(),
                     eff.kernel.shape == bokeh::KernelShape::Gaussian ? "Gaussian 4 sigma =" : "disk",
@@ -371,12 +340,11 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
                             method.c_str(), e_ms, p_ms > 0 ? format("{:.2f}", p_ms).c_str() : "",
                             e.rmse_linear, e.psnr_db, whole.psnr_db);
                 std::fflush(stdout);
-                rows.push_back(format("enlarge {},{},{},{},{},{:.3f},{},{:.6g},{:.2f}", eff.name, method,
-                                      peer, s, threads, e_ms, a.reps, e.rmse_linear, e.psnr_db));
+                rows.push_back(format("enlarge {},{},{},{},{},{:.3f},{},{}", eff.name, method, peer, s,
+                                      threads, e_ms, a.reps, error_fields(e)));
                 if (p_ms > 0)
-                    rows.push_back(format("enlarge {} pipeline,{},{},{},{},{:.3f},{},{:.6g},{:.2f}", eff.name,
-                                          method, peer, s, threads, p_ms, a.reps, e.rmse_linear,
-                                          e.psnr_db));
+                    rows.push_back(format("enlarge {} pipeline,{},{},{},{},{:.3f},{},{}", eff.name, method,
+                                          peer, s, threads, p_ms, a.reps, error_fields(e)));
                 return true;
             };
 

@@ -1,0 +1,100 @@
+#!/usr/bin/env python3
+"""bokeh-bench and its chart, end to end, small: the blur task on a small built-in scene
+and on a file, then chart.py on its CSV. Checks what the issue asks of the instrument
+(columns, an error per case against the exact reference, the peers in the same run, one
+chart per task in PNG and SVG) and that bad arguments fail with one line and status 1.
+Timings are not checked (they are measured, never asserted).
+
+    bench_smoke_test.py BOKEH_BENCH BOKEHTOOL CHART_PY SCRATCH_DIR
+"""
+
+import csv
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+
+bench, bokehtool, chart, scratch = sys.argv[1:5]
+shutil.rmtree(scratch, ignore_errors=True)
+os.makedirs(scratch)
+failures = []
+
+
+def check(ok, what):
+    if not ok:
+        failures.append(what)
+        print("FAILED:", what)
+
+
+def run(args):
+    return subprocess.run(args, capture_output=True, text=True, timeout=600)
+
+
+# A file frame: a built-in scene written by bokehtool, 200x120 (RGBA+Z: the bench takes RGBA).
+plate = os.path.join(scratch, "plate.exr")
+r = run([bokehtool, "--scene", "edges:width=200:height=120", "-o", plate])
+check(r.returncode == 0, "bokehtool wrote the plate: " + r.stderr)
+
+out_csv = os.path.join(scratch, "blur.csv")
+r = run([bench, "--quick", "--size", "240x160", "--reps", "1", "--threads", "2",
+         "--scenes", "lights", "--image", plate, "--csv", out_csv])
+check(r.returncode == 0, "bokeh-bench ran: " + r.stderr[-2000:])
+print(r.stdout[-3000:])
+
+with open(out_csv, newline="") as f:
+    reader = csv.reader(f)
+    header = next(reader)
+    rows = [dict(zip(header, row)) for row in reader]
+    f.seek(0)
+    widths = {len(row) for row in csv.reader(f)}
+check(header == ["task", "method", "peer", "size_px", "threads", "median_ms", "reps",
+                 "rmse_linear", "psnr_db_tonemapped", "max_abs_linear"], f"header: {header}")
+check(widths == {len(header)}, f"every row has {len(header)} fields: {widths}")
+
+tasks = {row["task"] for row in rows}
+for shape in ("box", "disk", "hexagon", "gaussian"):
+    check(shape in tasks, f"rows for {shape} on the lights scene")
+    check(f"{shape} (plate.exr)" in tasks, f"rows for {shape} on the file")
+for row in rows:
+    name = f"{row['task']} / {row['method']} / {row['size_px']}"
+    ms = float(row["median_ms"])
+    check(ms > 0 and math.isfinite(ms), f"{name}: a time ({row['median_ms']})")
+    rmse, psnr, mx = (float(row[c]) for c in ("rmse_linear", "psnr_db_tonemapped", "max_abs_linear"))
+    if row["peer"] == "gegl":
+        continue  # the peer's own output, reported as it is
+    check(all(math.isfinite(v) for v in (rmse, psnr, mx)), f"{name}: finite errors")
+    check(0 <= rmse <= mx, f"{name}: RMSE {rmse} <= max error {mx}")
+    if "exact" in row["method"]:
+        # Exact methods against the brute force: float rounding of the peak at most.
+        check(psnr >= 120, f"{name}: exact, PSNR {psnr}")
+    if row["method"].startswith("3 parallelograms") or row["method"].startswith("3 boxes"):
+        check(mx > 0, f"{name}: an approximation differs from the exact kernel")
+peers = {row["peer"] for row in rows}
+check("oiio" in peers, "OIIO's convolution runs in the same run")
+
+charts = os.path.join(scratch, "charts")
+r = run(["/usr/bin/python3", chart, out_csv, charts])
+check(r.returncode == 0, "chart.py ran: " + r.stderr[-2000:])
+check("Pareto" in r.stdout or "|" in r.stdout, "chart.py printed its front tables")
+for task in tasks:
+    stem = re.sub(r"[^A-Za-z0-9._-]+", "_", task)  # as chart.py names its files
+    for ext in ("png", "svg"):
+        path = os.path.join(charts, f"{stem}.{ext}")
+        check(os.path.isfile(path) and os.path.getsize(path) > 1000, f"chart {path}")
+
+# Bad arguments: one line naming the argument, status 1, no CSV written.
+for args, says in ((["--scenes", "nosuch"], "nosuch"),
+                   (["--image", os.path.join(scratch, "missing.exr")], "missing.exr"),
+                   (["--frobnicate"], "--frobnicate")):
+    bad_csv = os.path.join(scratch, "bad.csv")
+    r = run([bench, "--quick", "--size", "64x48", "--reps", "1"] + args + ["--csv", bad_csv])
+    check(r.returncode == 1, f"{args}: status {r.returncode}")
+    check(says in r.stderr, f"{args}: names it: {r.stderr.strip()}")
+    check(not os.path.exists(bad_csv), f"{args}: nothing written")
+
+if failures:
+    print(f"{len(failures)} check(s) failed")
+    sys.exit(1)
+print("bench smoke test passed")

@@ -1,0 +1,55 @@
+// bench_common.cpp — see bench_common.h.
+
+#include "bench_common.h"
+
+#include <bokeh/resample.h>
+
+#include <algorithm>
+#include <vector>
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh_bench {
+
+std::string error_fields(const bokeh::ImageError& e)
+{
+    return OIIO::Strutil::fmt::format("{:.6g},{:.2f},{:.6g}", e.rmse_linear, e.psnr_db, e.max_abs);
+}
+
+OIIO::ROI most_varied_crop(const OIIO::ImageBuf& img, int w, int h, int threads)
+{
+    constexpr int b = 8;
+    w = std::min(w, img.roi().width());
+    h = std::min(h, img.roi().height());
+    const OIIO::ImageBuf small = bokeh::reduce(img, b, {}, threads);
+    const OIIO::ROI r          = small.roi();
+    const int bw = w / b, bh = h / b;
+    std::vector<double> lum(size_t(r.width()) * size_t(r.height()));
+    for (OIIO::ImageBuf::ConstIterator<float> p(small); !p.done(); ++p)
+        lum[size_t(p.y() - r.ybegin) * size_t(r.width()) + size_t(p.x() - r.xbegin)] =
+            double(p[0]) + double(p[1]) + double(p[2]);
+    double best = -1.0;
+    int bx = 0, by = 0;
+    for (int y = 1; y + bh + 1 < r.height(); ++y)  // a block away from the edges
+        for (int x = 1; x + bw + 1 < r.width(); ++x) {
+            double lo = 1e30, hi = -1e30;
+            for (int j = 0; j < bh; ++j)
+                for (int i = 0; i < bw; ++i) {
+                    const double v = lum[size_t(y + j) * size_t(r.width()) + size_t(x + i)];
+                    lo = std::min(lo, v);
+                    hi = std::max(hi, v);
+                }
+            if (hi - lo > best) {
+                best = hi - lo;
+                bx = x, by = y;
+            }
+        }
+    // Inside the data window (a frame too small for the search keeps its corner).
+    const OIIO::ROI d = img.roi();
+    const int x0 = std::clamp((r.xbegin + bx) * b, d.xbegin, d.xend - w);
+    const int y0 = std::clamp((r.ybegin + by) * b, d.ybegin, d.yend - h);
+    return OIIO::ROI(x0, x0 + w, y0, y0 + h);
+}
+
+
+}  // namespace bokeh_bench
