@@ -309,7 +309,14 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
     const OIIO::ROI kr       = kf.roi();
     const int knc = kf.nchannels(), nc = in.nchannels();
     if (kr.width() > 4096 || kr.height() > 4096) {
-        dst.errorfmt("blur: the kernel image is {}x{}; at most 4096x4096", kr.width(), kr.height());
+        dst.errorfmt("convolve: the kernel image is {}x{}; at most 4096x4096", kr.width(), kr.height());
+        return false;
+    }
+    // Kernel channels past the image's would be dropped unseen (a 6-channel kernel on RGBA).
+    if (knc > nc) {
+        dst.errorfmt("convolve: the kernel image has {} channels, the image {}: a kernel has 1 channel (for "
+                     "all) or at most one per image channel",
+                     knc, nc);
         return false;
     }
 
@@ -325,20 +332,20 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
         double sum = 0.0;
         for (OIIO::ImageBuf::ConstIterator<float> it(kf); !it.done(); ++it) {
             if (!std::isfinite(it[c])) {
-                dst.errorfmt("blur: the kernel image has a non-finite value at ({}, {})", it.x(), it.y());
+                dst.errorfmt("convolve: the kernel image has a non-finite value at ({}, {})", it.x(), it.y());
                 return false;
             }
             k.w[size_t(it.y() - cy + ry) * size_t(2 * rx + 1) + size_t(it.x() - cx + rx)] = it[c];
             sum += it[c];
         }
         if (!(sum > 0.0)) {
-            dst.errorfmt("blur: kernel image channel {} sums to {}; it must be positive", c, sum);
+            dst.errorfmt("convolve: kernel image channel {} sums to {}; it must be positive", c, sum);
             return false;
         }
         // A weighted mean of exp(k x) with negative weights can fall to 0 or below, whose log
         // is NaN or -inf: iris mode takes kernels without them.
         if (opts.iris != 0.0f && *std::min_element(k.w.begin(), k.w.end()) < 0.0) {
-            dst.errorfmt("blur: iris mode needs a kernel image without negative weights (channel {} has some)", c);
+            dst.errorfmt("convolve: iris mode needs a kernel image without negative weights (channel {} has some)", c);
             return false;
         }
         for (double& v : k.w)

@@ -197,6 +197,11 @@ bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifi
                                          OIIO::Strutil::join(known, ", "));
             return false;
         }
+        // Twice (`kernel=disk:kernel=box`): one of the two would be dropped unseen.
+        if (out.given(name)) {
+            err = format("option '{}' is given twice", name);
+            return false;
+        }
         if (eq == std::string::npos) {
             // A bare name switches a Bool on, as in oiiotool's `--cmd:flag`.
             if (spec->type != OptionSpec::Type::Bool) {

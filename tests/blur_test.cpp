@@ -2724,4 +2724,9 @@ TEST(BlurImageKernel, BadKernelsAreRefused)
     EXPECT_NE(out.geterror().find("non-finite value at (1, 1)"), std::string::npos) << out.geterror();
     EXPECT_FALSE(convolve_image(out, src, OIIO::ImageBuf()));
     EXPECT_NE(out.geterror().find("kernel image"), std::string::npos) << out.geterror();
+    // More kernel channels than the image's: the extra ones would be dropped unseen.
+    OIIO::ImageBuf wide(OIIO::ImageSpec(3, 3, src.nchannels() + 1, OIIO::TypeFloat));
+    OIIO::ImageBufAlgo::fill(wide, std::vector<float>(size_t(src.nchannels() + 1), 1.0f));
+    EXPECT_FALSE(convolve_image(out, src, wide));
+    EXPECT_NE(out.geterror().find("channels, the image"), std::string::npos) << out.geterror();
 }

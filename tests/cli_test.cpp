@@ -499,6 +499,15 @@ TEST(Cli, BlurMethodsAndConvolve)
     ASSERT_TRUE(zero.write(dir + "/zero.exr"));
     expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --convolve -o {2}", in, dir, out)),
                          "kernel image channel 0 sums to 0", out);
+    // The error names both images (the kernel is the top one).
+    r = bokehtool(format("{0} {1}/zero.exr --convolve -o {2}", in, dir, out));
+    EXPECT_NE(r.err.find("kernel image: " + dir + "/zero.exr"), std::string::npos) << r.err;
+    // A kernel with more channels than the image would have had its extra ones dropped.
+    OIIO::ImageBuf six(OIIO::ImageSpec(3, 3, 6, OIIO::TypeFloat));
+    OIIO::ImageBufAlgo::fill(six, { 1.0f, 1.0f, 1.0f, 1.0f, 1.0f, 1.0f });
+    ASSERT_TRUE(six.write(dir + "/six.exr"));
+    expect_clean_failure(bokehtool(format("{0} {1}/six.exr --convolve -o {2}", in, dir, out)),
+                         "the kernel image has 6 channels, the image 5", out);
     expect_clean_failure(bokehtool(format("{0} --blur:kernel=box:method=fft 9 -o {1}", in, out)),
                          "method=fft is for disk, polygon, gaussian and OIIO's filter kernels", out);
     // --blur:kernel=image takes the kernel from the stack too, resized to WxH: at its own
@@ -568,7 +577,18 @@ TEST(Cli, Blur)
                                { "--blur:curvature=2:kernel=polygon 9", "option 'curvature' = 2 is out of range" },
                                { "--blur:hole=0.99 9", "option 'hole' = 0.99 is out of range" },
                                { "--blur:kernel=disk:method=bands:bands=65 9", "option 'bands' = 65 is out of range" },
-                               { "--blur:border=wrap 9", "option 'border' = 'wrap' is not one of" } }) {
+                               { "--blur:border=wrap 9", "option 'border' = 'wrap' is not one of" },
+                               // Options that would be ignored are refused, as methods are.
+                               { "--blur:kernel=box:blades=5 9", "blades does not apply to kernel=box" },
+                               { "--blur:kernel=hex:blades=5 9", "blades does not apply to kernel=hex" },
+                               { "--blur:kernel=disk:rotation=30 9x5", "rotation does not apply to kernel=disk" },
+                               { "--blur:kernel=box:sigma=3 9", "sigma does not apply to kernel=box" },
+                               { "--blur:kernel=box:hole=0.5 9", "hole does not apply to kernel=box" },
+                               { "--blur:kernel=disk:curvature=0.5 9", "curvature does not apply to kernel=disk" },
+                               { "--blur:kernel=lanczos3:edge=aa 9", "edge does not apply to kernel=lanczos3" },
+                               { "--blur:kernel=disk:bands=4 9", "bands does not apply to kernel=disk with method=auto" },
+                               { "--blur:kernel=disk:reduction=4 9", "reduction does not apply to kernel=disk with method=auto" },
+                               { "--blur:kernel=disk:kernel=box 9", "option 'kernel' is given twice" } }) {
         SCOPED_TRACE(args);
         r = bokehtool(in + " " + args + " -o " + out);
         expect_clean_failure(r, what, out);

@@ -62,6 +62,10 @@ TEST(Options, RejectsWithTheOptionNamed)
     EXPECT_FALSE(parse_options(specs(), "grow=maybe", v, err));
     EXPECT_FALSE(parse_options(specs(), "size", v, err));
     EXPECT_NE(err.find("needs a value"), std::string::npos) << err;
+    EXPECT_FALSE(parse_options(specs(), "edge=clamp:size=3:edge=mirror", v, err)) << "one would be dropped";
+    EXPECT_NE(err.find("option 'edge' is given twice"), std::string::npos) << err;
+    EXPECT_FALSE(parse_options(specs(), "grow:grow=0", v, err));
+    EXPECT_NE(err.find("option 'grow' is given twice"), std::string::npos) << err;
 }
 
 TEST(Options, ParseSize)

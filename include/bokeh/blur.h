@@ -175,7 +175,8 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// centre is its data window's pixel (xbegin + width / 2, ybegin + height / 2), which is
 /// (0, 0) for OIIO's make_kernel results. Channels: a 1-channel kernel blurs every
 /// channel; otherwise source channel c uses kernel channel c, and source channels past
-/// the kernel's (alpha, say) use the mean of the kernel's channels. Each kernel channel
+/// the kernel's (alpha, say) use the mean of the kernel's channels; a kernel with more
+/// channels than the source is refused. Each kernel channel
 /// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
 /// kernel value, is refused, and in iris mode a kernel with negative weights (its mean
 /// of exp(k x) could fall to 0 or below). NaN and infinite source values reach exactly the

@@ -75,7 +75,7 @@ public:
 
 /// Parse `modifiers` ("kernel=disk:grow=1", the part after the command's first colon)
 /// against `specs`. False + `err` naming the option for an unknown name, a value of the
-/// wrong type, outside its range, or not among the choices.
+/// wrong type, outside its range, not among the choices, or given twice.
 bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifiers,
                    OptionValues& out, std::string& err);
 

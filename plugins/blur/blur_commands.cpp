@@ -29,6 +29,50 @@ bokeh::BlurOptions blur_options(const CommandContext& c)
     return o;
 }
 
+// The options that shape a kernel or tune a method, refused where they do not apply: an
+// ignored option would let `kernel=box:blades=5` or `kernel=hex:blades=5` run as if it had
+// not been given (a hexagon), as a method that does not apply is refused. False + the
+// reason for the first one given that does not.
+bool options_apply(const CommandContext& c, const std::string& kernel, std::string& why)
+{
+    const std::string& method = c.options.get_string("method");
+    struct Rule {
+        const char* option;
+        bool applies;
+        const char* to;
+    };
+    const bool polygon = kernel == "polygon" || kernel == "hex";
+    const bool shaped  = polygon || kernel == "disk" || kernel == "box" || kernel == "gaussian";
+    const Rule rules[] = {
+        { "sigma", kernel == "gaussian", "kernel=gaussian" },
+        { "blades", kernel == "polygon", "kernel=polygon; kernel=hex has 6" },
+        { "rotation", polygon, "kernel=polygon and hex; a disk's squeeze stays on the frame's axes" },
+        { "curvature", polygon, "kernel=polygon and hex" },
+        { "hole", polygon || kernel == "disk", "kernel=disk, polygon and hex" },
+        // OIIO's filters are sampled at whole offsets: edge=hard is what they are already.
+        { "edge", shaped || (kernel != "image" && c.options.get_string("edge") == "hard"),
+          "kernel=box, gaussian, disk, polygon and hex (OIIO's filters: edge=hard, what they are)" },
+        { "bands", method == "bands" || method == "fast", "method=bands and fast" },
+        { "reduction", method == "reduced", "method=reduced" },
+    };
+    for (const Rule& r : rules)
+        if (c.options.given(r.option) && !r.applies) {
+            why = format("{} does not apply to kernel={}{}: it is for {}", r.option, kernel,
+                         r.option == std::string("bands") || r.option == std::string("reduction")
+                             ? format(" with method={}", method)
+                             : std::string(),
+                         r.to);
+            return false;
+        }
+    return true;
+}
+
+// A convolution's error with the two images it was given named (the kernel is the top one).
+std::string with_inputs(const CommandContext& c, const std::string& err)
+{
+    return format("{} (image: {}; kernel image: {})", err, c.inputs[0].origin, c.inputs[1].origin);
+}
+
 // `--blur:kernel=image WxH`: the top image is the kernel (an aperture scan, say), resized
 // to WxH and convolved as `--convolve` does.
 bool blur_with_image_command(CommandContext& c, float width_px, float height_px)
@@ -59,7 +103,7 @@ bool blur_with_image_command(CommandContext& c, float width_px, float height_px)
     if (!bokeh::resize(kernel, *c.inputs[1].buf, w, h, {}, c.nthreads))
         return c.fail(format("the kernel image: {}", kernel.geterror()));
     if (!bokeh::convolve_image(*out.buf, *c.inputs[0].buf, kernel, blur_options(c), {}, c.nthreads))
-        return c.fail(out.buf->geterror());
+        return c.fail(with_inputs(c, out.buf->geterror()));
     c.outputs.push_back(std::move(out));
     return true;
 }
@@ -70,6 +114,9 @@ bool blur_command(CommandContext& c)
     if (!bokeh::parse_extent(c.args[0], k.width_px, k.height_px))
         return c.fail(format("'{}' is not a kernel size (WxH or N pixels, >= 0)", c.args[0]));
     const std::string& shape = c.options.get_string("kernel");
+    std::string why;
+    if (!options_apply(c, shape, why))
+        return c.fail(why);
     if (shape == "image")
         return blur_with_image_command(c, k.width_px, k.height_px);
     k.shape = shape == "box"                            ? bokeh::KernelShape::Box
@@ -78,7 +125,7 @@ bool blur_command(CommandContext& c)
               : shape == "hex" || shape == "polygon"    ? bokeh::KernelShape::Polygon
                                                         : bokeh::KernelShape::Filter;
     k.filter = shape;
-    k.blades       = shape == "hex" ? 6 : c.options.get_int("blades");
+    k.blades       = shape == "hex" ? 6 : c.options.get_int("blades");  // options_apply: not given to hex
     k.sigma_px     = float(c.options.get_float("sigma"));
     k.rotation_deg = float(c.options.get_float("rotation"));
     k.curvature    = float(c.options.get_float("curvature"));
@@ -117,7 +164,7 @@ bool convolve_command(CommandContext& c)
     out.buf               = std::make_shared<OIIO::ImageBuf>();
     if (!bokeh::convolve_image(*out.buf, *c.inputs[0].buf, *c.inputs[1].buf, blur_options(c), {},
                                c.nthreads))
-        return c.fail(out.buf->geterror());
+        return c.fail(with_inputs(c, out.buf->geterror()));
     c.outputs.push_back(std::move(out));
     return true;
 }
@@ -149,10 +196,12 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "kernel shape (gaussian: sigma = W/4 as oiiotool, not truncated unless edge=hard; "
                            "image: the top image of the stack, resized to WxH, blurs the one "
                            "below it, as --convolve; the names after it are OIIO's filters, "
-                           "oiiotool's make_kernel weights, computed exactly)"),
+                           "oiiotool's make_kernel weights, computed exactly; sinc is refused with "
+                           "its reason: OIIO's is not scaled to the size, the identity)"),
         OptionSpec::Choice("edge", { "aa", "hard" },
                            "aa: area-weighted edge; hard: sampled at pixel centres as oiiotool's kernels "
-                           "(disk, box; gaussian cut at WxH; with border=clamp, oiiotool's --blur to 1e-5)"),
+                           "(disk, box; gaussian cut at WxH; with border=clamp, oiiotool's --blur to 1e-5); "
+                           "OIIO's filters take hard only (what they are), kernel=image neither"),
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps", "reduced", "spans", "fft", "separable" },
