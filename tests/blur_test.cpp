@@ -76,6 +76,7 @@ std::vector<Named> kernels()
         KernelEdge::Hard;
     add("disk 15", KernelShape::Disk, 15, 15);
     add("disk 9 (the seed's bilinear taps too)", KernelShape::Disk, 9, 9);
+    add("disk 17 (the seed's 17x17 bilinear taps too)", KernelShape::Disk, 17, 17);
     add("disk 10.5", KernelShape::Disk, 10.5f, 10.5f);
     add("disk 21x9", KernelShape::Disk, 21, 9);
     add("disk 61x7 (15 spans in its top row)", KernelShape::Disk, 61, 7);
@@ -381,33 +382,81 @@ TEST(Blur, ZeroSizeIsTheIdentityBitForBit)
 TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
 {
     // Every exact method gives the kernel; the seed's bilinear taps and the three boxes give
-    // theirs (the bands' own test is BandsGiveTheirKernelFromALone1e6Pixel).
+    // theirs (the bands' own test is BandsGiveTheirKernelFromALone1e6Pixel). One, three and
+    // four channels: the running sums have a loop for each (RGBA in vector types).
+    for (int nc : { 1, 3, 4 })
     for (const Named& n : kernels())
     for (BlurMethod m : every_method(n.k)) {
         if (m == BlurMethod::Fast || m == BlurMethod::Bands || m == BlurMethod::Parallelograms)
             continue;
-        SCOPED_TRACE(n.name + method_name(m));
+        SCOPED_TRACE(n.name + method_name(m) + " channels " + std::to_string(nc));
         const KernelWeights kw = m == BlurMethod::BilinearTaps ? bilinear_tap_weights(n.k)
                                  : m == BlurMethod::ThreeBoxes ? three_box_weights(n.k)
                                                                : kernel_weights(n.k);
-        OIIO::ImageBuf src(OIIO::ImageSpec(2 * kw.rx + 9, 2 * kw.ry + 9, 1, OIIO::TypeFloat));
+        OIIO::ImageBuf src(OIIO::ImageSpec(2 * kw.rx + 9, 2 * kw.ry + 9, nc, OIIO::TypeFloat));
         const int cx = kw.rx + 4, cy = kw.ry + 4;
-        const float bright = 1e6f;
-        src.setpixel(cx, cy, &bright);
+        const std::vector<float> bright(size_t(nc), 1e6f);
+        src.setpixel(cx, cy, bright.data());
         BlurOptions o;
         o.method = m;
         OIIO::ImageBuf out;
         ASSERT_TRUE(blur(out, src, n.k, o));
         double worst = 0.0;
+        std::vector<float> v(static_cast<size_t>(nc));
         for (int y = 0; y < src.spec().height; ++y)
             for (int x = 0; x < src.spec().width; ++x) {
-                float v;
-                out.getpixel(x, y, &v);
+                out.getpixel(x, y, v.data());
                 const int dx = x - cx, dy = y - cy;
                 const double want = (std::abs(dx) <= kw.rx && std::abs(dy) <= kw.ry) ? kw.at(dx, dy) : 0.0;
-                worst = std::max(worst, std::abs(v / 1e6 - want));
+                for (float c : v)
+                    worst = std::max(worst, std::abs(c / 1e6 - want));
             }
         EXPECT_LE(worst, 1e-7) << "max deviation from the normalised kernel";
+    }
+}
+
+TEST(Blur, PolygonsMirrorAboutTheirVertexAxis)
+{
+    // With a vertex up (rotation 0) a polygon of any blade count, curved blades, a hole or
+    // an anamorphic squeeze is mirror symmetric in x, and so is its blur: a mirrored
+    // image's blur mirrored back is the blur (every exact method, and the bands).
+    const OIIO::ImageBuf src = test_image(41, 33);
+    std::vector<Named> cases;
+    auto add = [&](const char* name, int blades, float w, float h, float curvature, float hole) {
+        Kernel k;
+        k.shape     = KernelShape::Polygon;
+        k.blades    = blades;
+        k.width_px  = w;
+        k.height_px = h;
+        k.curvature = curvature;
+        k.hole      = hole;
+        cases.push_back({ name, k });
+    };
+    add("triangle 15", 3, 15, 15, 0.0f, 0.0f);
+    add("pentagon 19 curved 0.4", 5, 19, 19, 0.4f, 0.0f);
+    add("pentagon 21 with a hole", 5, 21, 21, 0.0f, 0.3f);
+    add("heptagon 17x23 curved 0.7", 7, 17, 23, 0.7f, 0.0f);
+    add("nonagon 13.5 curved, holed", 9, 13.5f, 13.5f, 0.5f, 0.25f);
+    for (const Named& n : cases) {
+        SCOPED_TRACE(n.name);
+        const KernelWeights kw = kernel_weights(n.k);
+        for (int dy = -kw.ry; dy <= kw.ry; ++dy)
+            for (int dx = -kw.rx; dx <= kw.rx; ++dx)
+                ASSERT_NEAR(kw.at(dx, dy), kw.at(-dx, dy), 1e-12);
+        std::vector<BlurMethod> methods = exact_methods(n.k);
+        if (n.k.hole == 0.0f)
+            methods.push_back(BlurMethod::Bands);
+        for (BlurMethod m : methods)
+            for (Border border : { Border::Black, Border::Mirror }) {
+                SCOPED_TRACE(testing::Message() << method_name(m) << " border " << int(border));
+                BlurOptions o;
+                o.method = m;
+                o.border = border;
+                OIIO::ImageBuf direct, back;
+                ASSERT_TRUE(blur(direct, src, n.k, o)) << direct.geterror();
+                ASSERT_TRUE(blur(back, OIIO::ImageBufAlgo::flop(src), n.k, o)) << back.geterror();
+                EXPECT_LE(bokeh_test::max_difference(OIIO::ImageBufAlgo::flop(back), direct), 2e-6 * peak(direct));
+            }
     }
 }
 
@@ -428,6 +477,9 @@ TEST(Blur, SymmetricKernelsGiveSymmetricResults)
             methods.push_back(BlurMethod::Bands);
         if (n.k.shape == KernelShape::Gaussian && n.k.edge == KernelEdge::Antialiased)
             methods.push_back(BlurMethod::ThreeBoxes);
+        const std::vector<BlurMethod> approx = approximations(n.k);
+        if (std::find(approx.begin(), approx.end(), BlurMethod::BilinearTaps) != approx.end())
+            methods.push_back(BlurMethod::BilinearTaps);
         for (BlurMethod m : methods)
             for (bool in_x : { true, false })
                 for (Border border : { Border::Black, Border::Mirror }) {
@@ -723,19 +775,23 @@ TEST(Blur, BandsGiveTheirKernelFromALone1e6Pixel)
 
 TEST(Blur, NoDriftAlongA4KRowAfterA1e6Pixel)
 {
-    OIIO::ImageBuf src(OIIO::ImageSpec(3840, 3, 1, OIIO::TypeFloat));
+    // One, three and four channels (each its own running-sum loop), every channel bright.
+    for (int nc : { 1, 3, 4 }) {
+    OIIO::ImageBuf src(OIIO::ImageSpec(3840, 3, nc, OIIO::TypeFloat));
+    std::vector<float> px(static_cast<size_t>(nc));
     for (int y = 0; y < 3; ++y)
         for (int x = 0; x < 3840; ++x) {
-            const float v = x == 20 && y == 1 ? 1e6f : 0.25f + 0.25f * float((x * 37) % 11) / 11.0f;
-            src.setpixel(x, y, &v);
+            for (int c = 0; c < nc; ++c)
+                px[size_t(c)] = x == 20 && y == 1 ? 1e6f : 0.25f + 0.25f * float((x * 37 + c * 5) % 11) / 11.0f;
+            src.setpixel(x, y, px.data());
         }
     // The approximations against themselves on the row without the bright pixel.
     OIIO::ImageBuf dim = src;
-    const float level  = 0.25f;
-    dim.setpixel(20, 1, &level);
+    const std::vector<float> level(size_t(nc), 0.25f);
+    dim.setpixel(20, 1, level.data());
     for (const Named& n : kernels())
     for (BlurMethod m : every_method(n.k)) {
-        SCOPED_TRACE(n.name + method_name(m));
+        SCOPED_TRACE(n.name + method_name(m) + " channels " + std::to_string(nc));
         BlurOptions o;
         o.method = m;
         OIIO::ImageBuf out, ref;
@@ -751,6 +807,7 @@ TEST(Blur, NoDriftAlongA4KRowAfterA1e6Pixel)
         EXPECT_LE(bokeh_test::max_difference(OIIO::ImageBufAlgo::cut(out, far),
                                              OIIO::ImageBufAlgo::cut(ref, far)),
                   1e-6);
+    }
     }
 }
 
@@ -2420,6 +2477,84 @@ TEST(BlurIris, ASmallExponentTendsToThePlainBlur)
             // The k var / 2 term, and float rounding of the plain blur's and the log's.
             EXPECT_LE(bokeh_test::max_difference(a, b), std::abs(k) / 8.0 + 1e-6);
         }
+}
+
+TEST(BlurIris, AnImageKernelMatchesExpMeanLogAndShiftsWithTheImage)
+{
+    // convolve_image in iris mode against its definition: exp(k x) per colour channel, the
+    // plain convolution with the same kernel image (convolve_image, itself checked against
+    // the brute force above), log / k; alpha plainly. A colour kernel, not symmetric, both
+    // signs of k up to |k| x range = 5. Then translation: the image moved by whole pixels
+    // (its data window) gives the same pixels, moved.
+    const OIIO::ImageBuf src = test_image(37, 29), moved = test_image(37, 29, 9, -5);  // 0 .. 500
+    OIIO::ImageBuf kernel(OIIO::ImageSpec(5, 7, 3, OIIO::TypeFloat));
+    for (int y = 0; y < 7; ++y)
+        for (int x = 0; x < 5; ++x) {
+            const float w[3] = { float(1 + (x * 3 + y) % 4), x + y < 6 ? 1.0f : 0.0f, float(1 + x * y) };
+            kernel.setpixel(x, y, w);
+        }
+    const int alpha = src.spec().alpha_channel;
+    for (float k : { 0.01f, -0.01f, 0.002f }) {
+        SCOPED_TRACE(k);
+        BlurOptions o;
+        o.border = Border::Clamp;  // no outside term: exp of clamped values
+        o.iris   = k;
+        OIIO::ImageBuf got, shifted;
+        ASSERT_TRUE(convolve_image(got, src, kernel, o)) << got.geterror();
+        OIIO::ImageBuf e = src;
+        for (OIIO::ImageBuf::Iterator<float> it(e); !it.done(); ++it)
+            for (int c = 0; c < 4; ++c)
+                if (c != alpha)
+                    it[c] = std::exp(k * it[c]);
+        BlurOptions plain = o;
+        plain.iris        = 0.0f;
+        OIIO::ImageBuf mean_e, linear;
+        ASSERT_TRUE(convolve_image(mean_e, e, kernel, plain));
+        ASSERT_TRUE(convolve_image(linear, src, kernel, plain));
+        double err = 0.0;
+        for (OIIO::ImageBuf::ConstIterator<float> it(got); !it.done(); ++it)
+            for (int c = 0; c < 4; ++c) {
+                const double want = c == alpha ? linear.getchannel(it.x(), it.y(), 0, c)
+                                               : std::log(double(mean_e.getchannel(it.x(), it.y(), 0, c))) / k;
+                err = std::max(err, std::abs(double(it[c]) - want) / std::max(1.0, std::abs(want)));
+            }
+        EXPECT_LE(err, 2e-4) << "relative (log turns exp-space rounding into ~1e-7 / |k|)";
+        ASSERT_TRUE(convolve_image(shifted, moved, kernel, o)) << shifted.geterror();
+        ASSERT_EQ(shifted.roi().xbegin - got.roi().xbegin, 9);
+        ASSERT_EQ(shifted.roi().ybegin - got.roi().ybegin, -5);
+        double moved_err = 0.0;
+        for (OIIO::ImageBuf::ConstIterator<float> it(got); !it.done(); ++it)
+            for (int c = 0; c < 4; ++c)
+                moved_err = std::max(moved_err, double(std::abs(it[c] - shifted.getchannel(it.x() + 9, it.y() - 5, 0, c))));
+        EXPECT_LE(moved_err, 1e-6 * peak(got)) << "the FFT's tiles follow the data window";
+    }
+}
+
+TEST(BlurIris, ExactMethodsShiftWithTheImage)
+{
+    // Translation equivariance in iris mode: every exact method, the image's data window
+    // moved by whole pixels.
+    const OIIO::ImageBuf a = test_image(43, 31), b = test_image(43, 31, -7, 12);
+    for (const Named& n : kernels()) {
+        const std::vector<double> w = kernel_weights(n.k).w;
+        if (std::any_of(w.begin(), w.end(), [](double v) { return v < 0.0; }))
+            continue;  // negative lobes: refused in iris mode (tested above)
+        for (BlurMethod m : exact_methods(n.k)) {
+            SCOPED_TRACE(n.name + method_name(m));
+            BlurOptions o;
+            o.method = m;
+            o.iris   = 0.01f;
+            OIIO::ImageBuf ra, rb;
+            ASSERT_TRUE(blur(ra, a, n.k, o)) << ra.geterror();
+            ASSERT_TRUE(blur(rb, b, n.k, o)) << rb.geterror();
+            ASSERT_EQ(rb.roi().xbegin - ra.roi().xbegin, -7);
+            double worst = 0.0;
+            for (OIIO::ImageBuf::ConstIterator<float> it(ra); !it.done(); ++it)
+                for (int c = 0; c < 4; ++c)
+                    worst = std::max(worst, double(std::abs(it[c] - rb.getchannel(it.x() - 7, it.y() + 12, 0, c))));
+            EXPECT_LE(worst, 1e-6 * peak(ra));
+        }
+    }
 }
 
 TEST(BlurIris, NonFiniteValuesDoNotWidenTheRange)
