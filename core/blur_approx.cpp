@@ -2014,7 +2014,8 @@ int hexagon_reach(const Kernel& k, bool along_x)
         r = std::max(r, std::abs(along_x ? x : y));
     }
     // A rhombus is two steep segments in series, and each spreads its segment by its
-    // shear's and its unshear's three taps (< 1.5 px each): < 6 px past the hexagon.
+    // shear's and its unshear's three taps (< 1.5 px each) and its last row's drift
+    // (< 0.5 px): < 7 px past the hexagon, so at whole offsets at most ceil(r) + 6.
     // It was + 2: measured, the parallelograms reach up to 5 px past the hexagon (9 px:
     // 10 against 4.5), and under clamp or mirror the frame's edge pixels lost up to 7.7e-6
     // of a constant image, read as black past the padding (session 17).

@@ -307,12 +307,16 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
     const OIIO::ImageBuf& in = float_source(src, src_holder);
     const OIIO::ImageBuf& kf = float_source(kernel, kernel_holder);
     const OIIO::ROI kr       = kf.roi();
-    const int knc = kf.nchannels(), nc = in.nchannels();
+    const int nc = in.nchannels();
+    // An aperture picture's alpha (its coverage, not a weight) is dropped where the image has
+    // no channel for it: an RGBA aperture scan on an RGB plate.
+    const int knc = kf.nchannels() > nc && kf.spec().alpha_channel == kf.nchannels() - 1 ? kf.nchannels() - 1
+                                                                                          : kf.nchannels();
     if (kr.width() > 4096 || kr.height() > 4096) {
         dst.errorfmt("convolve: the kernel image is {}x{}; at most 4096x4096", kr.width(), kr.height());
         return false;
     }
-    // Kernel channels past the image's would be dropped unseen (a 6-channel kernel on RGBA).
+    // Other kernel channels past the image's would be dropped unseen (6 on RGBA).
     if (knc > nc) {
         dst.errorfmt("convolve: the kernel image has {} channels, the image {}: a kernel has 1 channel (for "
                      "all) or at most one per image channel",

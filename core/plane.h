@@ -370,7 +370,8 @@ Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads
 
 /// The largest |k| times a channel's range that iris mode takes. exp() would overflow float
 /// past 88, but the sums in exp space give out first: they carry a bright pixel's exp(k x)
-/// beside the dark ones' 1, and double's 16 digits leave the dark ones nothing past ~30.
+/// beside the dark ones' values near 0 (exp(k d) - 1, Iris), and double's 16 digits leave
+/// the dark ones nothing past ~30.
 /// Measured (blur, 19 px kernels, a 0.003 .. 500 image): at k x range = 30 the exact
 /// methods stay within 3e-4 of the brute force; at 40 the bands return NaN and the exact
 /// methods err by 0.9; the layered defocus on the lights scene returned -2.9 in red at 43

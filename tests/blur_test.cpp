@@ -2864,4 +2864,18 @@ TEST(BlurImageKernel, BadKernelsAreRefused)
     OIIO::ImageBufAlgo::fill(wide, std::vector<float>(size_t(src.nchannels() + 1), 1.0f));
     EXPECT_FALSE(convolve_image(out, src, wide));
     EXPECT_NE(out.geterror().find("channels, the image"), std::string::npos) << out.geterror();
+    // ... unless the one too many is the kernel's alpha (an RGBA aperture picture on RGB):
+    // dropped, the same as the kernel without it.
+    const OIIO::ImageBuf rgb = OIIO::ImageBufAlgo::channels(src, 3, { 0, 1, 2 });
+    OIIO::ImageBuf aperture(OIIO::ImageSpec(3, 5, 4, OIIO::TypeFloat));
+    for (int y = 0; y < 5; ++y)
+        for (int x = 0; x < 3; ++x) {
+            const float px[4] = { float(1 + x), float(1 + y), 1.0f, 0.5f };
+            aperture.setpixel(x, y, px);
+        }
+    aperture.specmod().alpha_channel = 3;
+    OIIO::ImageBuf with_alpha, without;
+    ASSERT_TRUE(convolve_image(with_alpha, rgb, aperture)) << with_alpha.geterror();
+    ASSERT_TRUE(convolve_image(without, rgb, OIIO::ImageBufAlgo::channels(aperture, 3, { 0, 1, 2 })));
+    EXPECT_EQ(bokeh_test::max_difference(with_alpha, without), 0.0);
 }

@@ -119,6 +119,10 @@ TEST(CliDefocus, BadInputFailsCleanly)
         { format("{} --defocus:quality=gather:method=layers -o {}", kScene, out), "disagree" },
         { format("{} --defocus:iris=5000 -o {}", kScene, out), "iris" },
         { format("{} --defocus:fstop=2:iris=100 -o {}", kScene, out), "exceeds 30" },
+        // Aperture options the kernel would ignore (as --blur refuses them).
+        { format("{} --defocus:kernel=hex:blades=5 -o {}", kScene, out), "blades does not apply to kernel=hex" },
+        { format("{} --defocus:kernel=disk:rotation=20 -o {}", kScene, out), "rotation does not apply to kernel=disk" },
+        { format("{} --defocus:curvature=0.5 -o {}", kScene, out), "curvature does not apply to kernel=disk" },
     };
     for (const Case& k : cases) {
         SCOPED_TRACE(k.args);

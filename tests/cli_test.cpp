@@ -586,8 +586,8 @@ TEST(Cli, Blur)
                                { "--blur:kernel=box:hole=0.5 9", "hole does not apply to kernel=box" },
                                { "--blur:kernel=disk:curvature=0.5 9", "curvature does not apply to kernel=disk" },
                                { "--blur:kernel=lanczos3:edge=aa 9", "edge does not apply to kernel=lanczos3" },
-                               { "--blur:kernel=disk:bands=4 9", "bands does not apply to kernel=disk with method=auto" },
-                               { "--blur:kernel=disk:reduction=4 9", "reduction does not apply to kernel=disk with method=auto" },
+                               { "--blur:kernel=disk:bands=4 9", "bands does not apply to method=auto" },
+                               { "--blur:kernel=disk:reduction=4 9", "reduction does not apply to method=auto" },
                                { "--blur:kernel=disk:kernel=box 9", "option 'kernel' is given twice" } }) {
         SCOPED_TRACE(args);
         r = bokehtool(in + " " + args + " -o " + out);

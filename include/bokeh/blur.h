@@ -176,7 +176,8 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// (0, 0) for OIIO's make_kernel results. Channels: a 1-channel kernel blurs every
 /// channel; otherwise source channel c uses kernel channel c, and source channels past
 /// the kernel's (alpha, say) use the mean of the kernel's channels; a kernel with more
-/// channels than the source is refused. Each kernel channel
+/// channels than the source is refused, unless the one too many is the kernel's alpha
+/// (an RGBA aperture picture on an RGB image: its alpha is dropped). Each kernel channel
 /// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
 /// kernel value, is refused, and in iris mode a kernel with negative weights (its mean
 /// of exp(k x) could fall to 0 or below). NaN and infinite source values reach exactly the

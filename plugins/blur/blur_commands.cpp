@@ -32,36 +32,26 @@ bokeh::BlurOptions blur_options(const CommandContext& c)
 // The options that shape a kernel or tune a method, refused where they do not apply: an
 // ignored option would let `kernel=box:blades=5` or `kernel=hex:blades=5` run as if it had
 // not been given (a hexagon), as a method that does not apply is refused. False + the
-// reason for the first one given that does not.
+// reason for the first one given that does not. (With method=fast, `bands` and `reduction`
+// are taken where fast picks the bands or the reduced buffer: the help says so.)
 bool options_apply(const CommandContext& c, const std::string& kernel, std::string& why)
 {
+    if (!bokeh::aperture_options_apply(c.options, kernel, why))
+        return false;
     const std::string& method = c.options.get_string("method");
-    struct Rule {
-        const char* option;
-        bool applies;
-        const char* to;
-    };
-    const bool polygon = kernel == "polygon" || kernel == "hex";
-    const bool shaped  = polygon || kernel == "disk" || kernel == "box" || kernel == "gaussian";
-    const Rule rules[] = {
-        { "sigma", kernel == "gaussian", "kernel=gaussian" },
-        { "blades", kernel == "polygon", "kernel=polygon; kernel=hex has 6" },
-        { "rotation", polygon, "kernel=polygon and hex; a disk's squeeze stays on the frame's axes" },
-        { "curvature", polygon, "kernel=polygon and hex" },
-        { "hole", polygon || kernel == "disk", "kernel=disk, polygon and hex" },
-        // OIIO's filters are sampled at whole offsets: edge=hard is what they are already.
-        { "edge", shaped || (kernel != "image" && c.options.get_string("edge") == "hard"),
-          "kernel=box, gaussian, disk, polygon and hex (OIIO's filters: edge=hard, what they are)" },
-        { "bands", method == "bands" || method == "fast", "method=bands and fast" },
-        { "reduction", method == "reduced", "method=reduced" },
-    };
-    for (const Rule& r : rules)
-        if (c.options.given(r.option) && !r.applies) {
-            why = format("{} does not apply to kernel={}{}: it is for {}", r.option, kernel,
-                         r.option == std::string("bands") || r.option == std::string("reduction")
-                             ? format(" with method={}", method)
-                             : std::string(),
-                         r.to);
+    const bool shaped = kernel == "polygon" || kernel == "hex" || kernel == "disk" || kernel == "box"
+                        || kernel == "gaussian";
+    // OIIO's filters are sampled at whole offsets: edge=hard is what they are already.
+    if (c.options.given("edge") && !shaped && !(kernel != "image" && c.options.get_string("edge") == "hard")) {
+        why = format("edge does not apply to kernel={}: it is for kernel=box, gaussian, disk, polygon and hex "
+                     "(OIIO's filters: edge=hard, what they are)",
+                     kernel);
+        return false;
+    }
+    for (const auto& [option, methods] : { std::pair<const char*, const char*>{ "bands", "bands" },
+                                           { "reduction", "reduced" } })
+        if (c.options.given(option) && method != methods && method != "fast") {
+            why = format("{} does not apply to method={}: it is for method={} and fast", option, method, methods);
             return false;
         }
     return true;
@@ -219,8 +209,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                         "in y, a pentagon: twice that over its height); 0: the method's choice "
                         "(bands: 8; fast: the fewest, 3..8, within its accuracy bound)"),
         OptionSpec::Float("reduction", 0.0, 0.0, 16.0,
-                          "method=reduced: the factor N, 1..16 (0: the kernel's narrower side "
-                          "over 25, a polygon's over 30, at most 8; 1 below 1.5)"),
+                          "method=reduced (or fast, where it picks the reduced buffer): the factor "
+                          "N, 1..16 (0: the kernel's narrower side over 25, a polygon's over 30, at "
+                          "most 8; 1 below 1.5)"),
         OptionSpec::Float("sigma", 0.0, 0.0, 1024.0, "Gaussian sigma in pixels (0: W/4)"),
         OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
         OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon and hex: degrees (0: a vertex up)"),

@@ -86,6 +86,9 @@ bool read_options(CommandContext& c, const OIIO::ImageSpec& spec, bokeh::Defocus
     coc.max_coc_px    = v.get_float("maxcoc");
 
     const std::string& shape = v.get_string("kernel");
+    std::string why;
+    if (!bokeh::aperture_options_apply(v, shape, why))
+        return c.fail(why);
     o.aperture.shape  = shape == "disk" ? bokeh::KernelShape::Disk : bokeh::KernelShape::Polygon;
     o.aperture.blades = shape == "hex" ? 6 : v.get_int("blades");
     o.aperture.rotation_deg = float(v.get_float("rotation"));
@@ -207,8 +210,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("maxcoc", 512.0, 0.0, 8192.0, "largest CoC diameter in px"),
         OptionSpec::Choice("kernel", { "disk", "hex", "polygon" }, "aperture shape"),
         OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
-        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon: degrees"),
-        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon: 0 straight blades .. 1 circle"),
+        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon and hex: degrees"),
+        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "catadioptric hole (radius fraction)"),
         OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)"),
         OptionSpec::Int("layers", 0, 0, 1024, "layers: count (0: from the CoC range and budget)"),

@@ -8,9 +8,9 @@
 // x / (1 + x) per channel (peak 1), and the largest absolute difference (bench_common.h).
 // Frames: the built-in scenes named by --scenes (default "lights", --size WxH, default
 // 1920x1080; its crop is the lights, the floor and the sphere's edge at 1920x1080, else
-// where brightness varies most) and each --image FILE (RGBA, or RGB given alpha 1; the
-// crop where brightness varies most). A frame other than "lights" names its rows' task
-// "<shape> (<frame>)", so the chart draws it apart.
+// where brightness varies most) and each --image FILE (R, G, B and the file's alpha, or
+// alpha 1; the crop where brightness varies most). A frame other than lights at 1920x1080
+// names its rows' task "<shape> (<frame>)", so the chart draws it apart.
 //
 // --task defocus runs the depth-defocus task instead (defocus_task.cpp); --task resample
 // the reduced-buffer and enlargement study (resample_task.cpp), which writes two more
@@ -129,6 +129,14 @@ int main(int argc, char* argv[])
         }
     }
 
+    if (!image_files.empty() && task != "blur") {
+        std::fprintf(stderr, "bokeh-bench: --image is for the blur task, not --task %s\n", task.c_str());
+        return 1;
+    }
+    if (!args.only.empty() && task == "iris") {
+        std::fprintf(stderr, "bokeh-bench: --scenes is not for --task iris (it runs on the lights scene's crop)\n");
+        return 1;
+    }
     std::vector<std::string> rows;
     rows.push_back(bokeh_bench::kCsvHeader);
     if (task == "defocus") {
@@ -157,15 +165,22 @@ int main(int argc, char* argv[])
     }
 
     // The frames: built-in scenes, then files; each with the crop its errors are measured on.
+    // A frame's rows are named "<shape> (<frame>)", but for the docs' frame (lights at
+    // 1920x1080, its curated crop), whose rows keep the bare shape names.
     struct Frame {
         std::string name;
         OIIO::ImageBuf pixels, small;  // small: the crop, its origin at 0, 0 (IBA::cut)
         OIIO::ROI crop;
+        bool bare = false;
     };
     std::vector<Frame> frames;
-    const std::vector<std::string> scenes = args.only.empty() || task == "iris"
-                                                ? std::vector<std::string>{ "lights" }
-                                                : args.only;
+    auto unique_name = [&](std::string name) {  // no two frames' rows under one name
+        const std::string base = name;
+        for (int n = 2; std::any_of(frames.begin(), frames.end(), [&](const Frame& f) { return f.name == name; }); ++n)
+            name = format("{} #{}", base, n);
+        return name;
+    };
+    const std::vector<std::string> scenes = args.only.empty() ? std::vector<std::string>{ "lights" } : args.only;
     for (const std::string& name : scenes) {
         const std::vector<std::string> known = bokeh::scene_names();
         if (std::find(known.begin(), known.end(), name) == known.end()) {
@@ -181,8 +196,9 @@ int main(int argc, char* argv[])
             std::fprintf(stderr, "bokeh-bench: scene %s: %s\n", name.c_str(), scene.geterror().c_str());
             return 1;
         }
-        Frame f{ name, IBA::channels(scene, 4, { 0, 1, 2, 3 }), {}, {} };
         const bool curated = name == "lights" && args.width == 1920 && args.height == 1080;
+        Frame f{ unique_name(curated ? name : format("{} {}x{}", name, args.width, args.height)),
+                 IBA::channels(scene, 4, { 0, 1, 2, 3 }), {}, {}, curated };
         f.crop  = curated ? OIIO::ROI(840, 1080, 300, 435)  // lights, floor, sphere edge
                           : bokeh_bench::most_varied_crop(f.pixels, 240, 135, threads);
         f.small = IBA::cut(f.pixels, f.crop);
@@ -205,10 +221,13 @@ int main(int argc, char* argv[])
                          path.c_str(), nc, nc == 1 ? "" : "s", file.deep() ? ", deep" : "");
             return 1;
         }
-        // RGBA as it is; RGB with alpha 1 (a plate).
-        Frame f{ OIIO::Filesystem::filename(path),
-                 nc >= 4 ? IBA::channels(file, 4, { 0, 1, 2, 3 }) : IBA::channels(file, 4, { 0, 1, 2, -1 }, { 0, 0, 0, 1 }),
-                 {}, {} };
+        // The first three channels and the file's alpha, or alpha 1 where it has none (a plate;
+        // a fourth channel that is not alpha, depth say, is not taken for it).
+        const int alpha = file.spec().alpha_channel;
+        Frame f{ unique_name(OIIO::Filesystem::filename(path)),
+                 alpha >= 3 ? IBA::channels(file, 4, { 0, 1, 2, alpha })
+                            : IBA::channels(file, 4, { 0, 1, 2, -1 }, { 0, 0, 0, 1 }),
+                 {}, {}, false };
         f.crop  = bokeh_bench::most_varied_crop(f.pixels, 240, 135, threads);
         f.small = IBA::cut(f.pixels, f.crop);
         frames.push_back(std::move(f));
@@ -289,7 +308,7 @@ int main(int argc, char* argv[])
         const OIIO::ImageBuf &frame = fr.pixels, &small = fr.small;
         // The lights scene keeps the bare task names (the docs' charts); other frames are
         // charted apart. (No comma: the CSV is unquoted.)
-        const std::string suffix = fr.name == "lights" ? "" : " (" + OIIO::Strutil::replace(fr.name, ",", " ", true) + ")";
+        const std::string suffix = fr.bare ? "" : " (" + OIIO::Strutil::replace(fr.name, ",", " ", true) + ")";
         const OIIO::ROI& crop = fr.crop;
         std::printf("\n%s: %dx%d; errors on the %dx%d crop at (%d, %d)\n", fr.name.c_str(), frame.spec().width,
                     frame.spec().height, crop.width(), crop.height(), crop.xbegin, crop.ybegin);
