@@ -405,6 +405,7 @@ TEST(Cli, BadInput)
         { "--scene:width=0 lights -o " + out, "--scene: option 'width' = 0 is out of range" },
         { "--scene:width=wide lights -o " + out, "option 'width' wants an integer but got 'wide'" },
         { "--scene:aa=99 lights -o " + out, "out of range [1, 16]" },
+        { "--scene:width=100 lights:width=200 -o " + out, "option 'width' is given twice" },
         { "--scene nosuchscene -o " + out, "--scene: unknown scene 'nosuchscene'" },
         { "--threads many " + in + " -o " + out, "--threads: 'many' is not a thread count" },
         { in + " -d uint99 -o " + out, "-d: 'uint99' is not a pixel type" },

@@ -150,8 +150,12 @@ bool scene(CommandContext& c)
         if (!bokeh::parse_options(scene_options(), c.args[0].substr(colon + 1), own, err))
             return c.fail(err);
         for (const auto& [key, given] : own.explicitly_given)
-            if (given)
+            if (given) {
+                // Both `--scene:width=100 lights:width=200`: one would be dropped unseen.
+                if (c.options.given(key))
+                    return c.fail(format("option '{}' is given twice (--scene:{} and {})", key, key, c.args[0]));
                 c.options.values[key] = own.values[key];
+            }
     }
     bokeh::SceneOptions o;
     o.width  = c.options.get_int("width");
