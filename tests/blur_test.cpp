@@ -379,6 +379,35 @@ TEST(Blur, ZeroSizeIsTheIdentityBitForBit)
             }
 }
 
+TEST(Blur, AZeroSideIsTheIdentityForShapesAndOneAxisForSeparableKernels)
+{
+    // A disk or polygon with a zero side has no area: the identity, as 0 x 0. A box or a
+    // Gaussian (and OIIO's separable filters) takes its axes apart: 0 x 7 blurs along y
+    // alone, as a 1 px wide box does (a whole pixel: the identity along x).
+    const OIIO::ImageBuf src = test_image(23, 17);
+    for (KernelShape s : { KernelShape::Disk, KernelShape::Polygon })
+        for (auto [w, h] : { std::pair{ 0.0f, 7.0f }, std::pair{ 7.0f, 0.0f } }) {
+            Kernel k;
+            k.shape     = s;
+            k.width_px  = w;
+            k.height_px = h;
+            OIIO::ImageBuf out;
+            ASSERT_TRUE(blur(out, src, k)) << out.geterror();
+            EXPECT_EQ(std::memcmp(out.localpixels(), src.localpixels(), 23 * 17 * 4 * sizeof(float)), 0)
+                << int(s) << " " << w << "x" << h;
+        }
+    Kernel line, narrow;
+    line.shape     = narrow.shape = KernelShape::Box;
+    line.width_px  = 0.0f;
+    narrow.width_px = 1.0f;
+    line.height_px = narrow.height_px = 7.0f;
+    OIIO::ImageBuf a, b;
+    ASSERT_TRUE(blur(a, src, line));
+    ASSERT_TRUE(blur(b, src, narrow));
+    EXPECT_EQ(bokeh_test::max_difference(a, b), 0.0);
+    EXPECT_GT(bokeh_test::max_difference(a, src), 0.1) << "it blurs along y";
+}
+
 TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
 {
     // Every exact method gives the kernel; the seed's bilinear taps and the three boxes give

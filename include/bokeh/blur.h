@@ -3,7 +3,9 @@
 //
 // Sizes are the kernel's full footprint in pixels (width x height, like oiiotool's
 // `--blur WxH`); width != height gives an anamorphic (elliptical) kernel. A kernel of
-// size 0 (or one whose weights collapse to a single tap) is the identity, bit for bit.
+// size 0 (or one whose weights collapse to a single tap) is the identity, bit for bit; so
+// is a disk or polygon with one side 0 (no area), while a box, a Gaussian or a separable
+// OIIO filter with one side 0 blurs along the other axis alone.
 // All channels of the image are filtered alike, as oiiotool's --blur does.
 #pragma once
 
