@@ -47,9 +47,12 @@
 #include <fftw3.h>
 #include <tbb/enumerable_thread_specific.h>
 
+#include <OpenImageIO/strutil.h>
+
 namespace bokeh {
 
 using namespace detail;
+using OIIO::Strutil::fmt::format;
 
 namespace {
 
@@ -298,58 +301,56 @@ Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
 
 }  // namespace detail
 
-bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
-                    const BlurOptions& opts, OIIO::ROI roi, int nthreads)
+namespace {
+
+// A kernel image (float, any data window) as normalised weights for an image of `nc`
+// channels: kernels[kernel_of[c]] blurs channel c (convolve_image's rules, blur.h). False +
+// `err` for a kernel it refuses.
+bool kernel_image_weights(const OIIO::ImageBuf& kf, int nc, float iris, std::vector<KernelWeights>& kernels,
+                          std::vector<int>& kernel_of, std::string& err)
 {
-    if (!check_source(dst, src) || !check_source(dst, kernel, "blur kernel image"))
-        return false;
-    OIIO::ImageBuf src_holder, kernel_holder;
-    const OIIO::ImageBuf& in = float_source(src, src_holder);
-    const OIIO::ImageBuf& kf = float_source(kernel, kernel_holder);
-    const OIIO::ROI kr       = kf.roi();
-    const int nc = in.nchannels();
+    const OIIO::ROI kr = kf.roi();
     // An aperture picture's alpha (its coverage, not a weight) is dropped where the image has
     // no channel for it: an RGBA aperture scan on an RGB plate.
     const int knc = kf.nchannels() > nc && kf.spec().alpha_channel == kf.nchannels() - 1 ? kf.nchannels() - 1
                                                                                           : kf.nchannels();
     if (kr.width() > 4096 || kr.height() > 4096) {
-        dst.errorfmt("convolve: the kernel image is {}x{}; at most 4096x4096", kr.width(), kr.height());
+        err = format("the kernel image is {}x{}; at most 4096x4096", kr.width(), kr.height());
         return false;
     }
     // Other kernel channels past the image's would be dropped unseen (6 on RGBA).
     if (knc > nc) {
-        dst.errorfmt("convolve: the kernel image has {} channels, the image {}: a kernel has 1 channel (for "
-                     "all) or at most one per image channel",
+        err = format("the kernel image has {} channels, the image {}: a kernel has 1 channel (for all) or at most "
+                     "one per image channel",
                      knc, nc);
         return false;
     }
-
     // Centre and reach: kernel pixel (x, y) is offset (x - cx, y - cy).
     const int cx = kr.xbegin + kr.width() / 2, cy = kr.ybegin + kr.height() / 2;
     const int rx = std::max(cx - kr.xbegin, kr.xend - 1 - cx);
     const int ry = std::max(cy - kr.ybegin, kr.yend - 1 - cy);
     // Kernel channels as weights, normalised; source channel c uses kernels[kernel_of[c]].
-    std::vector<KernelWeights> kernels(size_t(knc), KernelWeights{ rx, ry, {} });
+    kernels.assign(size_t(knc), KernelWeights{ rx, ry, {} });
     for (int c = 0; c < knc; ++c) {
         KernelWeights& k = kernels[size_t(c)];
         k.w.assign(size_t(2 * rx + 1) * size_t(2 * ry + 1), 0.0);
         double sum = 0.0;
         for (OIIO::ImageBuf::ConstIterator<float> it(kf); !it.done(); ++it) {
             if (!std::isfinite(it[c])) {
-                dst.errorfmt("convolve: the kernel image has a non-finite value at ({}, {})", it.x(), it.y());
+                err = format("the kernel image has a non-finite value at ({}, {})", it.x(), it.y());
                 return false;
             }
             k.w[size_t(it.y() - cy + ry) * size_t(2 * rx + 1) + size_t(it.x() - cx + rx)] = it[c];
             sum += it[c];
         }
         if (!(sum > 0.0)) {
-            dst.errorfmt("convolve: kernel image channel {} sums to {}; it must be positive", c, sum);
+            err = format("kernel image channel {} sums to {}; it must be positive", c, sum);
             return false;
         }
         // A weighted mean of exp(k x) with negative weights can fall to 0 or below, whose log
         // is NaN or -inf: iris mode takes kernels without them.
-        if (opts.iris != 0.0f && *std::min_element(k.w.begin(), k.w.end()) < 0.0) {
-            dst.errorfmt("convolve: iris mode needs a kernel image without negative weights (channel {} has some)", c);
+        if (iris != 0.0f && *std::min_element(k.w.begin(), k.w.end()) < 0.0) {
+            err = format("iris mode needs a kernel image without negative weights (channel {} has some)", c);
             return false;
         }
         for (double& v : k.w)
@@ -362,9 +363,44 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
                 mean.w[i] += k.w[i] / knc;
         kernels.push_back(std::move(mean));
     }
-    std::vector<int> kernel_of(static_cast<size_t>(nc));
+    kernel_of.resize(static_cast<size_t>(nc));
     for (int c = 0; c < nc; ++c)
         kernel_of[size_t(c)] = knc == 1 ? 0 : (c < knc ? c : knc);
+    return true;
+}
+
+}  // namespace
+
+bool check_kernel_image(const OIIO::ImageBuf& kernel, int image_channels, const BlurOptions& opts, std::string& err)
+{
+    OIIO::ImageBuf checked;
+    if (!check_source(checked, kernel, "blur kernel image")) {
+        err = checked.geterror();
+        return false;
+    }
+    OIIO::ImageBuf kernel_holder;
+    std::vector<KernelWeights> kernels;
+    std::vector<int> kernel_of;
+    return kernel_image_weights(float_source(kernel, kernel_holder), image_channels, opts.iris, kernels, kernel_of,
+                                err);
+}
+
+bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
+                    const BlurOptions& opts, OIIO::ROI roi, int nthreads)
+{
+    if (!check_source(dst, src) || !check_source(dst, kernel, "blur kernel image"))
+        return false;
+    OIIO::ImageBuf src_holder, kernel_holder;
+    const OIIO::ImageBuf& in = float_source(src, src_holder);
+    const int nc             = in.nchannels();
+    std::vector<KernelWeights> kernels;
+    std::vector<int> kernel_of;
+    std::string err;
+    if (!kernel_image_weights(float_source(kernel, kernel_holder), nc, opts.iris, kernels, kernel_of, err)) {
+        dst.errorfmt("convolve: {}", err);
+        return false;
+    }
+    const int rx = kernels[0].rx, ry = kernels[0].ry;
 
     if (!roi.defined())
         roi = opts.grow ? grown(in.roi(), rx, ry) : in.roi();
@@ -383,9 +419,8 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
     iris.k     = opts.iris;
     iris.alpha = in.spec().alpha_channel;
     iris.z     = in.spec().z_channel;
-    std::string err;
     if (!iris.forward(p, err, nthreads)) {
-        dst.errorfmt("blur: {}", err);
+        dst.errorfmt("convolve: {}", err);
         return false;
     }
     Plane out = convolve_fft(p, kernels, kernel_of, nthreads);

@@ -535,6 +535,9 @@ TEST(Cli, BlurMethodsAndConvolve)
                          "kernel=image takes a whole number of pixels", out);
     expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --blur:kernel=image 9 -o {2}", in, dir, out)),
                          "kernel image channel 0 sums to 0", out);
+    // At size 0 (the image itself) the kernel is still checked: a script fails alike at every size.
+    expect_clean_failure(bokehtool(format("{0} {1}/zero.exr --blur:kernel=image 0 -o {2}", in, dir, out)),
+                         "kernel image channel 0 sums to 0", out);
     expect_clean_failure(bokehtool(format("{0} {1}/flat.exr --blur:kernel=image 5000 -o {2}", in, dir, out)),
                          "kernel size 5000x5000 is outside 0..4096 pixels", out);
 }

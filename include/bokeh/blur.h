@@ -189,6 +189,10 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
                     const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
 
+/// convolve_image's checks of `kernel` alone, for an image of `image_channels` channels
+/// (what a caller runs where it will not convolve, e.g. at size 0). False + `err`.
+bool check_kernel_image(const OIIO::ImageBuf& kernel, int image_channels, const BlurOptions& opts, std::string& err);
+
 /// Convolve with explicit weights by brute force: the exact reference for every method.
 bool convolve_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
                         const KernelWeights& weights, const BlurOptions& opts = {},

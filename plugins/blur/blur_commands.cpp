@@ -83,6 +83,9 @@ bool blur_with_image_command(CommandContext& c, float width_px, float height_px)
     bokeh::StackImage out = c.inputs[0];
     out.buf               = std::make_shared<OIIO::ImageBuf>();
     if (w == 0 || h == 0) {  // the zero-size kernel, as every other: the image itself
+        // The kernel image is still checked: a script fails alike at every size.
+        if (!bokeh::check_kernel_image(*c.inputs[1].buf, c.inputs[0].buf->nchannels(), blur_options(c), err))
+            return c.fail(with_inputs(c, err));
         out.buf->copy(*c.inputs[0].buf);
         c.outputs.push_back(std::move(out));
         return true;
