@@ -1250,6 +1250,22 @@ TEST(Blur, ThreeBoxesComputeTheirKernelExactly)
     // method=boxes3 against the brute force with its own kernel (three_box_weights: three
     // fractional boxes per axis of the Gaussian's variance), every border, grown or not; the
     // kernel's variance is the Gaussian's.
+    // Every border, grown or not: the method against the brute force with its kernel `w`.
+    auto matches_its_kernel = [](const OIIO::ImageBuf& img, const Kernel& k, const KernelWeights& w) {
+        for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
+            for (bool grow : { false, true }) {
+                SCOPED_TRACE(testing::Message() << "border " << int(border) << " grow " << grow);
+                BlurOptions o;
+                o.method = BlurMethod::ThreeBoxes;
+                o.border = border;
+                o.grow   = grow;
+                OIIO::ImageBuf got, ref;
+                ASSERT_TRUE(blur(got, img, k, o)) << got.geterror();
+                ASSERT_TRUE(convolve_reference(ref, img, w, o));
+                ASSERT_EQ(got.roi(), ref.roi());
+                EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
+            }
+    };
     const OIIO::ImageBuf src = test_image(57, 41);
     for (float sigma : { 0.8f, 2.5f, 4.0f })
         for (float aspect : { 1.0f, 0.6f }) {
@@ -1268,19 +1284,8 @@ TEST(Blur, ThreeBoxesComputeTheirKernelExactly)
             EXPECT_NEAR(sum, 1.0, 1e-12);
             EXPECT_NEAR(vx, double(sigma) * sigma, 1e-6 * sigma * sigma);
             EXPECT_NEAR(vy, double(sigma * aspect) * (sigma * aspect), 1e-6 * sigma * sigma);
-            for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
-                for (bool grow : { false, true }) {
-                    SCOPED_TRACE(testing::Message() << "sigma " << sigma << " aspect " << aspect << " border "
-                                                    << int(border) << " grow " << grow);
-                    BlurOptions o;
-                    o.method = BlurMethod::ThreeBoxes;
-                    o.border = border;
-                    o.grow   = grow;
-                    OIIO::ImageBuf got, ref;
-                    ASSERT_TRUE(blur(got, src, k, o)) << got.geterror();
-                    ASSERT_TRUE(convolve_reference(ref, src, w, o));
-                    EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
-                }
+            SCOPED_TRACE(testing::Message() << "sigma " << sigma << " aspect " << aspect);
+            matches_its_kernel(src, k, w);
         }
     // The direct path's other cases: 2 and 5 channels (the row's prefix sums, not the
     // running sum), a reach past the image (sigma 12 on 23 x 17: three boxes reach ~40 px),
@@ -1298,21 +1303,8 @@ TEST(Blur, ThreeBoxesComputeTheirKernelExactly)
             k.shape     = KernelShape::Gaussian;
             k.width_px  = 4.0f * sigma;
             k.height_px = 3.1f * sigma;
-            const KernelWeights w = three_box_weights(k);
-            for (Border border : { Border::Black, Border::Clamp, Border::Mirror })
-                for (bool grow : { false, true }) {
-                    SCOPED_TRACE(testing::Message() << nc << " channels, sigma " << sigma << " border "
-                                                    << int(border) << " grow " << grow);
-                    BlurOptions o;
-                    o.method = BlurMethod::ThreeBoxes;
-                    o.border = border;
-                    o.grow   = grow;
-                    OIIO::ImageBuf got, ref;
-                    ASSERT_TRUE(blur(got, img, k, o)) << got.geterror();
-                    ASSERT_TRUE(convolve_reference(ref, img, w, o));
-                    ASSERT_EQ(got.roi(), ref.roi());
-                    EXPECT_LE(bokeh_test::max_difference(got, ref), 2e-6 * peak(ref));
-                }
+            SCOPED_TRACE(testing::Message() << nc << " channels, sigma " << sigma);
+            matches_its_kernel(img, k, three_box_weights(k));
         }
 }
 
