@@ -17,7 +17,7 @@ oiiotool "$tmp/sharp.png" "$tmp/dof.png" --mosaic:pad=4 2x1 -o "$out/defocus.png
     -o "$out/focalplane.png"
 
 # Four kernels of 31 px on the same 320x180 crop of the full-resolution frame.
-crop=320x180+1040+380
+crop=320x180+1040+320
 for k in disk hex polygon:blades=7:curvature=0.3:rotation=10 gaussian; do
     name=${k%%:*}
     "$tool" -q "$tmp/sharp.exr" --ch R,G,B --blur:kernel=$k 31 -o "$tmp/k_$name.png"
