@@ -40,6 +40,7 @@ bench: build
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/blur.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/defocus.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/resample.csv docs/bench --size-label "reduction factor" && /usr/bin/python3 tools/bokeh-bench/artifact_chart.py docs/bench/resample_artifacts.csv docs/bench --timings docs/bench/resample.csv
+	/usr/bin/python3 tools/bokeh-bench/tables.py docs/benchmarks.md docs/bench
 
 # The command reference, one page per plugin module, from the registry (the ctest
 # docs_commands_current fails while the committed pages differ).
