@@ -6,6 +6,8 @@
 #include <bokeh/defocus.h>
 #include <bokeh/plugin.h>
 
+#include "aperture_options.h"
+
 #include <charconv>
 #include <cmath>
 
