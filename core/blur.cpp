@@ -85,9 +85,9 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         // The hexagon too takes the reduction from 45 px: 40.9-42.2 dB from 45 to 63 px at
         // rotations 0, 30 and 7 degrees, and 41 ms at 45 px (1080p RGBA, 2 threads) against
         // the parallelograms' 36 (flat-topped), 60 (upright) and 132 (7 degrees, four
-        // passes); 27 against 35 / 55 at 63 px (session 9, docs/benchmarks.md). Session 14,
-        // the sheared sweep at 7 and 25 degrees, 63 px: 28 and 24 ms against the reduced
-        // buffer's 19 (one run, a slow phase of the machine): still the reduction.
+        // passes); 27 against 35 / 55 at 63 px (bokeh-bench). The sheared sweep at 7 and 25
+        // degrees, 63 px: 28 and 24 ms against the reduced buffer's 19 (one run, a slow
+        // phase of the machine): still the reduction.
         // A hard-edged Gaussian is oiiotool's, cut at 2 sigma: three boxes stand for the
         // whole one.
         // OIIO's filters have no approximation here: exact.
@@ -185,19 +185,18 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // hexagon, the bands for other shapes) against the exact row spans by the cost models,
     // and takes the exact blur where it costs less: small kernels (15 px: a disk's spans
     // 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
-    // flat-topped and 54 upright; sessions 9, 10). With the spans model and the band counts
-    // of session 10 the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
-    // ~23 for an octagon, and (session 13, parallelograms_cost_ns refitted on this
-    // machine) ~9 px for the flat-topped hexagon and ~10 for the upright one, ~7 for the
-    // sheared sweep (session 14). The parallelograms are taken only from the size where
-    // they keep to the 40 dB budget (parallelograms_budget_px, on the narrow side: 15 px,
-    // stretched 21, sheared 27; before session 14 the cost alone decided, and the sweep ran
-    // from 9 px at 36.5 dB; before session 15 the wide side, and a 27 x 9 hexagon took the
-    // sweep at 36.9 dB).
+    // flat-topped and 54 upright; bokeh-bench). With the spans model and fast_band_count's
+    // band counts the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
+    // ~23 for an octagon, and with parallelograms_cost_ns (fitted on this machine) at ~9 px
+    // for the flat-topped hexagon and ~10 for the upright one, ~7 for the sheared sweep.
+    // The parallelograms are taken only from the size where they keep to the 40 dB budget
+    // (parallelograms_budget_px, on the narrow side: 15 px, stretched 21, sheared 27): the
+    // cost alone would take the sweep from 9 px at 36.5 dB, and the wide side would take a
+    // 27 x 9 hexagon at 36.9 dB.
     // (Only up to 64 px across: the spans' cost grows with the size and is past every
     // approximation's by then, and a large polygon's exact weights cost tens of ms.)
     // Its bands, unless the user named a count: the fewest within its accuracy bound
-    // (fast_band_count; 8 bands measured 41-48 ms at 15-37 px, 4 bands 33-35, session 9).
+    // (fast_band_count; 8 bands measured 41-48 ms at 15-37 px, 4 bands 33-35).
     // The budget holds at every size: a stretched hexagon past 64 px (81 x 15) too.
     if (opts.method == BlurMethod::Fast && method == BlurMethod::Parallelograms
         && std::min(k.width_px, k.height_px) < parallelograms_budget_px(k))
@@ -257,13 +256,13 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // exp(k x)'s rounding over its tile as the spans do along their rows. The FFT is taken
     // when its model is under 1.2 times the spans': at 95-191 px its wall time measured
     // 0.69-0.85 of its model, at 15-63 px 0.85-1.0, against the spans model's 0.84-1.21
-    // (session 10, 44 timings, two threads); of the factors 0.85-1.25 tried, 1.2 lost the
+    // (44 timings, 1080p RGBA, two threads); of the factors 0.85-1.25 tried, 1.2 lost the
     // least time by its wrong picks over those timings (33 ms in all: a 63 px pentagon
-    // by FFT at 1.11-1.17x the spans' time; 0.85, the margin before, lost 876 ms, 1.0
-    // lost 427). A disk crosses at ~99 px (measured FFT / spans: 1.05 at 95 px, 0.77 at 127).
+    // by FFT at 1.11-1.17x the spans' time; 0.85 lost 876 ms, 1.0 lost 427). A disk
+    // crosses at ~99 px (measured FFT / spans: 1.05 at 95 px, 0.77 at 127).
     // A Gaussian: the separable convolution or FFT tiles when the FFT's model promises
     // to be 15 % cheaper (at 1080p the FFT from sigma ~7: 0.72x the separable's time at
-    // sigma 7.75, 0.47x at 15.75, 0.25x at 63.75, A/B).
+    // sigma 7.75, 0.47x at 15.75, 0.25x at 63.75, bokeh-ab).
     const int nc = in.nchannels();
     auto fft_ns      = [&] { return fft_convolve_cost_ns(roi.width(), roi.height(), nc, rx, ry); };
     const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;

@@ -165,7 +165,7 @@ BOKEH_HOT void slide_rows(double* t, const float* const* add, const float* const
 namespace detail {
 
 // Flat in the size, nearly linear in the band count: measured (1080p RGBA, two threads,
-// session 9) 33-35 ms with 4 bands and 41-48 with 8 at 15-37 px, i.e. 5.5 + 0.67 ns a
+// bokeh-bench) 33-35 ms with 4 bands and 41-48 with 8 at 15-37 px, i.e. 5.5 + 0.67 ns a
 // pixel and channel per band on one thread (a pentagon's 16 bands over all its rows: 62-70
 // ms at 23-44 px, 15 ns); spans_cost_ns reads a disk's spans right (1.0-1.06 of measured
 // at 15 and 63 px), so the two compare as they are.
@@ -312,9 +312,9 @@ KernelWeights banded_from(const KernelWeights& exact, int bands)
         return exact;
     // A kernel symmetric in y (a disk, a polygon with an even number of blades) is split
     // over rows 0..ry of its lower half and the split mirrored; any other (a pentagon) over
-    // all its rows -ry..ry, with twice the bands. (Before, every kernel was mirrored: a
-    // pentagon's upper half became its lower half's mirror image, 28-32 dB against the exact
-    // pentagon at 23-44 px, a heptagon 33-38; session 9.)
+    // all its rows -ry..ry, with twice the bands. (Mirroring every kernel would make a
+    // pentagon's upper half its lower half's mirror image: measured 28-32 dB against the
+    // exact pentagon at 23-44 px, a heptagon 33-38.)
     double peak = 0.0;
     for (double v : exact.w)
         peak = std::max(peak, v);
@@ -405,7 +405,7 @@ KernelWeights banded_from(const KernelWeights& exact, int bands)
 
 // The banded kernel's error is in its edge rows, and on an image it grows with the kernel at
 // equal L1 distance: on bokeh-bench's crop of the lights frame (disk, pentagon, heptagon,
-// octagon at 0 and 22.5 degrees, 21-47 px, 2-8 bands; session 10), a distance of 0.049
+// octagon at 0 and 22.5 degrees, 21-47 px, 2-8 bands), a distance of 0.049
 // gave 38.9 dB at 47 px and 0.075 gave 40.9 at 21 px. Distance times the square root of
 // the size under 0.27 kept all 490 cases at 41.0 dB or more (the least: a heptagon, 31
 // px, 6 bands); the fewest bands within it are 4-6 for a disk at 21-47 px, 4-8 for the

@@ -181,8 +181,8 @@ inline __attribute__((always_inline)) void box_row_stretches(const RowSpan& v, c
 // A stretch for four channels in vector types (PixelRgba, plane.h), one pixel a vector:
 // the per-channel form (box_stretch) was compiled scalar in every clone for four
 // channels, as row_prefix was. Same sums in the same order as that form, so the same
-// bits. (The one- and three-channel clones are scalar, left so: the figures are
-// RGBA.)
+// bits. (The one- and three-channel clones are scalar, left so: the figures bokeh-bench
+// reports are RGBA.)
 template<bool Ends>
 inline __attribute__((always_inline)) void box_stretch_rgba(float* out, const BoxStreams& st,
                                                             int n, double* s_io, double inner,
@@ -406,7 +406,7 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
             box_out(out_row.data(), sum.data(), by.inner,
                     ends ? ring_row(centre - by.full - 1) : nullptr,
                     ends ? ring_row(centre + by.full + 1) : nullptr, by.end, n);
-            // Past the caches (session 13: A/B 0.88-0.98x at 15-255 px, 1080p RGBA).
+            // Past the caches (bokeh-ab: 0.88-0.98x the time at 15-255 px, 1080p RGBA).
             stream_floats(static_cast<float*>(dst.pixeladdr(roi.xbegin + xs, roi.ybegin + y)),
                           out_row.data(), n);
         }
@@ -418,9 +418,10 @@ bool box_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& 
 // BlurMethod::ThreeBoxes straight from the source to `dst`: each task walks down a strip
 // of output columns; a padded row is boxed three times along x in L1, then goes down
 // three running sums along y, each holding a ring of the rows it reads (the box's
-// 2 radius + 2), the rows of one fed to the next. Before (sessions 9-15), three box_direct
-// passes over whole frames, each into a fresh image (two of them, zeroed page by page).
-// The same arithmetic in another order (all x boxes before the y boxes): float rounding.
+// 2 radius + 2), the rows of one fed to the next, instead of three box_direct passes over
+// whole frames, each into a fresh image (two of them, zeroed page by page). The same
+// arithmetic as those three passes in another order (all x boxes before the y boxes): they
+// differ by float rounding.
 bool three_boxes_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi, const BoxPass& bx,
                         const BoxPass& by, Border border, int nthreads)
 {

@@ -155,16 +155,16 @@ int hexagon_plane_extra(const Kernel& k) { return sheared(k) ? 4 : 0; }
 bool hexagon_sweeps(const Kernel& k) { return along_rows(k) || sheared(k); }
 
 // Flat in the size, by path, in spans_cost_ns's units (ns a pixel and channel on one
-// thread): the sweep 3.6 flat-topped and 4.6 upright, the four passes 30. Refitted in
-// session 13 on this project's machine (AMD EPYC, 1 MiB L2), where the sweep had become
-// the cheaper of the two against the exact spans from 9-10 px (spot timings, 1080p RGBA,
-// two threads, 9 runs each: upright 10.8 against the spans' 10.6 ms at 9 px, 11.1 against
-// 12.1 at 11; flat-topped 10.3 against 10.6 at 9, 10.2 against 9.0 at 7): with these,
-// `fast` takes the sweep from 9 px flat-topped and 10 px upright. (Session 12's 5 and 7.5,
-// fitted on the machine before, crossed at 13 and 19 px; the four passes measured 3.7-3.8x
-// the spans at 15 px on both machines.) spans_cost_ns reads a hexagon's spans within
-// 0.84-1.18 of measured at 31-63 px (session 10), so the two models compare as they are.
-// The sheared sweep (session 14): its frame's cost (cheaper_shear) times kShearTapsCost.
+// thread): the sweep 3.6 flat-topped and 4.6 upright, the four passes 30. Fitted on this
+// project's machine (AMD EPYC, 1 MiB L2), where the sweep is the cheaper of the two
+// against the exact spans from 9-10 px (spot timings, 1080p RGBA, two threads, 9 runs each:
+// upright 10.8 against the spans' 10.6 ms at 9 px, 11.1 against 12.1 at 11; flat-topped
+// 10.3 against 10.6 at 9, 10.2 against 9.0 at 7): with these, `fast` takes the sweep from
+// 9 px flat-topped and 10 px upright. The constants are the machine's: 5 and 7.5, fitted
+// on an earlier one, crossed at 13 and 19 px (the four passes measured 3.7-3.8x the spans
+// at 15 px on both). spans_cost_ns reads a hexagon's spans within 0.84-1.18 of measured at
+// 31-63 px, so the two models compare as they are. The sheared sweep: its frame's cost
+// (cheaper_shear) times kShearTapsCost.
 double parallelograms_cost_ns(const Kernel& k, int w, int h)
 {
     double ns = 30.0;  // the four passes
@@ -176,11 +176,11 @@ double parallelograms_cost_ns(const Kernel& k, int w, int h)
 }
 
 // Their error is the slanted edges' softening by the taps, under a pixel, so it falls with
-// the size: on bokeh-bench's scene (PSNR after its tone map, 1080p, session 14) the sweep
+// the size: on bokeh-bench's scene (PSNR after its tone map, 1080p) the sweep
 // along the rows measured 38.8-39.0 dB at 13 px and 40.5-40.6 at 15; the sheared sweep,
 // two reads through the taps more, 38.5-38.7 at 23 px and 40.0-40.2 at 27 (7 and 20
 // degrees). Stretched hexagons (anamorphic) are softened as much on their narrow side, so
-// that side decides, and more (bokeh-bench's crop blurred alone, session 15): 2:1 and 3:1
+// that side decides, and more (bokeh-bench's crop blurred alone): 2:1 and 3:1
 // along the rows (0 and 90 degrees) 38.2-40.1 dB at 15 px across, 39.7-43.0 at 18,
 // 43.0-45.1 at 21; sheared or the four passes (left for hexagons stretched past any shear)
 // 36.4-37.2 at 15 across, 39.2 at 21, 40.5-43.7 at 27 (54 x 27 to 81 x 27 at 7 and 20
@@ -234,7 +234,7 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
         // 480 lines), and each line was fetched again for each of its four pixels: the
         // upright hexagon at 63 px took 45-51 ms on a 1900 px wide frame against 54-58 at
         // 1920, and a bare column-at-a-time transpose 6.6 ms against 14.7. Batched, A/B
-        // against one at a time: 0.79-0.86x at 15-63 px, 0.89-0.92x at 127-255 (session 10).
+        // against one at a time (bokeh-ab): 0.79-0.86x at 15-63 px, 0.89-0.92x at 127-255.
         io.batch = kColumnBatch;
         io.lines = [&](int r, int n, int c0, int c1, float* const* bufs, RowSpan* lines) {
             // Only the lit part of a column is gathered; the rest is black by the span.
@@ -281,9 +281,10 @@ int hexagon_reach(const Kernel& k, bool along_x)
     // A rhombus is two steep segments in series, and each spreads its segment by its
     // shear's and its unshear's three taps (< 1.5 px each) and its last row's drift
     // (< 0.5 px): < 7 px past the hexagon, so at whole offsets at most ceil(r) + 6.
-    // It was + 2: measured, the parallelograms reach up to 5 px past the hexagon (9 px:
-    // 10 against 4.5), and under clamp or mirror the frame's edge pixels lost up to 7.7e-6
-    // of a constant image, read as black past the padding (session 17).
+    // A reach of ceil(r) + 2 is too short: measured, the parallelograms reach up to 5 px
+    // past the hexagon (9 px: 10 against 4.5), and under clamp or mirror the frame's edge
+    // pixels then lost up to 7.7e-6 of a constant image, read as black past the padding
+    // (tests/blur_test.cpp checks a constant image under every border).
     return int(std::ceil(r)) + 6;
 }
 

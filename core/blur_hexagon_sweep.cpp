@@ -140,8 +140,8 @@ void shifted_row(float* g, const RowSpan& row, int nc, int u0, int u1, const Tap
 
 // The window moved by one row: s (the inner rows' sum) += enter - leave, in double (no
 // drift), then h = inner s + wf newest + wl oldest (the fractional ends), in float: the
-// two ends need no double, and their conversions are saved (session 11, with band_row's
-// the same: A/B 0.89-0.98x of the sweep's time).
+// two ends need no double, and their conversions are saved (with band_row's the same:
+// bokeh-ab, 0.89-0.98x of the sweep's time).
 BOKEH_HOT void slide_window(double* s, float* h, const float* newest, const float* enter,
                             const float* leave, const float* oldest, double wf, double inner,
                             double wl, size_t n)
@@ -180,11 +180,12 @@ size_t ring_slot(int r, int n) { return size_t(((r % n) + n) % n); }
 // G's rows are kept in a ring of the window's last - first + 1 rows: G row r depends on r
 // alone, so the row leaving the window is the one made when it entered (a column that
 // takes a row away was active when that row was made, see step()), and only the newest
-// input line is read and sheared per step. Before (sessions 9-11) the leaving line was
-// read and sheared again, not stored: a third of the three-tap passes, and for the fused
-// sweep a ring of X's rows and the oldest source rows read back from L3. A/B (1080p RGBA,
-// 15-255 px, session 12): 0.87-0.94x two threads, 0.91-0.94x one; float rounding apart
-// (1.2e-7: a column's shear is a vector or a scalar tap by where the call's range falls).
+// input line is read and sheared per step. Reading and shearing the leaving line again
+// instead of storing it costs a third more three-tap passes, and for the fused sweep a
+// ring of X's rows and the oldest source rows read back from L3: the ring measured
+// 0.87-0.94x of that time on two threads, 0.91-0.94x on one (bokeh-ab, 1080p RGBA,
+// 15-255 px); the two differ by float rounding (1.2e-7: a column's shear is a vector or a
+// scalar tap by where the call's range falls).
 class SteepWindow {
 public:
     // Input lines before `line0` are all zero; steps run from start() to ye.
@@ -457,8 +458,8 @@ Region hull(const Region& a, const Region& b)
 // rhombus(a, c) + rhombus(a, b) + rhombus(c, b). A steep segment is a window with a shear
 // and an unshear; a segment along the rows is a row's prefix sums, the cheaper pass: two
 // windows and two row passes, where hexagon_parallelograms' grouping
-// ((seg_c (seg_a in + B) + seg_a B) / 3) takes three windows and one row pass (session 11:
-// A/B 0.91-0.95 of that sweep's time at 15-255 px, 1080p RGBA, two threads). seg_a and
+// ((seg_c (seg_a in + B) + seg_a B) / 3) takes three windows and one row pass (bokeh-ab:
+// 0.91-0.95 of that sweep's time at 15-255 px, 1080p RGBA, two threads). seg_a and
 // seg_c commute exactly (every step of a steep window runs along the rows or sums down
 // the columns), so the two groupings differ only by float rounding.
 // Each row of T is made once, summed along the row at once into X, and kept in a ring
@@ -591,8 +592,8 @@ void hexagon_sweep(const SweepIO& io, int nc, const Region& out_region, double a
             segment_row(row, RowSpan{ t_row(y) + size_t(X0 - lc - t0) * ncs, 0, nt_read },
                         prefix.data(), nt_read, nc, seg_c, ab_row.data(), float(1.0 / 3.0), no,
                         t_zero);
-            // Past the caches (session 13: A/B 0.93-0.97x flat-topped at 15-255 px; the
-            // upright store's columns, streamed, measured 1.06x and stay plain).
+            // Past the caches (bokeh-ab: 0.93-0.97x flat-topped at 15-255 px; the upright
+            // store's columns, streamed, measured 1.06x and stay plain).
             if (o)
                 stream_floats(o, row, no);
             else if (held == batch - 1 || y == Y1 - 1) {

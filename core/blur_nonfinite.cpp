@@ -35,7 +35,8 @@ namespace bokeh::detail {
 // and kind, convolved with the kernel's support (1 where its weight is positive; the
 // negative weights of an image kernel, likewise, apart) by row spans, which leave exact
 // whole counts, or by the FFT where the exact blur would take it (fft_cheaper_than_spans;
-// counts to within 1e-9, read as reached from 0.5). Infinite depth (+inf in Z, "no depth") is the common case.
+// counts to within 1e-9, read as reached from 0.5). Infinite depth (+inf in Z, "no depth")
+// is the common case.
 bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::vector<KernelWeights>& kernels,
                     const std::vector<int>& kernel_of, Border border, bool keep_range,
                     const std::function<bool(OIIO::ImageBuf&, const OIIO::ImageBuf&)>& clean, int nthreads)

@@ -88,9 +88,9 @@ Plane convolve_separable(const Plane& in, const std::vector<double>& wx,
 // separable filters' exact method outside iris mode): each task walks down a strip of
 // output columns, filters each padded source row along x into a ring of the last 2 ry + 1
 // rows, and sums the ring's rows along y into the output row, each value's taps in the
-// order convolve_separable adds them (the same bits). Before, a padded plane, a middle
-// and an output plane (fresh pages: their zeroing took a quarter of the time) and a copy
-// into `dst`.
+// order convolve_separable adds them (the same bits). The plane path's padded, middle
+// and output planes (fresh pages: their zeroing took a quarter of its time) and its copy
+// into `dst` are saved.
 bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                       const std::vector<double>& wx, const std::vector<double>& wy, Border border, int nthreads)
 {
@@ -108,7 +108,7 @@ bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO:
         // The last padded row that read each source row: past an edge the clamp and mirror
         // borders read source rows again, and one still in the ring is copied, not filtered
         // again (a sigma 512 Gaussian on a 960 x 64 image: 13 s under clamp and 7 s under
-        // mirror before, 1.1 and ~1 s after; the same bits).
+        // mirror filtered again, 1.1 and ~1 s copied; the same bits).
         const int src_y0 = in.roi().ybegin;
         std::vector<int> last_read(size_t(in.roi().height()), std::numeric_limits<int>::min());
         // Padded row j (source row roi.ybegin - ry + j) along x into its ring slot.
@@ -154,10 +154,11 @@ bool separable_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO:
 // ~0.4 ns per tap of the two passes, plus ~2 for the padded plane and the copy out.
 // Fitted to Gaussians at 1080p on the project's machine (sigma = size / 4, 8 sigma + 1
 // taps per pass; 2 threads: 114, 213, 407 ms at sizes 15, 31, 63; the model errs low
-// above, 2250 ms measured at 255 against 1700). Session 16 (separable_direct, this
-// machine): 43, 54, 71, 88, 116 ms at sizes 11, 15, 19, 23, 31 against the FFT tiles' 78,
-// 60, 64, 93, 96 (medians of 9, one run): the crossover still falls between 19 and 31, so
-// the model, which puts it at sigma ~7 (size 28), is left as it is.
+// above, 2250 ms measured at 255 against 1700). With the direct path (separable_direct),
+// on this machine: 43, 54, 71, 88, 116 ms at sizes 11, 15, 19, 23, 31 against the FFT
+// tiles' 78, 60, 64, 93, 96 (medians of 9, one run; bokeh-micro's BM_ExactBlur times both
+// by name): the crossover falls between 19 and 31, where the model puts it (sigma ~7,
+// size 28).
 double separable_cost_ns(int w, int h, int taps_x, int taps_y)
 {
     return double(w) * double(h) * (0.4 * double(taps_x + taps_y) + 2.0);

@@ -129,13 +129,14 @@ Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads)
 // 0.10 ns per span and pixel (two prefix loads and a multiply-add) and 0.29 per kernel
 // row and pixel (the row's accumulators loaded and stored, its prefix row found), both
 // 0.7 of that for a kernel mirrored in y (convolve_symmetric_spans shares each span's sum
-// between two output rows: 0.65-0.79x the time, A/B, session 8), plus 0.75 for the prefix
-// sums and the copy out. Fitted (least relative squares) to 44 timings at 1080p RGBA on
-// two threads, session 10: disks 15-191 px, hexagons at 0, 30 and 7 degrees, pentagons,
-// a curved octagon, 2:1 and 1:2 ellipses and a catadioptric disk; it reads them within
-// 0.84-1.21 of measured. The model before charged spans alone (0.15 ns each, growing
-// with the rows): it read a hexagon's spans up to 1.30x low and large or holed kernels
-// up to 1.7x high (a hexagon has ~2.2 spans per row against a disk's 2.6, a holed disk 5).
+// between two output rows: 0.65-0.79x the time, bokeh-ab), plus 0.75 for the prefix sums
+// and the copy out. Fitted (least relative squares) to 44 timings at 1080p RGBA on two
+// threads (bokeh-micro's BM_ExactBlur times such cases): disks 15-191 px, hexagons at 0,
+// 30 and 7 degrees, pentagons, a curved octagon, 2:1 and 1:2 ellipses and a catadioptric
+// disk; it reads them within 0.84-1.21 of measured. A model charging spans alone (0.15 ns
+// each, growing with the rows) read a hexagon's spans up to 1.30x low and large or holed
+// kernels up to 1.7x high (a hexagon has ~2.2 spans per row against a disk's 2.6, a holed
+// disk 5).
 double spans_cost_ns(int w, int h, const std::vector<Span>& spans)
 {
     std::set<int> rows;
@@ -274,7 +275,7 @@ bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const 
     // 128-column tiles: at D = 63 the tile's prefix ring (66 rows of 191 pixels, twice) is
     // 0.8 MB and stays in L2. Measured A/B in one process against 256 x 64 x 8: 5-9 % faster
     // at 15-127 px; sub-tiles of 32 x 16 were slower. The ring and tiles of >= 256 rows
-    // (before: a table of all the tile's rows, tiles of 64 rows, so the prefix rows were
+    // (against a table of all the tile's rows in tiles of 64 rows, whose prefix rows were
     // computed twice per output row at 63 px): 6-7 % faster at 63 and 127 px, same bits.
     constexpr int kSubW = 128, kSubH = 4;
     prepare_destination(dst, in, roi);

@@ -4,10 +4,11 @@
 // Every method is a "valid" convolution of a padded plane: the source region the output
 // needs, grown by the kernel's reach and filled past the data window by the border rule,
 // is copied once into a contiguous interleaved float plane; the methods read only inside
-// it, and finish() copies the wanted region into the destination. The fast exact paths
-// (box, spans, bands, ...; blur.cpp lists them) skip both copies: they read rows through source_row() per
-// tile and write into a destination set up by prepare_destination(), so no whole-frame
-// plane is made (the copies cost ~14 ms per call at 1080p on the project's machine).
+// it, and finish() copies the wanted region into the destination. The direct paths (box,
+// spans, bands and more; blur.cpp lists them) skip both copies: they read rows through
+// source_row() per tile and write into a destination set up by prepare_destination(), so
+// no whole-frame plane is made (the copies cost ~14 ms per call at 1080p on the project's
+// machine).
 #pragma once
 
 #include <bokeh/blur.h>
@@ -98,7 +99,7 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
 /// wide into: about 960 columns each, an even count, fixed by the width (never by the
 /// thread count, so the float rounding is too). Each chunk reads and computes its
 /// kernel's reach again on both sides, which wide chunks make a small share. Measured
-/// (session 13, 1080p RGBA, two threads, A/B): the box in two strips of 960 against 256
+/// (bokeh-ab, 1080p RGBA, two threads): the box in two strips of 960 against 256
 /// columns (512 from 96 px) 0.73-0.82x at 15-255 px, though a 255 px box's ring (3.9 MiB)
 /// is then far out of this machine's 1 MiB L2, three strips of 640 the slowest; the
 /// hexagon sweep in two chunks against four 0.90-0.96x at 15-95 px, and at 255 px on one
@@ -120,13 +121,13 @@ template<class Fn> void for_each_column_strip(int w, int nthreads, Fn&& fn)
 
 /// Columns a transposing reader or writer takes at once (source_columns): 16 RGBA float
 /// pixels are four 64-byte cache lines. The upright hexagon's sweep at 63 px, 1080p
-/// RGBA, interleaved in one process (session 10): 63 ms one at a time, 52 by 4, 48 by 8,
+/// RGBA, interleaved in one process (bokeh-ab): 63 ms one at a time, 52 by 4, 48 by 8,
 /// 45.5 by 16, 47 by 32.
 constexpr int kColumnBatch = 16;
 /// How many rows ahead a transposing reader or writer asks for its next batch's cache
 /// lines (__builtin_prefetch): its rows are a frame's pitch apart, a new page each, where
 /// the hardware's stream prefetch does not follow. Upright hexagon, 1080p RGBA, A/B
-/// (session 11): 0.94-0.99x with the reads' prefetch, 0.93-0.95x more with the writes'
+/// (bokeh-ab): 0.94-0.99x with the reads' prefetch, 0.93-0.95x more with the writes'
 /// (8, 16 and 32 rows ahead measured alike).
 constexpr int kPrefetchRows = 8;
 

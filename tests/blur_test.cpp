@@ -2149,9 +2149,9 @@ TEST(BlurApprox, FastKeepsItsBudgetForEveryShapeAndAspect)
 {
     // method=fast promises 40 dB against the exact blur on the bench's crop, whatever it
     // picks (the reduction, the bands, the parallelograms or the exact blur itself), also
-    // for stretched (anamorphic) kernels and rotated hexagons. Session 15 found it taking
-    // the parallelograms for a 27 x 9 hexagon at 36.9 dB: their budget went by the wide
-    // side, and the narrow one decides (parallelograms_budget_px).
+    // for stretched (anamorphic) kernels and rotated hexagons. A budget read on the wide
+    // side would take the parallelograms for a 27 x 9 hexagon at 36.9 dB: the narrow one
+    // decides (parallelograms_budget_px).
     const OIIO::ImageBuf& src = bench_crop();
     struct Case {
         KernelShape shape;
