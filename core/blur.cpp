@@ -27,7 +27,7 @@
 //
 // Limits: the cost models behind `exact` and `fast` were fitted at 1080p RGBA on two
 // threads on the project's machine (each cites its figures); elsewhere a choice near a
-// crossover may be the slower of two, never a less accurate one than asked for.
+// crossover may be the slower of the two, both keeping the accuracy asked for.
 
 #include <bokeh/blur.h>
 #include <bokeh/image.h>

@@ -1,5 +1,6 @@
 // blur_taps.cpp — the seed's bilinear-tap disk (BlurMethod::BilinearTaps; SEEDS.md
-// section 5): the 9x9 disk from 25 bilinear fetches and the 17x17 one from 81.
+// section 5): the 9x9 disk from 25 bilinear fetches and the 17x17 one from 81 (77: the
+// four corner fetches cover none of the disk and are left out).
 //
 // The taps are grouped 2 (or 1, the centre) per axis; a fetch sits at the area-weighted
 // centroid of its group, weighted by the group's disk area, so its bilinear footprint
