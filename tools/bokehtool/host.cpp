@@ -1,6 +1,7 @@
 // host.cpp — bokehtool's host. See host.h for the two-pass design.
 
 #include "host.h"
+#include "help_markdown.h"
 #include "sequence.h"
 
 #include <algorithm>
@@ -61,6 +62,11 @@ void Host::register_host_commands()
     // Global options: applied in pass 1, wherever they stand on the line.
     add_host_command(host_command("--help", "", 0, 0,
                                   "Print this help; --help COMMAND for one command", nothing),
+                     true);
+    add_host_command(host_command("--help-markdown", "", 0, 0,
+                                  "Print the command reference as Markdown, a page per "
+                                  "module; --help-markdown DIR writes the pages into DIR",
+                                  nothing),
                      true);
     add_host_command(host_command("--version", "", 0, 0, "Print the version", nothing), true);
     add_host_command(host_command("--plugins", "", 0, 0,
@@ -260,6 +266,31 @@ bool Host::print_command_help(const std::string& name) const
     for (const OptionSpec& o : c->options)
         std::cout << option_line(o);
     return true;
+}
+
+int Host::print_markdown(const std::vector<std::string>& args, bool plugins_ok)
+{
+    // A reference made without a module that failed to load would be silently incomplete.
+    if (!plugins_ok) {
+        for (const std::string& f : m_plugin_failures)
+            std::cerr << format("{} ERROR: --help-markdown: {}\n", kProgram, f);
+        return 1;
+    }
+    if (args.size() > 2 || args[0] != "--help-markdown")
+        return fail("--help-markdown", "takes one optional argument, the directory to write "
+                                       "(bokehtool --help-markdown [DIR]), and nothing else"),
+               1;
+    const std::vector<MarkdownPage> pages = command_reference_pages(m_registry, kProgram,
+                                                                    m_global);
+    if (args.size() == 1) {
+        for (const MarkdownPage& p : pages)
+            std::cout << p.text << "\n";
+        return 0;
+    }
+    std::string err;
+    if (!write_markdown_pages(pages, args[1], err))
+        return fail("--help-markdown", err), 1;
+    return 0;
 }
 
 void Host::print_plugins() const
@@ -561,6 +592,8 @@ int Host::main(const std::vector<std::string>& args)
         return 0;
     }
     const bool plugins_ok = load_plugins();
+    if (has("--help-markdown"))
+        return print_markdown(args, plugins_ok);
     auto help = std::find(args.begin(), args.end(), "--help");
     if (args.empty() || help != args.end()) {
         if (help != args.end() && help + 1 != args.end()) {

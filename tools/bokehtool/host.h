@@ -44,6 +44,8 @@ private:
     void print_help() const;
     bool print_command_help(const std::string& name) const;
     void print_plugins() const;
+    /// `--help-markdown [DIR]`: the command reference pages, printed or written into DIR.
+    int print_markdown(const std::vector<std::string>& args, bool plugins_ok);
 
     bool parse(const std::vector<std::string>& args, bool checking);
     void dispatch(OIIO::ArgParse& ap, const std::vector<std::string>& argv, bool checking);
