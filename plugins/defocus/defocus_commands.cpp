@@ -7,6 +7,8 @@
 #include <bokeh/defocus.h>
 #include <bokeh/plugin.h>
 
+#include "aperture_options.h"
+
 #include <charconv>
 #include <cmath>
 
@@ -97,7 +99,7 @@ bool read_options(CommandContext& c, const OIIO::ImageSpec& spec, bokeh::Defocus
     o.aperture.hole         = float(v.get_float("hole"));
     o.aspect                = float(v.get_float("aspect"));
 
-    // quality= is the spelling, method= the name the docs and -v use; one option.
+    // quality= and method= are one option under two spellings (method= the docs' and -v's).
     if (v.given("quality") && v.given("method") && v.get_string("quality") != v.get_string("method"))
         return c.fail(format("quality={} and method={} disagree; give one", v.get_string("quality"),
                              v.get_string("method")));
