@@ -178,7 +178,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     const float bloom_t = o.bloom_threshold, bloom_g = o.bloom_gain;
     parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
         std::vector<Piece> pieces;
-        std::vector<float> T(K, 1.0f);
+        std::vector<float> T(K, 1.0f), self(K), nearer_t(K), in_layer_t(K);
         for (int64_t p = b; p < e; ++p) {
             const int ns = dd.samples(p);
             if (ns == 0)
@@ -223,17 +223,36 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                     pieces.push_back(pc);
                 }
             }
+            // Each piece's layers, and what the pixel leaves visible of each layer (the
+            // divisor of its blurred content, as the flat method's visibility):
+            //   self_k:   a piece shared between k - 1 and k is seen through its own nearer
+            //             share, 1 - (1 - u) a;
+            //   hidden_k: what lies wholly in nearer layers covers 1 - prod(1 - a) of the
+            //             pixel; where the pixel holds nothing in layer k itself, that part
+            //             of layer k is unknown, and layer k is continued under it (a surface
+            //             crossing layers goes on under its nearer ribbons: without this,
+            //             seams open between the ribbons of one surface, and what lies
+            //             farther behind shows through them). So
+            //   vis_k = self_k (1 - hidden_k in_k), in_k = prod(1 - a) of the pieces with a
+            //   share in layer k (content the layer holds at the pixel needs no guess).
+            std::fill(self.begin(), self.end(), 1.0f);
+            std::fill(nearer_t.begin(), nearer_t.end(), 1.0f);
+            std::fill(in_layer_t.begin(), in_layer_t.end(), 1.0f);
             for (const Piece& pc : pieces) {
                 uint16_t lower;
                 float upper;
                 share_between(pc.coc, m.coc_px, lower, upper);
-                // The farther share is seen through the nearer one when the layers are
-                // composited: the farther layer is divided by the blur of what its split
-                // samples leave visible (as the flat method divides by visibility), so an
-                // opaque sample stays opaque and a lone one keeps its energy.
                 const float alpha = std::clamp(pc.rgba[3], 0.0f, 1.0f);
-                if (upper > 0.0f && upper < 1.0f && size_t(lower) + 1 < K)
-                    f.layer_vis[size_t(lower) + 1][size_t(p)] *= 1.0f - (1.0f - upper) * alpha;
+                const bool split  = upper > 0.0f && upper < 1.0f && size_t(lower) + 1 < K;
+                if (split)
+                    self[size_t(lower) + 1] *= 1.0f - (1.0f - upper) * alpha;
+                const size_t wholly_nearer_from = size_t(lower) + (upper > 0.0f ? 2 : 1);
+                if (wholly_nearer_from < K)
+                    nearer_t[wholly_nearer_from] *= 1.0f - alpha;
+                if (upper < 1.0f)
+                    in_layer_t[lower] *= 1.0f - alpha;
+                if (upper > 0.0f && size_t(lower) + 1 < K)
+                    in_layer_t[size_t(lower) + 1] *= 1.0f - alpha;
                 for (int side = 0; side < 2; ++side) {
                     const size_t k = size_t(lower) + size_t(side);
                     const float w  = side == 0 ? 1.0f - upper : upper;
@@ -242,9 +261,17 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                     float* v = f.layer_rgba[k].data() + size_t(p) * 4;
                     for (int c = 0; c < 4; ++c)
                         v[c] += T[k] * w * pc.rgba[c];
-                    T[k] *= 1.0f - w * std::clamp(pc.rgba[3], 0.0f, 1.0f);
+                    // Whatever follows lies behind this piece in depth: hidden by all of it,
+                    // whichever share of it this layer holds.
+                    T[k] *= 1.0f - alpha;
                 }
             }
+            // nearer_t: transmittance of what lies wholly in front of layer k (a running
+            // product forward).
+            for (size_t k = 1; k < K; ++k)
+                nearer_t[k] *= nearer_t[k - 1];
+            for (size_t k = 0; k < K; ++k)
+                f.layer_vis[k][size_t(p)] = self[k] * (1.0f - (1.0f - nearer_t[k]) * in_layer_t[k]);
             std::fill(T.begin(), T.end(), 1.0f);
         }
     });

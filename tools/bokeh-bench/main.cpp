@@ -20,6 +20,7 @@
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
 
 #include "bench_common.h"
+#include "deep_task.h"
 #include "defocus_task.h"
 #include "gegl_peer.h"
 #include "iris_task.h"
@@ -99,7 +100,8 @@ int main(int argc, char* argv[])
         else if (a == "--task" && i + 1 < argc && (std::string(argv[i + 1]) == "blur"
                                                    || std::string(argv[i + 1]) == "defocus"
                                                    || std::string(argv[i + 1]) == "resample"
-                                                   || std::string(argv[i + 1]) == "iris"))
+                                                   || std::string(argv[i + 1]) == "iris"
+                                                   || std::string(argv[i + 1]) == "deep"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -121,7 +123,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample|iris] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b] [--image FILE]...\n",
                          a.c_str());
@@ -143,6 +145,13 @@ int main(int argc, char* argv[])
         args.threads = threads;
         args.reps    = reps;
         if (!bokeh_bench::run_defocus_task(args, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "deep") {
+        args.threads = threads;
+        args.reps    = reps;
+        if (!bokeh_bench::run_deep_task(args, rows))
             return 1;
         return write_csv(csv, rows);
     }

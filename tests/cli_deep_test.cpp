@@ -1,0 +1,133 @@
+// The deep commands as a user runs them: oiiotool's spellings, the deep defocus, and bad
+// input (one line, exit 1, nothing written).
+#include <gtest/gtest.h>
+
+#include <OpenImageIO/deepdata.h>
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/strutil.h>
+
+#include <bokeh/deep.h>
+#include <bokeh/io.h>
+
+#include "test_util.h"
+
+using namespace bokeh_test;
+using OIIO::Strutil::fmt::format;
+
+namespace {
+
+// A small deep file with a volume, a point and, at one pixel, a bad sample of `kind`.
+std::string write_deep(const std::string& dir, const std::string& name, const std::string& kind = "")
+{
+    OIIO::ImageSpec spec(8, 6, 6, OIIO::TypeFloat);
+    spec.channelnames   = { "R", "G", "B", "A", "Z", "ZBack" };
+    spec.channelformats = { OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeFloat,
+                            OIIO::TypeFloat };
+    spec.alpha_channel  = 3;
+    spec.z_channel      = 4;
+    spec.deep           = true;
+    OIIO::ImageBuf buf(spec);
+    OIIO::DeepData& dd = *buf.deepdata();
+    for (int64_t p = 0; p < dd.pixels(); ++p)
+        dd.set_samples(p, 2);
+    for (int64_t p = 0; p < dd.pixels(); ++p) {
+        const float a[2][6] = { { 0.2f, 0.1f, 0.0f, 0.4f, 2.0f, 4.0f }, { 0.0f, 0.3f, 0.6f, 1.0f, 3.0f, 3.0f } };
+        for (int s = 0; s < 2; ++s)
+            for (int c = 0; c < 6; ++c)
+                dd.set_deep_value(p, c, s, a[s][c]);
+    }
+    if (kind == "nan")
+        dd.set_deep_value(9, 4, 0, NAN);
+    else if (kind == "back")
+        dd.set_deep_value(9, 5, 1, 1.0f);
+    const std::string path = dir + "/" + name;
+    std::string err;
+    EXPECT_TRUE(bokeh::write_image(buf, path, {}, err)) << err;
+    return path;
+}
+
+}  // namespace
+
+TEST(CliDeep, OiiotoolSpellingsWork)
+{
+    const std::string dir = fresh_dir("cli_deep_spellings");
+    const std::string a   = write_deep(dir, "a.exr");
+    RunResult r = bokehtool(format("{} --deeptidy -o {}/tidy.exr", a, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("{} {} {} --deepmerge:n=3 -o {}/m.exr --flatten -o {}/flat.exr", a, a, a, dir, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("{} {} --deepholdout -o {}/h.exr", a, a, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("{} --deepslice 2.5 inf -o {}/s.exr", a, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("{}/flat.exr --deepen -o {}/deepened.exr", dir, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    std::string err;
+    OIIO::ImageBuf m, flat, tidy;
+    ASSERT_TRUE(bokeh::read_image(m, dir + "/m.exr", err)) << err;
+    ASSERT_TRUE(m.deep());
+    EXPECT_EQ(m.deepdata()->channeltype(0), OIIO::TypeHalf) << "half colour stays half";
+    EXPECT_EQ(m.deepdata()->channeltype(4), OIIO::TypeFloat);
+    ASSERT_TRUE(bokeh::read_image(flat, dir + "/flat.exr", err)) << err;
+    EXPECT_FALSE(flat.deep());
+    ASSERT_TRUE(bokeh::read_image(tidy, dir + "/tidy.exr", err)) << err;
+    // The volume [2, 4) is cut at the point at 3: three samples a pixel.
+    EXPECT_EQ(tidy.deepdata()->samples(0), 3);
+}
+
+TEST(CliDeep, DeepDefocusFlatAndDeepOut)
+{
+    const std::string dir = fresh_dir("cli_deep_defocus");
+    const std::string a   = write_deep(dir, "a.exr");
+    RunResult r = bokehtool(format("-v {} --defocus:math=direct:scale=3:method=reference -o {}/flat.exr", a, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("deep reference"), std::string::npos) << r.out;
+    r = bokehtool(format("{} --defocus:math=direct:scale=3:method=reference:output=deep -o {}/deep.exr "
+                         "--flatten --ch R,G,B,A {}/flat.exr --diff:fail=80",
+                         a, dir, dir));
+    ASSERT_EQ(r.status, 0) << r.err << r.out;
+    std::string err;
+    OIIO::ImageBuf d;
+    ASSERT_TRUE(bokeh::read_image(d, dir + "/deep.exr", err)) << err;
+    EXPECT_TRUE(d.deep());
+}
+
+TEST(CliDeep, BadInputFailsCleanly)
+{
+    const std::string dir = fresh_dir("cli_deep_bad");
+    const std::string out = dir + "/out.exr";
+    // A flat image given to a deep-only command.
+    expect_clean_failure(bokehtool(format("--scene lights:width=32:height=18 --deeptidy -o {}", out)),
+                         "flat", out);
+    expect_clean_failure(bokehtool(format("--scene lights:width=32:height=18 --flatten -o {}", out)), "flat", out);
+    // A deep image without Z.
+    {
+        OIIO::ImageSpec spec(4, 4, 2, OIIO::TypeFloat);
+        spec.channelnames = { "R", "A" };
+        spec.deep         = true;
+        OIIO::ImageBuf noz(spec);
+        std::string err;
+        ASSERT_TRUE(bokeh::write_image(noz, dir + "/noz.exr", {}, err)) << err;
+        expect_clean_failure(bokehtool(format("{}/noz.exr --flatten -o {}", dir, out)), "no Z channel", out);
+    }
+    // NaN depth and ZBack < Z: repaired and warned by default, refused under error.
+    for (const char* kind : { "nan", "back" }) {
+        const std::string bad = write_deep(dir, format("{}.exr", kind), kind);
+        RunResult r           = bokehtool(format("{} --deeptidy -o {}", bad, out));
+        ASSERT_EQ(r.status, 0) << r.err;
+        EXPECT_NE((r.out + r.err).find("repaired"), std::string::npos) << kind << ": " << r.out << r.err;
+        std::remove(out.c_str());
+        // Strict everywhere: the read refuses the NaN, the command the ZBack < Z sample.
+        expect_clean_failure(bokehtool(format("--nan:policy=error {} --deeptidy:nonfinite=error -o {}", bad, out)),
+                             std::string(kind) == "nan" ? "non-finite" : "pixel (1, 1) has a sample with ZBack 1 < Z 3",
+                             out);
+    }
+    // Merges of images with other channels; an empty slice; the gather method.
+    const std::string a = write_deep(dir, "a.exr");
+    expect_clean_failure(bokehtool(format("{} --ch R,A,Z {} --deepmerge -o {}", a, a, out)), "channel", out);
+    expect_clean_failure(bokehtool(format("{} --deepslice 5 5 -o {}", a, out)), "empty", out);
+    expect_clean_failure(bokehtool(format("{} --deepslice near 5 -o {}", a, out)), "NEAR", out);
+    expect_clean_failure(bokehtool(format("{} --defocus:method=gather -o {}", a, out)), "gather", out);
+    expect_clean_failure(bokehtool(format("--scene lights:width=32:height=18 --defocus:output=deep -o {}", out)),
+                         "deep", out);
+}
