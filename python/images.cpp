@@ -194,7 +194,7 @@ ImageArg image_arg(const std::string& function, const py::object& obj, const cha
     }
 }
 
-py::array image_to_array(std::shared_ptr<OIIO::ImageBuf> buf, bool owned)
+py::array image_to_array(const std::shared_ptr<OIIO::ImageBuf>& buf, bool owned)
 {
     if (buf->deep())
         throw py::type_error("a deep image is not an array: keep it as an OpenImageIO.ImageBuf "
@@ -202,7 +202,7 @@ py::array image_to_array(std::shared_ptr<OIIO::ImageBuf> buf, bool owned)
     const OIIO::ROI roi = buf->roi();
     const py::ssize_t h = roi.height(), w = roi.width(), c = buf->nchannels();
     const py::ssize_t fs = sizeof(float);
-    if (owned && buf.use_count() == 1 && buf->storage() == OIIO::ImageBuf::LOCALBUFFER
+    if (owned && buf->storage() == OIIO::ImageBuf::LOCALBUFFER
         && buf->spec().format == OIIO::TypeFloat && roi.depth() == 1 && buf->pixel_stride() == c * fs
         && buf->scanline_stride() == w * c * fs) {
         // Hand the buffer over: the array owns the ImageBuf through a capsule.
@@ -223,7 +223,7 @@ py::array image_to_array(std::shared_ptr<OIIO::ImageBuf> buf, bool owned)
     return std::move(out);
 }
 
-py::object image_to_imagebuf(std::shared_ptr<OIIO::ImageBuf> buf, bool owned)
+py::object image_to_imagebuf(const std::shared_ptr<OIIO::ImageBuf>& buf, bool owned)
 {
     std::string why;
     if (!have_oiio_module(&why))
@@ -232,7 +232,7 @@ py::object image_to_imagebuf(std::shared_ptr<OIIO::ImageBuf> buf, bool owned)
         throw std::runtime_error("OpenImageIO's Python module does not share pybind11's internals "
                                  "with this one (built with another compiler or pybind11 version): "
                                  "its ImageBuf cannot be returned");
-    if (owned && buf.use_count() == 1 && buf->storage() != OIIO::ImageBuf::APPBUFFER)
+    if (owned && buf->storage() != OIIO::ImageBuf::APPBUFFER)
         return py::cast(std::move(*buf));
     OIIO::ImageBuf copy;
     copy.copy(*buf);

@@ -45,11 +45,12 @@ ImageArg image_arg(const std::string& function, const py::object& obj, const cha
 /// Z, the RGBA + Z layout of the scenes and the defocus.
 std::vector<std::string> channel_names(const py::object& channels, int count, const char* name);
 
-/// An array's data window as an (H, W, C) float32 array (no copy when `buf` holds it as
-/// local float pixels and is ours to give away: `owned`).
-py::array image_to_array(std::shared_ptr<OIIO::ImageBuf> buf, bool owned);
+/// An image's data window as an (H, W, C) float32 array: when `owned` (the caller gives the
+/// buffer away; it is left empty) and it holds local float pixels, without a copy (the
+/// array keeps the buffer alive), else copied.
+py::array image_to_array(const std::shared_ptr<OIIO::ImageBuf>& buf, bool owned);
 
-/// `buf` as an OpenImageIO.ImageBuf object (moved when `owned`, else copied).
-py::object image_to_imagebuf(std::shared_ptr<OIIO::ImageBuf> buf, bool owned);
+/// `buf` as an OpenImageIO.ImageBuf object: moved when `owned` (left empty), else copied.
+py::object image_to_imagebuf(const std::shared_ptr<OIIO::ImageBuf>& buf, bool owned);
 
 }  // namespace openbokeh_python

@@ -379,6 +379,16 @@ def test_array_imagebuf_round_trip_and_half_input(scene_array):
     assert np.array_equal(ob.to_array(ob.blur(half, 5)), ob.blur(as_float, 5))
 
 
+def test_results_are_new_writable_arrays(scene_array):
+    before = scene_array.copy()
+    same = ob.blur(scene_array, 0)  # the identity, bit for bit
+    assert np.array_equal(same, scene_array)
+    assert same.flags["WRITEABLE"] and same.flags["C_CONTIGUOUS"]
+    assert not np.shares_memory(same, scene_array)
+    same[...] = 7
+    assert np.array_equal(scene_array, before)
+
+
 def test_an_empty_imagebuf_is_refused():
     with pytest.raises(ValueError, match="blur: argument 'image' is an ImageBuf without an image"):
         ob.blur(oiio.ImageBuf(), 3)
