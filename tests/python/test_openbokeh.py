@@ -444,6 +444,25 @@ def test_the_gil_is_released_while_the_library_works():
     assert ratio > 0.15
 
 
+def test_calls_from_several_threads_at_once_give_each_its_own_result(scene_array):
+    cases = [(9, {"kernel": "disk"}), (13, {"kernel": "hex"}), (7, {}), (21, {"kernel": "box"})]
+    expected = [ob.blur(scene_array, size, **o) for size, o in cases]
+    results = [None] * len(cases)
+
+    def run(i):
+        size, o = cases[i]
+        for _ in range(5):
+            results[i] = ob.blur(scene_array, size, threads=1, **o)
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(len(cases))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for got, want in zip(results, expected):
+        assert np.array_equal(got, want)
+
+
 # --- the examples ------------------------------------------------------------------------
 
 @pytest.mark.parametrize("example", ["defocus_scene.py", "deep_merge_flatten.py"])
