@@ -11,13 +11,13 @@
 // output and read the source straight through the border rule, so no padded copy of the
 // frame is made, and a channel of a tile of a few hundred pixels square stays in L2.
 //
-// What changed and why (issue 3): the first version transformed the whole padded frame:
-// ~3 double planes per channel in flight (~80 MB at 1080p), 55-70 ms per channel at 1080p
-// on one thread. Tiles cost ~14 ns per transformed point at 256 x 256 and more as they
-// grow (tile_cost_ns); the tiling is chosen per call by that model, and blur.cpp compares
-// the result (fft_convolve_cost_ns) with the other exact method's model. At 1080p the FFT
+// Why tiles: transforming the whole padded frame keeps ~3 double planes per channel in
+// flight (~80 MB at 1080p) and took 55-70 ms per channel at 1080p on one thread. Tiles
+// cost ~14 ns per transformed point at 256 x 256 and more as they grow (tile_cost_ns);
+// the tiling is chosen per call by that model, and blur.cpp compares the result
+// (fft_convolve_cost_ns) with the other exact method's model. At 1080p the FFT
 // takes a disk from about 99 px across (against the row spans of a kernel mirrored in y,
-// session 10: 0.77x their time at 127 px, 1.05x at 95, 1.39x at 63; its wall time measured
+// two threads: 0.77x their time at 127 px, 1.05x at 95, 1.39x at 63; its wall time measured
 // 0.69-0.85 of this model at 95-191 px, 0.85-1.0 at 15-63) and a Gaussian from sigma ~7.
 //
 // Double precision throughout: float transforms leave noise of ~1e-7 of a tile's largest

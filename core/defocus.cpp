@@ -42,7 +42,7 @@
 #include <bokeh/defocus.h>
 #include <bokeh/parallel.h>
 
-#include "plane.h"
+#include "defocus_layers.h"
 
 #include <algorithm>
 #include <array>
@@ -60,48 +60,6 @@ namespace {
 using OIIO::Strutil::fmt::format;
 
 // --- the image being defocused ------------------------------------------------------
-
-// Iris mode (SEEDS.md section 3) in the layers: colour is carried as
-// A (exp(k (colour / A - shift)) - 1) (premultiplied exp-space colour), so each layer
-// averages exp(k x) weighted by coverage; every layer comes back by
-// shift + log(1 + mean) / k before it is composited ("over" is linear). The shift (the
-// channel's minimum for k > 0, maximum for k < 0) keeps the exponents in
-// [0, kIrisMaxExponent], and the 1 taken away keeps a small k's digits, as blur's Iris does.
-struct IrisSpace {
-    float k = 0.0f;
-    std::array<float, 3> shift{};
-};
-
-struct Frame {
-    WorkImage img;           // premultiplied RGBA over the data window (iris: exp space)
-    std::vector<float> linear_rgba;  // iris mode: img.rgba before the exp; else empty
-    IrisSpace iris;
-    std::vector<float> coc;  // signed CoC per pixel of the data window
-    OIIO::ROI data, out;     // the data window; the output region
-    Border border = Border::Clamp;
-
-    // Index of the data-window pixel that stands for (x, y) by the border rule; -1 when
-    // it is outside and empty.
-    int64_t source(int x, int y) const
-    {
-        const int sx = border_index(x, data.xbegin, data.xend, border);
-        const int sy = border_index(y, data.ybegin, data.yend, border);
-        if (sx == kOutside || sy == kOutside)
-            return -1;
-        return int64_t(img.index(sx, sy));
-    }
-    // The source's premultiplied RGBA in linear light (not in iris space).
-    const std::vector<float>& linear() const { return linear_rgba.empty() ? img.rgba : linear_rgba; }
-};
-
-// Each pixel's place among the layers: its share 1 - upper in layer `lower` and `upper` in
-// layer lower + 1.
-struct Membership {
-    std::vector<float> coc_px;     // the layers' CoCs, ascending (front to back)
-    std::vector<int> reduction;    // each layer's buffer reduction
-    std::vector<uint16_t> lower;   // per data-window pixel
-    std::vector<float> upper;
-};
 
 // The mean over s x s full-resolution pixels of `fetch(x, y, v)` (which adds nc values
 // into v), for the reduced pixels of `low`: reduced pixel (i, j) covers full resolution
@@ -198,7 +156,14 @@ std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& 
         for (int tx = (x0 - f.out.xbegin) / t; tx <= (x1 - f.out.xbegin) / t; ++tx)
             tiles[k][size_t(ty) * size_t(cols[k]) + size_t(tx)] = 1;
     };
-    for (int y = f.data.ybegin; y < f.data.yend; ++y) {
+    for (int y = f.data.ybegin; y < f.data.yend && f.deep(); ++y)
+        for (size_t k = 0; k < K; ++k) {
+            const float* row = f.layer_rgba[k].data() + f.img.index(f.data.xbegin, y) * 4;
+            for (int x = f.data.xbegin; x < f.data.xend; ++x, row += 4)
+                if (row[0] != 0.0f || row[1] != 0.0f || row[2] != 0.0f || row[3] != 0.0f)
+                    mark(k, x, x, y);
+        }
+    for (int y = f.data.ybegin; y < f.data.yend && !f.deep(); ++y) {
         int x = f.data.xbegin;
         while (x < f.data.xend) {  // runs of equal membership
             const size_t i  = f.img.index(x, y);
@@ -259,8 +224,12 @@ std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& 
 struct LayerPixel {
     float share, nearer;
 };
-inline LayerPixel layer_pixel(const Membership& m, int k, size_t at)
+inline LayerPixel layer_pixel(const Frame& f, const Membership& m, int k, size_t at)
 {
+    if (f.deep()) {  // the layer's own pixels: known, hidden by nothing that is not drawn
+        const float* v = f.layer_rgba[size_t(k)].data() + at * 4;
+        return { (v[0] != 0.0f || v[1] != 0.0f || v[2] != 0.0f || v[3] != 0.0f) ? 1.0f : 0.0f, 0.0f };
+    }
     const int lo    = m.lower[at];
     const float up  = m.upper[at];
     return { lo == k ? 1.0f - up : lo + 1 == k ? up : 0.0f,
@@ -302,8 +271,9 @@ TileContent tile_content(const Frame& f, const Membership& m, int k, const OIIO:
                 if (sx[i] == kOutside)
                     continue;
                 const size_t at    = row + size_t(sx[i]);
-                const LayerPixel p = layer_pixel(m, k, at);
-                t.hidden           = t.hidden || p.nearer * f.img.rgba[at * 4 + 3] > 0.0f;
+                const LayerPixel p = layer_pixel(f, m, k, at);
+                t.hidden           = t.hidden || (f.deep() ? f.layer_vis[size_t(k)][at] < 1.0f
+                                                               : p.nearer * f.img.rgba[at * 4 + 3] > 0.0f);
                 if (p.share > 0.0f) {
                     first = first < 0 ? int(i) : first;
                     last  = int(i);
@@ -342,13 +312,13 @@ Plane layer_input(const Frame& f, const Membership& m, int k, const OIIO::ROI& l
                     continue;
                 }
                 const size_t at    = f.img.index(sx[i], sy);
-                const LayerPixel q = layer_pixel(m, k, at);
-                const float* px    = f.img.rgba.data() + at * 4;
+                const LayerPixel q = layer_pixel(f, m, k, at);
+                const float* px    = f.deep() ? f.layer_rgba[size_t(k)].data() + at * 4 : f.img.rgba.data() + at * 4;
                 if (q.share > 0.0f)
                     for (int c = 0; c < 4; ++c)
                         v[c] += px[c] * q.share;
                 if (with_visibility)
-                    v[4] += 1.0f - px[3] * q.nearer;
+                    v[4] += f.deep() ? f.layer_vis[size_t(k)][at] : 1.0f - px[3] * q.nearer;
             }
         }
         if (s > 1)
@@ -390,10 +360,18 @@ void divide_by_visibility(Plane& p)
     }
 }
 
-// Composite every layer of `m`, back to front, into `out` (RGBA over f.out).
-void composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
-                      int nthreads)
+}  // namespace
+
+void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
+                      int nthreads, std::vector<Plane>* per_layer)
 {
+    if (per_layer) {
+        per_layer->clear();
+        for (size_t k = 0; k < m.coc_px.size(); ++k) {
+            per_layer->emplace_back(f.out.width(), f.out.height(), 4);
+            std::fill_n(per_layer->back().px.get(), per_layer->back().size(), 0.0f);
+        }
+    }
     std::vector<int> cols;
     const std::vector<std::vector<uint8_t>> tiles = layer_tiles(f, m, o, cols);
     const int gx = f.out.xbegin, gy = f.out.ybegin;
@@ -436,8 +414,9 @@ void composite_layers(Plane& out, const Frame& f, const Membership& m, const Def
             if (content.hidden)
                 divide_by_visibility(layer);
             from_iris_space(layer, f.iris);
+            Plane& target = per_layer ? (*per_layer)[size_t(k)] : out;
             for (int y = draw.ybegin; y < draw.yend; ++y) {
-                float* dst = out.row(y - gy) + size_t(draw.xbegin - gx) * 4;
+                float* dst = target.row(y - gy) + size_t(draw.xbegin - gx) * 4;
                 for (int x = draw.xbegin; x < draw.xend; ++x, dst += 4) {
                     float l[4];
                     sample(layer, need, gx, gy, s, x, y, l);
@@ -449,6 +428,8 @@ void composite_layers(Plane& out, const Frame& f, const Membership& m, const Def
         });
     }
 }
+
+namespace {
 
 // The layered method's CoC ladder over [lo, hi]: 0, then +-1, +-r, +-r^2 ... on each side
 // up to the extreme, the last rung moved onto the extreme so it gets its exact kernel.
@@ -471,29 +452,16 @@ std::vector<float> coc_ladder(float lo, float hi, double ratio)
     return rungs;
 }
 
-// Shares of every pixel in the ladder `rungs`: a CoC between two rungs goes to both with
-// weights that keep the second moment (c^2 = (1 - u) c_lo^2 + u c_hi^2), since a disk's
-// spread is proportional to its diameter.
+// Shares of every pixel in the ladder `rungs` (share_between).
 Membership share_between_rungs(const Frame& f, std::vector<float> rungs, int nthreads)
 {
     Membership m;
     m.coc_px = std::move(rungs);
     m.lower.resize(f.coc.size());
     m.upper.resize(f.coc.size());
-    const std::vector<float>& r = m.coc_px;
     parallel_for_chunks(0, int64_t(f.coc.size()), 4096, nthreads, [&](int64_t b, int64_t e) {
-        for (int64_t i = b; i < e; ++i) {
-            const float c = std::clamp(f.coc[size_t(i)], r.front(), r.back());
-            size_t j      = size_t(std::upper_bound(r.begin(), r.end(), c) - r.begin());
-            j             = j == 0 ? 0 : std::min(j - 1, r.size() - 1);
-            float u       = 0.0f;
-            if (j + 1 < r.size()) {
-                const double a2 = double(r[j]) * r[j], b2 = double(r[j + 1]) * r[j + 1];
-                u = float(std::clamp((double(c) * c - a2) / (b2 - a2), 0.0, 1.0));
-            }
-            m.lower[size_t(i)] = uint16_t(j);
-            m.upper[size_t(i)] = u;
-        }
+        for (int64_t i = b; i < e; ++i)
+            share_between(f.coc[size_t(i)], m.coc_px, m.lower[size_t(i)], m.upper[size_t(i)]);
     });
     return m;
 }
@@ -507,14 +475,14 @@ struct CocBins {
     std::vector<float> mean_px;
     std::vector<uint32_t> of_pixel;
 };
-CocBins coc_bins(const Frame& f, float lo, float hi, float step)
+CocBins coc_bins(const std::vector<float>& cocs, float lo, float hi, float step)
 {
     const int64_t first = int64_t(std::floor(lo / step)), last = int64_t(std::floor(hi / step));
     const size_t n = size_t(last - first + 1);
     std::vector<double> sum(n, 0.0);
     std::vector<int64_t> count(n, 0);
     auto bin = [&](float c) { return size_t(std::clamp(int64_t(std::floor(c / step)) - first, int64_t(0), int64_t(n) - 1)); };
-    for (float c : f.coc) {
+    for (float c : cocs) {
         const size_t b = bin(c);
         sum[b] += c;
         ++count[b];
@@ -526,9 +494,9 @@ CocBins coc_bins(const Frame& f, float lo, float hi, float step)
             index[b] = uint32_t(r.mean_px.size());
             r.mean_px.push_back(float(sum[b] / double(count[b])));
         }
-    r.of_pixel.resize(f.coc.size());
-    for (size_t i = 0; i < f.coc.size(); ++i)
-        r.of_pixel[i] = index[bin(f.coc[i])];
+    r.of_pixel.resize(cocs.size());
+    for (size_t i = 0; i < cocs.size(); ++i)
+        r.of_pixel[i] = index[bin(cocs[i])];
     return r;
 }
 
@@ -536,7 +504,7 @@ CocBins coc_bins(const Frame& f, float lo, float hi, float step)
 // (exact when a bin holds one value, as in scenes of few depths).
 Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step)
 {
-    CocBins bins = coc_bins(f, lo, hi, step);
+    CocBins bins = coc_bins(f.coc, lo, hi, step);
     Membership m;
     m.coc_px = std::move(bins.mean_px);
     m.reduction.assign(m.coc_px.size(), 1);
@@ -581,36 +549,8 @@ float min_reduced_coc_px(const DefocusOptions& o)
 
 Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads)
 {
-    const LayerSettings set = settings_for_budget(o.budget_db);
-    double ratio            = set.ratio;
-    if (o.layers > 0) {
-        // The ratio that puts o.layers rungs (0 and both sides) over the range.
-        const double span = std::log(std::max(1.0f, -lo)) + std::log(std::max(1.0f, hi));
-        const int sides   = (lo < -1.0f ? 1 : 0) + (hi > 1.0f ? 1 : 0);
-        const int steps   = std::max(1, o.layers - 1 - sides);
-        ratio             = span > 0.0 ? std::exp(span / steps) : 2.0;
-        ratio             = std::max(ratio, 1.01);
-    }
-    // A scene of few depths (planes, a handful of lights) gets one rung per CoC it holds,
-    // so its layers are exact but for the reductions; others get the ladder.
-    std::vector<float> rungs;
-    if (o.layers == 0) {
-        if ((hi - lo) / kRungStep_px < 1e6f) {
-            rungs = coc_bins(f, lo, hi, kRungStep_px).mean_px;
-            if (rungs.size() > kMaxExactRungs)
-                rungs.clear();
-        }
-        // A rung at 0, so no two neighbouring rungs lie on opposite sides of focus (the
-        // shares below keep the second moment of one side's disks).
-        if (!rungs.empty() && !std::binary_search(rungs.begin(), rungs.end(), 0.0f))
-            rungs.insert(std::upper_bound(rungs.begin(), rungs.end(), 0.0f), 0.0f);
-    }
-    if (rungs.empty())
-        rungs = coc_ladder(lo, hi, ratio);
-    Membership m  = share_between_rungs(f, std::move(rungs), nthreads);
-    const float q = min_reduced_coc_px(o);
-    for (float c : m.coc_px)
-        m.reduction.push_back(reduction_for(c, q, o.max_reduction));
+    Membership m = share_between_rungs(f, layer_rungs(f.coc, o, lo, hi), nthreads);
+    m.reduction  = layer_reductions(m.coc_px, o);
     return m;
 }
 
@@ -888,7 +828,9 @@ void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads)
     });
 }
 
-bool check_options(const DefocusOptions& o, std::string& err)
+}  // namespace
+
+bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
 {
     Kernel k    = o.aperture;
     k.width_px  = 1.0f;
@@ -935,11 +877,13 @@ bool check_options(const DefocusOptions& o, std::string& err)
     return true;
 }
 
+namespace {
+
 // Everything but the method: the scrubbed, premultiplied pixels, their CoC, the regions.
 bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport& rep,
              int nthreads, std::string& err)
 {
-    if (!check_options(o, err))
+    if (!check_defocus_options(o, err))
         return false;
     if (src.deep()) {
         err = "a deep image cannot be defocused here; flatten it first (--flatten)";
@@ -998,29 +942,90 @@ bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, Defoc
     rep.min_coc_px      = f.coc.empty() ? 0.0f : *lo;
     rep.max_coc_px      = f.coc.empty() ? 0.0f : *hi;
     const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
-    f.out               = f.data;
+    f.out               = defocus_output_region(src.spec(), f.data, extreme, o);
+    return true;
+}
+
+}  // namespace
+
+void detail::share_between(float c, const std::vector<float>& r, uint16_t& lower, float& upper)
+{
+    c        = std::clamp(c, r.front(), r.back());
+    size_t j = size_t(std::upper_bound(r.begin(), r.end(), c) - r.begin());
+    j        = j == 0 ? 0 : std::min(j - 1, r.size() - 1);
+    float u  = 0.0f;
+    if (j + 1 < r.size()) {
+        const double a2 = double(r[j]) * r[j], b2 = double(r[j + 1]) * r[j + 1];
+        u = float(std::clamp((double(c) * c - a2) / (b2 - a2), 0.0, 1.0));
+    }
+    lower = uint16_t(j);
+    upper = u;
+}
+
+std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const DefocusOptions& o, float lo, float hi,
+                                       bool exact_allowed)
+{
+    const LayerSettings set = settings_for_budget(o.budget_db);
+    double ratio            = set.ratio;
+    if (o.layers > 0) {
+        // The ratio that puts o.layers rungs (0 and both sides) over the range.
+        const double span = std::log(std::max(1.0f, -lo)) + std::log(std::max(1.0f, hi));
+        const int sides   = (lo < -1.0f ? 1 : 0) + (hi > 1.0f ? 1 : 0);
+        const int steps   = std::max(1, o.layers - 1 - sides);
+        ratio             = span > 0.0 ? std::exp(span / steps) : 2.0;
+        ratio             = std::max(ratio, 1.01);
+    }
+    // A scene of few depths (planes, a handful of lights) gets one rung per CoC it holds,
+    // so its layers are exact but for the reductions; others get the ladder.
+    std::vector<float> rungs;
+    if (o.layers == 0) {
+        if (exact_allowed && (hi - lo) / kRungStep_px < 1e6f) {
+            rungs = coc_bins(cocs, lo, hi, kRungStep_px).mean_px;
+            if (rungs.size() > kMaxExactRungs)
+                rungs.clear();
+        }
+        // A rung at 0, so no two neighbouring rungs lie on opposite sides of focus (the
+        // shares keep the second moment of one side's disks).
+        if (!rungs.empty() && !std::binary_search(rungs.begin(), rungs.end(), 0.0f))
+            rungs.insert(std::upper_bound(rungs.begin(), rungs.end(), 0.0f), 0.0f);
+    }
+    if (rungs.empty())
+        rungs = coc_ladder(lo, hi, ratio);
+    return rungs;
+}
+
+std::vector<int> detail::layer_reductions(const std::vector<float>& rungs, const DefocusOptions& o)
+{
+    std::vector<int> r;
+    const float q = min_reduced_coc_px(o);
+    for (float c : rungs)
+        r.push_back(reduction_for(c, q, o.max_reduction));
+    return r;
+}
+
+OIIO::ROI detail::defocus_output_region(const OIIO::ImageSpec& s, const OIIO::ROI& data, float extreme,
+                                const DefocusOptions& o)
+{
+    OIIO::ROI out = data;
     if (o.grow) {
-        const OIIO::ImageSpec& s = src.spec();
         const OIIO::ROI display(s.full_x, s.full_x + s.full_width, s.full_y, s.full_y + s.full_height);
-        const OIIO::ROI limit = OIIO::roi_union(display, f.data);
+        const OIIO::ROI limit = OIIO::roi_union(display, data);
         // Half the largest kernel: how far bokeh spread past the data window; a layer in a
         // buffer reduced by s reaches up to 1.5 s px farther (its box and the bilinear
         // enlargement).
         int spill = 0;
         if (o.method == DefocusMethod::Auto || o.method == DefocusMethod::Layers) {
-            const int s = reduction_for(extreme, min_reduced_coc_px(o), o.max_reduction);
-            spill       = s > 1 ? (3 * s + 1) / 2 : 0;
+            const int r = reduction_for(extreme, min_reduced_coc_px(o), o.max_reduction);
+            spill       = r > 1 ? (3 * r + 1) / 2 : 0;
         }
         const int gx = int(std::ceil(0.5f * extreme)) + spill;
         const int gy = int(std::ceil(0.5f * extreme * o.aspect)) + spill;
-        f.out = OIIO::roi_intersection(grown(f.data, gx, gy), limit);
+        out = OIIO::roi_intersection(grown(data, gx, gy), limit);
     }
-    f.out.chbegin = 0;
-    f.out.chend   = 4;
-    return true;
+    out.chbegin = 0;
+    out.chend   = 4;
+    return out;
 }
-
-}  // namespace
 
 const char* method_name(DefocusMethod m)
 {
@@ -1036,11 +1041,17 @@ const char* method_name(DefocusMethod m)
 bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
              DefocusReport* report, int nthreads)
 {
+    if (src.initialized() && src.deep())
+        return defocus_deep(dst, src, opts, report, nthreads);
     DefocusReport rep;
     Frame f;
     std::string err;
     if (!prepare(f, src, opts, rep, nthreads, err)) {
         dst.errorfmt("defocus: {}", err);
+        return false;
+    }
+    if (opts.deep_output) {
+        dst.errorfmt("defocus: a deep result needs a deep image (--deepen makes one)");
         return false;
     }
     rep.method = opts.method == DefocusMethod::Auto ? DefocusMethod::Layers : opts.method;

@@ -396,7 +396,7 @@ bool check_source(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* wh
 // so the running sum (one vector add per block, not per pixel) is the only dependency
 // carried from block to block. Written with vector types (PixelRgba, plane.h): the same
 // steps written per channel were compiled scalar in every clone, 2x slower in isolation
-// and 18 % of the fused hexagon sweep's time (session 11). Other channel counts go
+// and 18 % of the fused hexagon sweep's time. Other channel counts go
 // through memory.
 BOKEH_HOT void row_prefix(double* p, const float* v, size_t npx, int nc)
 {

@@ -4,10 +4,11 @@
 // Every method is a "valid" convolution of a padded plane: the source region the output
 // needs, grown by the kernel's reach and filled past the data window by the border rule,
 // is copied once into a contiguous interleaved float plane; the methods read only inside
-// it, and finish() copies the wanted region into the destination. The fast exact paths
-// (box, spans, bands; blur.cpp) skip both copies: they read rows through source_row() per
-// tile and write into a destination set up by prepare_destination(), so no whole-frame
-// plane is made (the copies cost ~14 ms per call at 1080p on the project's machine).
+// it, and finish() copies the wanted region into the destination. The direct paths (box,
+// spans, bands and more; blur.cpp lists them) skip both copies: they read rows through
+// source_row() per tile and write into a destination set up by prepare_destination(), so
+// no whole-frame plane is made (the copies cost ~14 ms per call at 1080p on the project's
+// machine).
 #pragma once
 
 #include <bokeh/blur.h>
@@ -98,7 +99,7 @@ void source_columns(const OIIO::ImageBuf& src, int sx, int n, int y0, int y1, Bo
 /// wide into: about 960 columns each, an even count, fixed by the width (never by the
 /// thread count, so the float rounding is too). Each chunk reads and computes its
 /// kernel's reach again on both sides, which wide chunks make a small share. Measured
-/// (session 13, 1080p RGBA, two threads, A/B): the box in two strips of 960 against 256
+/// (bokeh-ab, 1080p RGBA, two threads): the box in two strips of 960 against 256
 /// columns (512 from 96 px) 0.73-0.82x at 15-255 px, though a 255 px box's ring (3.9 MiB)
 /// is then far out of this machine's 1 MiB L2, three strips of 640 the slowest; the
 /// hexagon sweep in two chunks against four 0.90-0.96x at 15-95 px, and at 255 px on one
@@ -120,13 +121,13 @@ template<class Fn> void for_each_column_strip(int w, int nthreads, Fn&& fn)
 
 /// Columns a transposing reader or writer takes at once (source_columns): 16 RGBA float
 /// pixels are four 64-byte cache lines. The upright hexagon's sweep at 63 px, 1080p
-/// RGBA, interleaved in one process (session 10): 63 ms one at a time, 52 by 4, 48 by 8,
+/// RGBA, interleaved in one process (bokeh-ab): 63 ms one at a time, 52 by 4, 48 by 8,
 /// 45.5 by 16, 47 by 32.
 constexpr int kColumnBatch = 16;
 /// How many rows ahead a transposing reader or writer asks for its next batch's cache
 /// lines (__builtin_prefetch): its rows are a frame's pitch apart, a new page each, where
 /// the hardware's stream prefetch does not follow. Upright hexagon, 1080p RGBA, A/B
-/// (session 11): 0.94-0.99x with the reads' prefetch, 0.93-0.95x more with the writes'
+/// (bokeh-ab): 0.94-0.99x with the reads' prefetch, 0.93-0.95x more with the writes'
 /// (8, 16 and 32 rows ahead measured alike).
 constexpr int kPrefetchRows = 8;
 
@@ -252,13 +253,13 @@ void weighted_sum(float* out, const float* const* src, const double* w, size_t t
 void row_prefix(double* p, const float* v, size_t npx, int nc);
 
 /// Row prefix sums in double: prefix[y][(x + 1) nc + c] = sum of in[y][0..x] in channel c,
-/// and prefix[y][c] = 0; rows of (in.w + 1) * nc values (blur.cpp).
+/// and prefix[y][c] = 0; rows of (in.w + 1) * nc values (blur_spans.cpp).
 void row_prefix_sums(const Plane& in, double* prefix, int nthreads);
 
 /// The separable kernel wx (x) wy, each of odd length, centred (kernel.cpp).
 KernelWeights outer(const std::vector<double>& wx, const std::vector<double>& wy);
 
-/// The weights point-reflected, so that out(x) = sum_d w(d) in(x - d) (blur.cpp).
+/// The weights point-reflected, so that out(x) = sum_d w(d) in(x - d) (blur_spans.cpp).
 KernelWeights reflected(const KernelWeights& k);
 
 /// One bar of a kernel row: weight `weight` on offsets dx in [x0, x1] of row dy.
@@ -266,19 +267,19 @@ struct Span {
     int dy, x0, x1;
     double weight;
 };
-/// Skyline decomposition of each kernel row into stacked horizontal bars (blur.cpp).
+/// Skyline decomposition of each kernel row into stacked horizontal bars (blur_spans.cpp).
 std::vector<Span> kernel_spans(const KernelWeights& k);
 /// Exact "valid" convolution by row spans: the output is `in` less (rx, ry) on each side.
 Plane convolve_spans(const Plane& in, const KernelWeights& kernel, int nthreads);
 
 /// The convolution with a list of spans straight from the source into `dst` over `roi`
-/// (blur.cpp), by the border rule, for a kernel reaching rx, ry. A span (dy, x0, x1, w)
+/// (blur_spans.cpp), by the border rule, for a kernel reaching rx, ry. A span (dy, x0, x1, w)
 /// adds w * (T[y + dy][x + x1 + 1] - T[y + dy][x + x0]) where T is the row prefix sums of
 /// the padded source (dy in [-ry, ry]), built per output tile.
 bool convolve_spans_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                            int rx, int ry, std::vector<Span> spans, Border border, int nthreads);
 
-/// A blur with NaN and infinite source values kept within their footprint (blur.cpp):
+/// A blur with NaN and infinite source values kept within their footprint (blur_nonfinite.cpp):
 /// `clean` blurs `in` with them replaced (by 0; by the channel's least finite value with
 /// `keep_range`, for iris mode) into `dst`; then each output whose kernel
 /// (kernels[kernel_of[c]] for channel c) has weight on one of them takes what the linear
@@ -303,12 +304,12 @@ Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
                    const std::vector<int>& kernel_of, int nthreads);
 
 /// Whether the FFT tiles are the cheaper exact convolution of nc channels over a w x h
-/// output, against the row spans `spans` reaching rx, ry (blur.cpp: both cost models, the
+/// output, against the row spans `spans` reaching rx, ry (blur_spans.cpp: both cost models, the
 /// FFT taken below 1.2 times the spans', as measured).
 bool fft_cheaper_than_spans(int w, int h, int nc, int rx, int ry, const std::vector<Span>& spans);
 
 /// Predicted single-thread time in ns of one channel of convolve_spans_direct over a
-/// w x h output with the kernel's `spans` (blur.cpp's cost model).
+/// w x h output with the kernel's `spans` (blur_spans.cpp's cost model).
 double spans_cost_ns(int w, int h, const std::vector<Span>& spans);
 /// Whether kernel rows dy and -dy have the same spans (a disk; a polygon symmetric about
 /// its horizontal axis): convolve_spans_direct then shares each span sum between two
@@ -316,28 +317,28 @@ double spans_cost_ns(int w, int h, const std::vector<Span>& spans);
 bool spans_mirror_in_y(const std::vector<Span>& spans);
 
 /// Predicted single-thread time in ns of one channel of the separable convolution over a
-/// w x h output with taps_x and taps_y taps (blur.cpp's cost model).
+/// w x h output with taps_x and taps_y taps (blur_separable.cpp's cost model).
 double separable_cost_ns(int w, int h, int taps_x, int taps_y);
 
 /// banded_weights (blur.h) from the kernel's exact weights.
 KernelWeights banded_from(const KernelWeights& exact, int bands);
 /// method=fast's band count for a kernel `size_px` across with these exact weights: the
-/// fewest bands, 3..8, whose kernel stays within its accuracy bound (blur_approx.cpp).
+/// fewest bands, 3..8, whose kernel stays within its accuracy bound (blur_bands.cpp).
 int fast_band_count(const KernelWeights& exact, double size_px);
 /// Predicted single-thread time in ns of one channel of convolve_bands_direct over a w x h
 /// output with `bands` bands per half kernel (twice that over the height unless the kernel
-/// is `mirrored` in y, as banded_from splits it), in spans_cost_ns's units (blur_approx.cpp).
+/// is `mirrored` in y, as banded_from splits it), in spans_cost_ns's units (blur_bands.cpp).
 double bands_cost_ns(int w, int h, int bands, bool mirrored);
 /// A banded kernel (rows in runs of equal rows) straight from the source into `dst` over
-/// `roi` by running sums down the rows (blur_approx.cpp): cost independent of its size.
+/// `roi` by running sums down the rows (blur_bands.cpp): cost independent of its size.
 bool convolve_bands_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                            const KernelWeights& banded, Border border, int nthreads);
 
-/// Approximations (blur_approx.cpp). Planes are the padded input's size.
-/// Whether the parallelograms of `k` run on the transposed plane (see blur_approx.cpp).
+/// The hexagon by parallelograms (blur_hexagon.cpp). Planes are the padded input's size.
+/// Whether the parallelograms of `k` run on the transposed plane.
 bool hexagon_transposed(const Kernel& k);
 /// How much further than hexagon_reach the parallelograms of `k` read on a padded plane:
-/// the sheared frame's two more taps (blur_approx.cpp).
+/// the sheared frame's two more taps.
 int hexagon_plane_extra(const Kernel& k);
 /// The hexagon of `k` by parallelograms; `in` transposed when hexagon_transposed(k), padded
 /// by hexagon_reach + hexagon_plane_extra. Only the plane less `margin_x`, `margin_y` on
@@ -350,22 +351,23 @@ int hexagon_reach(const Kernel& k, bool along_x);
 /// columns or rows, turned along them (other rotations, unless stretched past any shear).
 bool hexagon_sweeps(const Kernel& k);
 /// Predicted single-thread time in ns of one channel of the parallelograms over a w x h
-/// output, in spans_cost_ns's units, so the two compare (blur_approx.cpp's cost model).
+/// output, in spans_cost_ns's units, so the two compare (the parallelograms' cost model).
 double parallelograms_cost_ns(const Kernel& k, int w, int h);
 /// The narrow side (px) from which the parallelograms of `k` keep within the 40 dB
-/// budget of `method=fast` on bokeh-bench's scene (blur_approx.cpp).
+/// budget of `method=fast` on bokeh-bench's scene.
 double parallelograms_budget_px(const Kernel& k);
 /// The fused sweep straight from `in` into `dst` over roi (no padded plane, no copy out),
 /// where hexagon_sweeps(k); rx, ry as hexagon_reach.
 bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                     const Kernel& k, int rx, int ry, Border border, int nthreads);
 
-/// BlurMethod::Reduced (blur_approx.cpp): `k` at 1/N resolution, N = opts.reduction or the
+/// BlurMethod::Reduced (blur_reduced.cpp): `k` at 1/N resolution, N = opts.reduction or the
 /// automatic factor (reduction_factor), enlarged back over `roi` (undefined: the source's
 /// data window, grown by the method's reach if opts.grow).
 bool blur_reduced(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const Kernel& k,
                   const BlurOptions& opts, OIIO::ROI roi, int nthreads);
-/// Convolution with a kernel of repeated rows (bands) via a summed-area table (iris mode).
+/// Convolution with a kernel of repeated rows (bands) via a summed-area table (iris mode;
+/// blur_bands.cpp).
 Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads);
 
 /// The largest |k| times a channel's range that iris mode takes. exp() would overflow float

@@ -217,29 +217,6 @@ bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifi
     return true;
 }
 
-bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why)
-{
-    const bool polygon = kernel == "polygon" || kernel == "hex";
-    struct Rule {
-        const char* option;
-        bool applies;
-        const char* to;
-    };
-    const Rule rules[] = {
-        { "sigma", kernel == "gaussian", "kernel=gaussian" },
-        { "blades", kernel == "polygon", "kernel=polygon; kernel=hex has 6" },
-        { "rotation", polygon, "kernel=polygon and hex; a disk's squeeze stays on the frame's axes" },
-        { "curvature", polygon, "kernel=polygon and hex" },
-        { "hole", polygon || kernel == "disk", "kernel=disk, polygon and hex" },
-    };
-    for (const Rule& r : rules)
-        if (v.given(r.option) && !r.applies) {
-            why = format("{} does not apply to kernel={}: it is for {}", r.option, kernel, r.to);
-            return false;
-        }
-    return true;
-}
-
 bool parse_extent(std::string_view text, float& width, float& height)
 {
     const size_t x = text.find('x');

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """bokeh-bench and its chart, end to end, small: the blur task on a small built-in scene
-and on a file, then chart.py on its CSV. Checks what the issue asks of the instrument
+and on a file, then chart.py on its CSV. Checks what the benchmark must give
 (columns, an error per case against the exact reference, the peers in the same run, one
 chart per task in PNG and SVG) and that bad arguments fail with one line and status 1.
 Timings are not checked (they are measured, never asserted).

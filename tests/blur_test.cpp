@@ -842,7 +842,7 @@ TEST(Blur, NoDriftAlongA4KRowAfterA1e6Pixel)
 
 TEST(Blur, SpansAndFftTilesAgreeAndExactIsOneOfThem)
 {
-    // The cost models (blur.cpp, blur_fft.cpp) pick row spans at 15 px and FFT tiles at
+    // The cost models (blur_spans.cpp, blur_fft.cpp) pick row spans at 15 px and FFT tiles at
     // 151 px for the exact method. Both are exact in double, so their float results agree
     // to the last bit or so (which one ran shows in the time only: docs/benchmarks.md).
     const OIIO::ImageBuf src = test_image(640, 360);
@@ -1411,7 +1411,7 @@ KernelWeights point_response(const Kernel& k, const BlurOptions& o, int r)
 
 }  // namespace
 
-// The parallelogram method written out plainly from its definition in blur_approx.cpp,
+// The parallelogram method written out plainly from its definition in blur_hexagon*.cpp,
 // in double, each segment pass a full sum over its rows: the reference the fused sweep
 // and the four passes must both equal.
 namespace parallelogram_reference {
@@ -1625,7 +1625,7 @@ OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k, Border border
     });
 }
 
-// The hexagon at rotations off multiples of 30 degrees (blur_approx.cpp): the frame (the
+// The hexagon at rotations off multiples of 30 degrees (blur_hexagon_sheared.cpp): the frame (the
 // source, or its transpose with `transposed`) with its columns sheared so that the
 // segment nearest its rows runs along them, line r at column x reading the source at
 // (x, r + m x) through the B-spline's taps, and outputs read back at (x, y - m x); x counts
@@ -1943,7 +1943,7 @@ TEST(BlurApprox, HexagonFromParallelogramsIsCloseToTheExactHexagon)
         EXPECT_GT(d, 0.0) << "an approximation";
         // Inside, the level is flat within 20 %: the rhombi are flat (two crossing sheared
         // passes left a 20 % moire there with linear interpolation, under 4 % with the
-        // B-spline; see blur_approx.cpp), but along the three seams where rhombi meet their
+        // B-spline; see hexagon.h), but along the three seams where rhombi meet their
         // softened edges do not add up exactly: up to 16 % near the centre, measured.
         const KernelWeights exact = kernel_weights(c.k);
         const double level = exact.at(0, 0);
@@ -1978,7 +1978,7 @@ TEST(BlurApprox, ParallelogramsAreEquivariantUnderTransposition)
 {
     // Mirroring the image in its diagonal mirrors the hexagon: rotation r becomes
     // -r - 30 (mod 60). Rotation 0 runs on the transposed plane and 30 on the plane as
-    // given (blur_approx.cpp); 7 / -37 and 25 / -55 take the sheared sweep in the
+    // given (blur_hexagon.cpp); 7 / -37 and 25 / -55 take the sheared sweep in the
     // transposed frame on one side and the frame as given on the other. Each pair checks
     // one path against another: equal to float rounding. (Near 20 degrees the two sheared
     // frames cost alike and the cost model, which charges the frame as given for its
@@ -2149,9 +2149,9 @@ TEST(BlurApprox, FastKeepsItsBudgetForEveryShapeAndAspect)
 {
     // method=fast promises 40 dB against the exact blur on the bench's crop, whatever it
     // picks (the reduction, the bands, the parallelograms or the exact blur itself), also
-    // for stretched (anamorphic) kernels and rotated hexagons. Session 15 found it taking
-    // the parallelograms for a 27 x 9 hexagon at 36.9 dB: their budget went by the wide
-    // side, and the narrow one decides (parallelograms_budget_px).
+    // for stretched (anamorphic) kernels and rotated hexagons. A budget read on the wide
+    // side would take the parallelograms for a 27 x 9 hexagon at 36.9 dB: the narrow one
+    // decides (parallelograms_budget_px).
     const OIIO::ImageBuf& src = bench_crop();
     struct Case {
         KernelShape shape;

@@ -93,7 +93,7 @@ TEST(CliDefocus, VerboseNamesTheLayers)
     for (const std::string& l : lines)
         found = found || (l.find("layers") != std::string::npos && l.find("CoC") != std::string::npos);
     EXPECT_TRUE(found) << "no line with 'layers' and 'CoC' in:\n" << r.out;
-    // quality= is method= under the spelling.
+    // quality= is method= under another spelling.
     const RunResult g = bokehtool(format("-v {} --defocus:focus=6:fstop=2:quality=gather -o {}/g.exr", kScene, dir));
     ASSERT_EQ(g.status, 0) << g.err;
     EXPECT_NE(g.out.find("gather"), std::string::npos) << g.out;

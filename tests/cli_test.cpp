@@ -379,7 +379,7 @@ TEST(Cli, NoClobber)
     EXPECT_EQ(file_bytes(dir + "/out.exr"), "keep");
 }
 
-// The bad-input list of the foundation issue: one line, exit 1, nothing written,
+// The bad-input rule (DESIGN.md): one line, exit 1, nothing written,
 // inputs untouched.
 TEST(Cli, BadInput)
 {

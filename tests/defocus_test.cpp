@@ -1059,7 +1059,7 @@ TEST(DefocusBadOptions, RefusedByName)
             EXPECT_NE(dst.geterror().find(k.what), std::string::npos)
                 << "expected '" << k.what << "' in: " << dst.geterror();
         }
-    // A deep image.
+    // A deep image takes the layers (deep_defocus_test.cpp), not the flat-only tools.
     OIIO::ImageSpec spec(8, 8, 5, OIIO::TypeFloat);
     spec.channelnames  = { "R", "G", "B", "A", "Z" };
     spec.alpha_channel = 3;
@@ -1068,6 +1068,16 @@ TEST(DefocusBadOptions, RefusedByName)
     OIIO::ImageBuf deep(spec);
     ASSERT_TRUE(deep.deep());
     OIIO::ImageBuf dst;
-    EXPECT_FALSE(defocus(dst, deep, direct(DefocusMethod::Layers)));
+    EXPECT_FALSE(defocus(dst, deep, direct(DefocusMethod::Gather)));
+    EXPECT_NE(dst.geterror().find("gather"), std::string::npos) << dst.geterror();
+    DefocusOptions iris = direct(DefocusMethod::Layers);
+    iris.iris           = 2.0f;
+    EXPECT_FALSE(defocus(dst, deep, iris));
+    EXPECT_NE(dst.geterror().find("iris"), std::string::npos) << dst.geterror();
+    EXPECT_TRUE(defocus(dst, deep, direct(DefocusMethod::Layers))) << dst.geterror();
+    // A deep result needs a deep image.
+    DefocusOptions deep_out = direct(DefocusMethod::Layers);
+    deep_out.deep_output    = true;
+    EXPECT_FALSE(defocus(dst, src, deep_out));
     EXPECT_NE(dst.geterror().find("deep"), std::string::npos) << dst.geterror();
 }

@@ -63,6 +63,9 @@ struct DefocusOptions {
     NonFinitePolicy nonfinite = NonFinitePolicy::Zero;
     /// Reference: CoC values are quantised to this step (px) to count as one layer.
     float reference_step_px = 0.25f;
+    /// A deep input's result as a deep image: one sample a layer per pixel, each a volume
+    /// over its layer's depth range; its flatten is the flat result.
+    bool deep_output = false;
 };
 
 /// What a defocus decided and found, for `-v` and for tests.
@@ -77,7 +80,10 @@ struct DefocusReport {
 
 /// Defocus `src` (R, G, B, optional A, and Z) into `dst`: premultiplied R, G, B(, A) as
 /// float over the grown data window, with src's metadata. Z and other channels are not
-/// carried (a defocused image has no single depth per pixel). False + dst.geterror().
+/// carried (a defocused image has no single depth per pixel). A deep `src` (R, A, Z, and
+/// optionally G, B, ZBack) is defocused sample by sample, each at its own depth's CoC, with
+/// the background it holds behind every foreground (no disocclusion to invent); with
+/// `deep_output` the result stays deep. False + dst.geterror().
 bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
              DefocusReport* report = nullptr, int nthreads = 0);
 

@@ -79,12 +79,6 @@ public:
 bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifiers,
                    OptionValues& out, std::string& err);
 
-/// The aperture options `kernel=NAME` uses, as --blur and --defocus spell them (`sigma`,
-/// `blades`, `rotation`, `curvature`, `hole`): false + `why` for the first one given
-/// (of those `v` has) that the kernel would ignore (`kernel=hex:blades=5`, `kernel=disk:
-/// rotation=30`), so it is refused rather than dropped unseen.
-bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why);
-
 /// Parse an image size "WxH" or "N" (= NxN); both positive. False if malformed.
 bool parse_size(std::string_view text, int& width, int& height);
 

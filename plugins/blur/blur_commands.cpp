@@ -7,6 +7,8 @@
 #include <bokeh/plugin.h>
 #include <bokeh/resample.h>
 
+#include "aperture_options.h"
+
 #include <cmath>
 
 #include <OpenImageIO/strutil.h>

@@ -2,8 +2,9 @@
 // lens, depth modes, aperture, method and diagnostics as options. The work is
 // bokeh::defocus, bokeh::coc_map, bokeh::focal_plane_view and bokeh::layer_map
 // (core/defocus.cpp, core/lens.cpp); the options become bokeh::DefocusOptions in
-// defocus_options.cpp, which the Python module shares.
+// plugins/shared/defocus_options.cpp, which the Python module shares.
 
+#include <bokeh/deep.h>
 #include <bokeh/defocus.h>
 #include <bokeh/plugin.h>
 
@@ -27,13 +28,20 @@ bool defocus_command(CommandContext& c)
     bokeh::StackImage out = in;
     out.buf               = std::make_shared<OIIO::ImageBuf>();
     const std::string& what = c.options.get_string("output");
+    o.deep_output           = what == "deep";
+    // The diagnostics of a deep image are those of its flatten (Z: its nearest visible depth).
+    const bool diagnostic = what == "coc" || what == "focalplane" || what == "layers";
+    OIIO::ImageBuf flat;
+    if (diagnostic && in.buf->deep() && !bokeh::flatten(flat, *in.buf, {}, c.nthreads))
+        return c.fail(flat.geterror());
+    const OIIO::ImageBuf& src = diagnostic && in.buf->deep() ? flat : *in.buf;
     bool ok;
     if (what == "coc")
-        ok = bokeh::coc_map(*out.buf, *in.buf, o.coc, c.nthreads);
+        ok = bokeh::coc_map(*out.buf, src, o.coc, c.nthreads);
     else if (what == "focalplane")
-        ok = bokeh::focal_plane_view(*out.buf, *in.buf, o.coc, 32.0f, c.nthreads);
+        ok = bokeh::focal_plane_view(*out.buf, src, o.coc, 32.0f, c.nthreads);
     else if (what == "layers")
-        ok = bokeh::layer_map(*out.buf, *in.buf, o, c.nthreads);
+        ok = bokeh::layer_map(*out.buf, src, o, c.nthreads);
     else {
         bokeh::DefocusReport report;
         ok = bokeh::defocus(*out.buf, *in.buf, o, &report, c.nthreads);
@@ -67,8 +75,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
 {
     bokeh::Command c = bokeh::make_command(
         "--defocus", "", 1,
-        "Depth of field from RGBA + Z: thin-lens CoC, aperture-shaped bokeh, nearer over "
-        "farther (output=coc|focalplane|layers for diagnostics)",
+        "Depth of field from RGBA + Z or a deep image: thin-lens CoC, aperture-shaped bokeh, "
+        "nearer over farther (a deep image's hidden background revealed; output=deep keeps it "
+        "deep; output=coc|focalplane|layers for diagnostics)",
         defocus_command);
     c.needs_scene_linear = true;
     c.options = {
@@ -77,9 +86,10 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "reference: exact, slow"),
         OptionSpec::Choice("quality", { "auto", "layers", "gather", "reference" },
                            "the same as method"),
-        OptionSpec::Choice("output", { "image", "coc", "focalplane", "layers" },
-                           "image, or a diagnostic: signed CoC map, focal-plane view (near red, "
-                           "focus green, far blue), layer map"),
+        OptionSpec::Choice("output", { "image", "deep", "coc", "focalplane", "layers" },
+                           "image; deep (a deep input's result kept deep: a sample a layer); or a "
+                           "diagnostic: signed CoC map, focal-plane view (near red, focus green, far "
+                           "blue), layer map"),
         OptionSpec::String("focus", "5", "focus distance in depth units, or a pixel x,y to sample"),
         OptionSpec::Float("fstop", 2.8, 0.5, 1e4, "f-number"),
         OptionSpec::Float("focal", 50.0, 0.1, 1e5, "focal length mm (default: image's bokeh:focal_mm, else 50)"),

@@ -13,8 +13,8 @@
 // Prints per case the two medians (ms), new / old, the minimums and the largest absolute
 // difference between the two results. The frame is 1920x1080 uniform noise in [0, 1], or
 // the image given. Both builds must agree on blur.h's structs (fields are only appended)
-// and on what their defaults mean: a library from before BlurOptions::bands = 0 ("the
-// method's choice", session 10) refuses 0, so A/B against one names the count (:N).
+// and on what their defaults mean: a library older than BlurOptions::bands = 0 ("the
+// method's choice") refuses 0, so A/B against one names the count (:N).
 #include <bokeh/blur.h>
 
 #include <dlfcn.h>

@@ -18,7 +18,7 @@
 // Artifact rows (bokeh::enlargement_artifacts, the four synthetic scenes of metrics.h) go to
 // a second table: method, peer, factor, Mach, ringing, shimmer, detail.
 //
-// The figures are timed separately at 480x270 -> 1920x1080: our enlargement also
+// The headline figures are timed separately at 480x270 -> 1920x1080: our enlargement also
 // through resample_plane into a buffer allocated once (the compute alone), OIIO's resize
 // into an existing ImageBuf; the seed's cost claim as the median of alternating runs of the
 // two pipelines, so that the machine's slow phases hit both alike.
@@ -65,7 +65,7 @@ const std::vector<std::pair<const char*, F>> kPeers = { { "triangle", F::Bilinea
                                                         { "gaussian", F::Gaussian },
                                                         { "lanczos3", F::Lanczos3 },
                                                         { "catmull-rom", F::CatmullRom } };
-constexpr int kPeerFactor = 4;  // 480x270 -> 1920x1080, the figures
+constexpr int kPeerFactor = 4;  // 480x270 -> 1920x1080, the headline figures
 constexpr int kSheetFactor = 8;
 constexpr int kMargin      = 32;  // 2 x the largest factor
 constexpr int kPairedReps  = 6;   // the cost claim's runs per pipeline, times --reps
@@ -453,7 +453,7 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
         }
     }
 
-    // --- the figures ----------------------------------------------------------
+    // --- the headline figures --------------------------------------------------------
     // Enlargement 480x270 -> 1920x1080 of the glare's 1/4 buffer: through the ImageBuf API
     // (above) and through resample_plane into a buffer allocated once.
     const OIIO::ImageBuf& src = quarter["glare"];

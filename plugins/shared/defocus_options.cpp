@@ -4,6 +4,8 @@
 
 #include "defocus_options.h"
 
+#include "aperture_options.h"
+
 #include <charconv>
 #include <cmath>
 

@@ -1,0 +1,328 @@
+// defocus_deep.cpp — depth defocus of a deep image: every sample blurred with its own CoC,
+// in layers, with the background that the render holds behind each foreground.
+//
+// The flat defocus (defocus.cpp) must invent what a foreground hides (SEEDS.md section 12:
+// disocclusion); a deep image holds it. Here every sample of the tidy image takes the
+// signed CoC of its own depth (CocOfDepth, so the depth math modes, gains and limits are
+// the flat defocus's), a volume is cut where its CoC crosses a rung of the layer ladder
+// (expm1/log1p, as deep.cpp cuts), and each piece is shared between the two rungs around
+// its CoC with the flat method's second-moment weights. Layer k of a pixel is its pieces
+// in that layer composited front to back ("over"); the layers then go through the flat
+// method's machinery (composite_layers: the aperture at the rung's CoC, large ones in
+// reduced buffers, nearer over farther) with nothing divided or filled: what is behind a
+// nearer layer is the layer's own, rendered content.
+//
+// Deep output: each layer of a pixel becomes one sample, a volume from the depth of its
+// rung's CoC to the next rung's (the last a point), so a later merge with another deep
+// element interleaves by depth, and the flatten of the result is the flat output.
+//
+// Limits: samples between two rungs are blurred by a mix of the two kernels (as in the
+// flat method); within a layer, the order of a pixel's pieces is kept but their blur is
+// one; iris mode and depth dilation are flat-image tools and are refused here; the
+// gather method is flat only.
+
+#include <bokeh/deep.h>
+#include <bokeh/defocus.h>
+
+#include "defocus_layers.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <OpenImageIO/deepdata.h>
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using namespace detail;
+
+namespace {
+
+using OIIO::Strutil::fmt::format;
+
+// One piece of a sample: premultiplied colour and alpha, its CoC.
+struct Piece {
+    float rgba[4];
+    float coc;
+};
+
+// The depth value (in the Z channel's own terms) at which `coc_of` reaches `target`,
+// between depth values lo and hi whose CoCs bracket it (CocOfDepth is monotone in the
+// depth value for every depth mode).
+double depth_of_coc(const CocOfDepth& coc_of, double lo, double hi, float target)
+{
+    const bool rising = coc_of(float(hi)) >= coc_of(float(lo));
+    for (int i = 0; i < 60; ++i) {
+        const double mid = 0.5 * (lo + hi);
+        if ((coc_of(float(mid)) < target) == rising)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return 0.5 * (lo + hi);
+}
+
+}  // namespace
+
+bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& o,
+                  DefocusReport* report, int nthreads)
+{
+    std::string err;
+    auto fail = [&](const std::string& why) {
+        dst.errorfmt("defocus: {}", why);
+        return false;
+    };
+    if (!check_defocus_options(o, err))
+        return fail(err);
+    if (o.method == DefocusMethod::Gather)
+        return fail("the gather method is for flat images; a deep image takes auto, layers or reference");
+    if (o.iris != 0.0f)
+        return fail("iris mode is not available for deep images yet; flatten first (--flatten) to use it");
+    if (o.depth_dilate_px > 0)
+        return fail("zdilate is a remedy for flat images' filtered depth; a deep sample has its own depth");
+    DeepOptions dopt;
+    DeepRepairs repairs;
+    dopt.policy  = o.nonfinite;
+    dopt.repairs = &repairs;
+    OIIO::ImageBuf tidy, flat;
+    if (!deep_tidy(tidy, src, dopt, nthreads) || !flatten(flat, tidy, dopt, nthreads))
+        return fail(tidy.has_error() ? tidy.geterror() : flat.geterror());
+    const OIIO::ImageSpec& spec = tidy.spec();
+    const int cr = spec.channelindex("R"), ca = spec.channelindex("A"), cz = spec.channelindex("Z");
+    int cg = spec.channelindex("G"), cb = spec.channelindex("B");
+    int czb = spec.channelindex("ZBack");
+    czb     = czb >= 0 ? czb : spec.channelindex("Zback");
+    if (cr < 0 || ca < 0)
+        return fail(format("a deep image to defocus needs R and A channels (has {})",
+                           OIIO::Strutil::join(spec.channelnames, ",")));
+    cg = cg >= 0 ? cg : cr;  // a grey image
+    cb = cb >= 0 ? cb : cr;
+
+    // The lens: focus by pixel samples the flattened depth.
+    CocOptions coc = o.coc;
+    if (!resolve_coc_options(coc, flat, err))
+        return fail(err);
+    const int width_px = spec.full_width > 0 ? spec.full_width : spec.width;
+    const CocOfDepth coc_of(coc, width_px);
+
+    DefocusReport rep;
+    rep.method = o.method == DefocusMethod::Auto ? DefocusMethod::Layers : o.method;
+    rep.nonfinite.colour = repairs.nonfinite;
+    rep.nonfinite.depth  = repairs.nan_depth + repairs.back_before;
+
+    // Every sample's CoC at its ends: the range, and the CoCs the rungs are fitted to.
+    const OIIO::DeepData& dd = *tidy.deepdata();
+    const int64_t npx        = dd.pixels();
+    std::vector<float> cocs;
+    bool continuous = false;
+    double zlo = std::numeric_limits<double>::infinity(), zhi = -zlo;
+    for (int64_t p = 0; p < npx; ++p)
+        for (int s = 0; s < dd.samples(p); ++s) {
+            const float z = dd.deep_value(p, cz, s);
+            cocs.push_back(coc_of(z));
+            zlo = std::min(zlo, double(z)), zhi = std::max(zhi, double(z));
+            if (czb >= 0) {
+                const float zb = dd.deep_value(p, czb, s);
+                if (zb > z) {
+                    cocs.push_back(coc_of(zb));
+                    zhi = std::max(zhi, double(zb));
+                    continuous = continuous || std::abs(cocs.back() - cocs[cocs.size() - 2]) > 0.125f;
+                }
+            }
+        }
+    if (cocs.empty())
+        cocs.push_back(0.0f);
+    const auto [lo_it, hi_it] = std::minmax_element(cocs.begin(), cocs.end());
+    rep.min_coc_px = *lo_it;
+    rep.max_coc_px = *hi_it;
+
+    Membership m;
+    if (rep.method == DefocusMethod::Reference) {
+        // One full-resolution layer per CoC step: the rungs are the occupied bins.
+        std::vector<float> bins;
+        for (float c : cocs)
+            bins.push_back(std::round(c / o.reference_step_px) * o.reference_step_px);
+        std::sort(bins.begin(), bins.end());
+        bins.erase(std::unique(bins.begin(), bins.end()), bins.end());
+        if (!std::binary_search(bins.begin(), bins.end(), 0.0f))
+            bins.insert(std::upper_bound(bins.begin(), bins.end(), 0.0f), 0.0f);
+        if (bins.size() > 4096)
+            return fail(format("{} distinct CoC steps of {} px; raise the reference step", bins.size(),
+                               o.reference_step_px));
+        m.coc_px = std::move(bins);
+        m.reduction.assign(m.coc_px.size(), 1);
+    } else {
+        // A volume's CoC runs continuously between its ends: no exact rungs then.
+        m.coc_px    = layer_rungs(cocs, o, rep.min_coc_px, rep.max_coc_px, !continuous);
+        m.reduction = layer_reductions(m.coc_px, o);
+    }
+    const size_t K = m.coc_px.size();
+    cocs.clear();
+    cocs.shrink_to_fit();
+
+    // Each layer's pixels: the pixel's pieces in it, composited front to back.
+    Frame f;
+    f.data     = tidy.roi();
+    f.img.roi  = f.data;
+    f.border   = o.border;
+    f.layer_rgba.assign(K, std::vector<float>(size_t(npx) * 4, 0.0f));
+    f.layer_vis.assign(K, std::vector<float>(size_t(npx), 1.0f));
+    std::vector<double> rung_depth(K, 0.0);
+    const bool have_depths = zlo <= zhi;
+    for (size_t k = 0; k < K && have_depths; ++k) {
+        const float c_lo = coc_of(float(zlo)), c_hi = coc_of(float(zhi));
+        const float target = std::clamp(m.coc_px[k], std::min(c_lo, c_hi), std::max(c_lo, c_hi));
+        rung_depth[k] = depth_of_coc(coc_of, zlo, zhi, target);
+    }
+    const float bloom_t = o.bloom_threshold, bloom_g = o.bloom_gain;
+    parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
+        std::vector<Piece> pieces;
+        std::vector<float> T(K, 1.0f);
+        for (int64_t p = b; p < e; ++p) {
+            const int ns = dd.samples(p);
+            if (ns == 0)
+                continue;
+            pieces.clear();
+            for (int s = 0; s < ns; ++s) {
+                float rgba[4] = { dd.deep_value(p, cr, s), dd.deep_value(p, cg, s), dd.deep_value(p, cb, s),
+                                  dd.deep_value(p, ca, s) };
+                if (bloom_g != 1.0f)  // ZDefocus's bloom, on the unpremultiplied colour
+                    for (int c = 0; c < 3; ++c) {
+                        const float un = rgba[3] > 0.0f ? rgba[c] / rgba[3] : rgba[c];
+                        if (un > bloom_t)
+                            rgba[c] *= bloom_g;
+                    }
+                const double z  = dd.deep_value(p, cz, s);
+                const double zb = czb >= 0 ? std::max(double(dd.deep_value(p, czb, s)), z) : z;
+                const float c0 = coc_of(float(z)), c1 = coc_of(float(zb));
+                if (!(zb > z) || std::isinf(zb)) {
+                    pieces.push_back({ { rgba[0], rgba[1], rgba[2], rgba[3] }, c0 });
+                    continue;
+                }
+                // A volume: cut where its CoC crosses a rung, each piece at its middle's CoC.
+                std::vector<double> cuts = { z };
+                for (size_t k = 0; k < K; ++k)
+                    if ((m.coc_px[k] > std::min(c0, c1)) && (m.coc_px[k] < std::max(c0, c1)))
+                        cuts.push_back(depth_of_coc(coc_of, z, zb, m.coc_px[k]));
+                cuts.push_back(zb);
+                std::sort(cuts.begin(), cuts.end());
+                const double a = std::clamp(double(rgba[3]), 0.0, 1.0);
+                for (size_t i = 0; i + 1 < cuts.size(); ++i) {
+                    const double x  = (cuts[i + 1] - cuts[i]) / (zb - z);
+                    const double ap = a >= 1.0 ? (i == 0 ? 1.0 : 0.0) : -std::expm1(x * std::log1p(-a));
+                    // Colour scales with the piece's alpha; light of alpha 0 with its depth.
+                    const double scale = a > 0.0 ? ap / a : x;
+                    // Pieces behind an opaque volume's first are hidden by it: alpha 1 keeps
+                    // the light at the front.
+                    Piece pc;
+                    for (int c = 0; c < 3; ++c)
+                        pc.rgba[c] = float(rgba[c] * (a >= 1.0 ? (i == 0 ? 1.0 : 0.0) : scale));
+                    pc.rgba[3] = float(ap);
+                    pc.coc     = coc_of(float(0.5 * (cuts[i] + cuts[i + 1])));
+                    pieces.push_back(pc);
+                }
+            }
+            for (const Piece& pc : pieces) {
+                uint16_t lower;
+                float upper;
+                share_between(pc.coc, m.coc_px, lower, upper);
+                // The farther share is seen through the nearer one when the layers are
+                // composited: the farther layer is divided by the blur of what its split
+                // samples leave visible (as the flat method divides by visibility), so an
+                // opaque sample stays opaque and a lone one keeps its energy.
+                const float alpha = std::clamp(pc.rgba[3], 0.0f, 1.0f);
+                if (upper > 0.0f && upper < 1.0f && size_t(lower) + 1 < K)
+                    f.layer_vis[size_t(lower) + 1][size_t(p)] *= 1.0f - (1.0f - upper) * alpha;
+                for (int side = 0; side < 2; ++side) {
+                    const size_t k = size_t(lower) + size_t(side);
+                    const float w  = side == 0 ? 1.0f - upper : upper;
+                    if (w <= 0.0f || k >= K)
+                        continue;
+                    float* v = f.layer_rgba[k].data() + size_t(p) * 4;
+                    for (int c = 0; c < 4; ++c)
+                        v[c] += T[k] * w * pc.rgba[c];
+                    T[k] *= 1.0f - w * std::clamp(pc.rgba[3], 0.0f, 1.0f);
+                }
+            }
+            std::fill(T.begin(), T.end(), 1.0f);
+        }
+    });
+
+    const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
+    f.out               = defocus_output_region(src.spec(), f.data, extreme, o);
+    rep.layer_coc_px    = m.coc_px;
+    rep.layer_reduction = m.reduction;
+    rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}", method_name(rep.method),
+                         rep.min_coc_px, rep.max_coc_px, K, f.out.width(), f.out.height(),
+                         o.deep_output ? ", deep" : "",
+                         repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string());
+
+    if (!o.deep_output) {
+        Plane out(f.out.width(), f.out.height(), 4);
+        std::fill_n(out.px.get(), out.size(), 0.0f);
+        composite_layers(out, f, m, o, nthreads);
+        OIIO::ImageSpec fs = derived_spec(src.spec(), { "R", "G", "B", "A" }, f.out);
+        fs.deep            = false;
+        fs.channelformats.clear();
+        reset_uninitialised(dst, fs);
+        parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int y = int(y0); y < int(y1); ++y)
+                std::copy_n(out.row(y), size_t(out.w) * 4,
+                            static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y)));
+        });
+    } else {
+        std::vector<Plane> layers;
+        Plane unused(1, 1, 4);
+        composite_layers(unused, f, m, o, nthreads, &layers);
+        // Layer k's depth range: from its rung's depth to the next rung's, kept strictly
+        // increasing so that no two layers of a pixel coincide (a tidy would merge them).
+        std::vector<float> z0(K), z1(K);
+        for (size_t k = 0; k < K; ++k) {
+            z0[k] = k == 0 ? float(rung_depth[0])
+                           : std::max(float(rung_depth[k]), std::nextafter(z1[k - 1], HUGE_VALF));
+            z1[k] = k + 1 < K ? std::max(float(rung_depth[k + 1]), std::nextafter(z0[k], HUGE_VALF)) : z0[k];
+        }
+        OIIO::ImageSpec ds = derived_spec(src.spec(), { "R", "G", "B", "A", "Z", "ZBack" }, f.out);
+        ds.deep            = true;
+        ds.z_channel       = 4;
+        ds.channelformats  = std::vector<OIIO::TypeDesc>(6, OIIO::TypeFloat);
+        OIIO::ImageBuf result(ds);
+        OIIO::DeepData& out = *result.deepdata();
+        const int w = f.out.width();
+        auto shows = [](const float* v) { return v[0] != 0.0f || v[1] != 0.0f || v[2] != 0.0f || v[3] != 0.0f; };
+        std::vector<unsigned int> counts(size_t(out.pixels()), 0u);
+        parallel_for_chunks(0, f.out.height(), 16, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int64_t y = y0; y < y1; ++y)
+                for (int x = 0; x < w; ++x)
+                    for (size_t k = 0; k < K; ++k)
+                        counts[size_t(y) * size_t(w) + size_t(x)] += shows(layers[k].row(int(y)) + size_t(x) * 4);
+        });
+        out.set_all_samples(counts);
+        if (out.pixels() > 0)
+            (void)out.data_ptr(0, 0, 0);  // allocate once, before the threads write
+        parallel_for_chunks(0, f.out.height(), 16, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int64_t y = y0; y < y1; ++y)
+                for (int x = 0; x < w; ++x) {
+                    const int64_t p = y * w + x;
+                    int s           = 0;
+                    for (size_t k = 0; k < K; ++k) {
+                        const float* v = layers[k].row(int(y)) + size_t(x) * 4;
+                        if (!shows(v))
+                            continue;
+                        for (int c = 0; c < 4; ++c)
+                            out.set_deep_value(p, c, s, v[c]);
+                        out.set_deep_value(p, 4, s, z0[k]);
+                        out.set_deep_value(p, 5, s, z1[k]);
+                        ++s;
+                    }
+                }
+        });
+        dst = std::move(result);
+    }
+    if (report)
+        *report = std::move(rep);
+    return true;
+}
+
+}  // namespace bokeh

@@ -1,0 +1,33 @@
+// aperture_options.cpp — which aperture options each kernel uses (aperture_options.h).
+
+#include "aperture_options.h"
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why)
+{
+    const bool polygon = kernel == "polygon" || kernel == "hex";
+    struct Rule {
+        const char* option;
+        bool applies;
+        const char* to;
+    };
+    const Rule rules[] = {
+        { "sigma", kernel == "gaussian", "kernel=gaussian" },
+        { "blades", kernel == "polygon", "kernel=polygon; kernel=hex has 6" },
+        { "rotation", polygon, "kernel=polygon and hex; a disk's squeeze stays on the frame's axes" },
+        { "curvature", polygon, "kernel=polygon and hex" },
+        { "hole", polygon || kernel == "disk", "kernel=disk, polygon and hex" },
+    };
+    for (const Rule& r : rules)
+        if (v.given(r.option) && !r.applies) {
+            why = OIIO::Strutil::fmt::format("{} does not apply to kernel={}: it is for {}", r.option, kernel,
+                                             r.to);
+            return false;
+        }
+    return true;
+}
+
+}  // namespace bokeh

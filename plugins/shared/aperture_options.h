@@ -1,0 +1,18 @@
+// aperture_options.h — the rule the plugins that take an aperture (`--blur`, `--defocus`)
+// share for its options: which of them each `kernel=NAME` uses. It lives with those
+// plugins, not in the registry (core/plugin.cpp), which knows no kernel or algorithm.
+#pragma once
+
+#include <bokeh/plugin.h>
+
+#include <string>
+
+namespace bokeh {
+
+/// The aperture options `kernel=NAME` uses, as --blur and --defocus spell them (`sigma`,
+/// `blades`, `rotation`, `curvature`, `hole`): false + `why` for the first one given
+/// (of those `v` has) that the kernel would ignore (`kernel=hex:blades=5`, `kernel=disk:
+/// rotation=30`), so it is refused rather than dropped unseen.
+bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why);
+
+}  // namespace bokeh

@@ -1,0 +1,293 @@
+// The defocus of a deep image: against exact per-layer blurs of scenes of few depths, the
+// flat defocus where the two must agree, energy, the deep result, determinism.
+//
+// The scenes use DepthMode::Direct (Z holds the signed CoC in pixels), so each sample's
+// CoC is known exactly and depth order is CoC order.
+#include <gtest/gtest.h>
+
+#include <array>
+#include <cmath>
+#include <iostream>
+
+#include <OpenImageIO/deepdata.h>
+#include <OpenImageIO/imagebufalgo.h>
+
+#include <bokeh/blur.h>
+#include <bokeh/deep.h>
+#include <bokeh/defocus.h>
+#include <bokeh/io.h>
+
+#include "test_util.h"
+
+using namespace bokeh;
+using namespace bokeh_test;
+
+namespace {
+
+struct Smp {
+    float r, g, b, a, z;
+};
+
+// A deep R, G, B, A, Z image over w x h at the origin; `fn(x, y)` lists a pixel's samples.
+OIIO::ImageBuf deep_image(int w, int h, const std::function<std::vector<Smp>(int, int)>& fn)
+{
+    OIIO::ImageSpec spec(w, h, 5, OIIO::TypeFloat);
+    spec.channelnames  = { "R", "G", "B", "A", "Z" };
+    spec.alpha_channel = 3;
+    spec.z_channel     = 4;
+    spec.deep          = true;
+    OIIO::ImageBuf buf(spec);
+    OIIO::DeepData& dd = *buf.deepdata();
+    std::vector<std::vector<Smp>> px;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            px.push_back(fn(x, y));
+    for (size_t p = 0; p < px.size(); ++p)
+        dd.set_samples(int64_t(p), int(px[p].size()));
+    for (size_t p = 0; p < px.size(); ++p)
+        for (size_t s = 0; s < px[p].size(); ++s) {
+            const Smp& m = px[p][s];
+            const float v[5] = { m.r, m.g, m.b, m.a, m.z };
+            for (int c = 0; c < 5; ++c)
+                dd.set_deep_value(int64_t(p), c, int(s), v[c]);
+        }
+    return buf;
+}
+
+DefocusOptions direct_options(DefocusMethod m)
+{
+    DefocusOptions o;
+    o.coc.mode = DepthMode::Direct;
+    o.method   = m;
+    o.border   = Border::Black;
+    o.grow     = true;
+    return o;
+}
+
+// The exact blur of a flat RGBA layer by the disk of diameter |coc| (rotated half a turn in
+// front of focus, as the defocus does), over `roi`, border black.
+OIIO::ImageBuf blurred_layer(const OIIO::ImageBuf& layer, float coc, const OIIO::ROI& roi)
+{
+    Kernel k;
+    k.shape     = KernelShape::Disk;
+    k.width_px  = std::abs(coc);
+    k.height_px = std::abs(coc);
+    if (coc < 0.0f)
+        k.rotation_deg = 180.0f;
+    BlurOptions bo;
+    bo.method = BlurMethod::Reference;
+    bo.border = Border::Black;
+    bo.grow   = true;
+    OIIO::ImageBuf out;
+    EXPECT_TRUE(blur(out, layer, k, bo)) << out.geterror();
+    OIIO::ImageBuf cut;
+    EXPECT_TRUE(OIIO::ImageBufAlgo::crop(cut, out, roi));
+    return cut;
+}
+
+OIIO::ImageBuf flat_rgba(int w, int h, const std::function<std::array<float, 4>(int, int)>& fn)
+{
+    OIIO::ImageSpec spec(w, h, 4, OIIO::TypeFloat);
+    spec.channelnames  = { "R", "G", "B", "A" };
+    spec.alpha_channel = 3;
+    OIIO::ImageBuf buf(spec);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const auto v = fn(x, y);
+            buf.setpixel(x, y, v.data(), 4);
+        }
+    return buf;
+}
+
+// A foreground square (CoC -9, opaque, orange) in front of a textured background (CoC 5)
+// that continues behind it: the two-depth scene whose truth is the exact blur of each
+// layer, composited.
+const int kW = 64, kH = 48;
+bool in_square(int x, int y) { return x >= 20 && x < 40 && y >= 14 && y < 34; }
+std::array<float, 4> background(int x, int y)
+{
+    const float t = 0.3f + 0.2f * std::sin(0.7f * x) * std::cos(0.45f * y);
+    return { t, 0.5f * t, 0.2f + 0.1f * ((x / 4 + y / 4) % 2), 1.0f };
+}
+
+}  // namespace
+
+TEST(DeepDefocus, TwoDepthsAreTheExactBlursOfTheirLayersComposited)
+{
+    const auto img = deep_image(kW, kH, [](int x, int y) {
+        std::vector<Smp> s;
+        if (in_square(x, y))
+            s.push_back({ 0.9f, 0.5f, 0.1f, 1.0f, -9.0f });
+        const auto b = background(x, y);
+        s.push_back({ b[0], b[1], b[2], b[3], 5.0f });
+        return s;
+    });
+    OIIO::ImageBuf out;
+    DefocusReport rep;
+    ASSERT_TRUE(defocus(out, img, direct_options(DefocusMethod::Reference), &rep)) << out.geterror();
+    ASSERT_FALSE(out.deep());
+    // The truth: blur(front) over blur(back), each layer whole (the background behind the
+    // square included: a deep image holds it).
+    const OIIO::ROI roi = out.roi();
+    const OIIO::ImageBuf front = blurred_layer(flat_rgba(kW, kH, [](int x, int y) {
+        return in_square(x, y) ? std::array<float, 4>{ 0.9f, 0.5f, 0.1f, 1.0f } : std::array<float, 4>{};
+    }), -9.0f, roi);
+    const OIIO::ImageBuf back = blurred_layer(flat_rgba(kW, kH, background), 5.0f, roi);
+    double worst = 0.0;
+    for (int y = roi.ybegin; y < roi.yend; ++y)
+        for (int x = roi.xbegin; x < roi.xend; ++x) {
+            float f[4], b[4], o[4];
+            front.getpixel(x, y, f, 4);
+            back.getpixel(x, y, b, 4);
+            out.getpixel(x, y, o, 4);
+            for (int c = 0; c < 4; ++c)
+                worst = std::max(worst, double(std::abs(o[c] - (f[c] + (1.0f - f[3]) * b[c]))));
+        }
+    EXPECT_LT(worst, 2e-5) << rep.summary;
+
+    // The flat defocus of the flattened image must invent the background behind the
+    // square; near the square's blurred edge it is measurably farther from the truth.
+    OIIO::ImageBuf flat, flat_out;
+    ASSERT_TRUE(flatten(flat, img));
+    DefocusOptions fo = direct_options(DefocusMethod::Reference);
+    ASSERT_TRUE(defocus(flat_out, flat, fo)) << flat_out.geterror();
+    double err_deep = 0.0, err_flat = 0.0;
+    int n = 0;
+    for (int y = 10; y < 38; ++y)
+        for (int x = 16; x < 44; ++x) {
+            if (x >= 24 && x < 36 && y >= 18 && y < 30)
+                continue;  // the square's core: opaque either way
+            float f[4], b[4], o[4], fl[4];
+            front.getpixel(x, y, f, 4);
+            back.getpixel(x, y, b, 4);
+            out.getpixel(x, y, o, 4);
+            flat_out.getpixel(x, y, fl, 4);
+            for (int c = 0; c < 3; ++c) {
+                const double truth = f[c] + (1.0f - f[3]) * b[c];
+                err_deep += (o[c] - truth) * (o[c] - truth);
+                err_flat += (fl[c] - truth) * (fl[c] - truth);
+            }
+            ++n;
+        }
+    std::cout << "square edge band: RMS error deep " << std::sqrt(err_deep / (3 * n)) << ", flat "
+              << std::sqrt(err_flat / (3 * n)) << "\n";
+    EXPECT_GT(err_flat, 100.0 * err_deep);
+}
+
+TEST(DeepDefocus, OneDepthEqualsTheFlatDefocusOfItsDeepen)
+{
+    // Where nothing hides anything (one depth), the deep and the flat defocus agree.
+    const OIIO::ImageBuf flat = rgbaz_image(40, 30, [](int x, int y) {
+        const float a = ((x * 7 + y * 3) % 5) * 0.25f;
+        return std::array<float, 5>{ 0.8f * a, 0.3f * a * (x % 3), 0.1f * a, a > 1.0f ? 1.0f : a, 7.0f };
+    });
+    OIIO::ImageBuf deep;
+    ASSERT_TRUE(deepen(deep, flat));
+    for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+        OIIO::ImageBuf a, b;
+        ASSERT_TRUE(defocus(a, flat, direct_options(m))) << a.geterror();
+        ASSERT_TRUE(defocus(b, deep, direct_options(m))) << b.geterror();
+        ASSERT_EQ(a.roi(), b.roi());
+        EXPECT_LT(max_difference(a, b), 1e-5) << method_name(m);
+    }
+}
+
+TEST(DeepDefocus, EnergyOfPointsAndVolumesIsKept)
+{
+    // A lone bright point and a lone volume spanning CoCs 2..30 (cut at every rung it
+    // crosses): their light is conserved, spread over the aperture.
+    for (bool volume : { false, true }) {
+        OIIO::ImageSpec spec(33, 33, 6, OIIO::TypeFloat);
+        spec.channelnames  = { "R", "G", "B", "A", "Z", "ZBack" };
+        spec.alpha_channel = 3;
+        spec.z_channel     = 4;
+        spec.deep          = true;
+        OIIO::ImageBuf img(spec);
+        OIIO::DeepData& dd = *img.deepdata();
+        const int64_t p    = 16 * 33 + 16;
+        dd.set_samples(p, 1);
+        const float v[6] = { 1000.0f, 500.0f, 0.0f, 0.5f, volume ? 2.0f : 12.0f, volume ? 30.0f : 12.0f };
+        for (int c = 0; c < 6; ++c)
+            dd.set_deep_value(p, c, 0, v[c]);
+        OIIO::ImageBuf out;
+        DefocusReport rep;
+        ASSERT_TRUE(defocus(out, img, direct_options(DefocusMethod::Layers), &rep)) << out.geterror();
+        const auto stats = OIIO::ImageBufAlgo::computePixelStats(out);
+        const double npx = double(out.spec().width) * out.spec().height;
+        const double light = stats.avg[0] * npx, cover = stats.avg[3] * npx;
+        if (!volume) {
+            EXPECT_NEAR(light, 1000.0, 1000.0 * 1e-4) << rep.summary;
+            EXPECT_NEAR(cover, 0.5, 0.5 * 1e-4) << rep.summary;
+        } else {
+            // A volume's far part is seen through its near part only along the rays that
+            // cross both; defocused, most of its light passes beside it. So the light lies
+            // between the pixel's flat value (all of it behind all of it) and the light of
+            // its parts unoccluded (optical depth u = -log(1 - a) over a).
+            const double u = -std::log(1.0 - 0.5);
+            EXPECT_GT(light, 1000.0 * 1.02) << rep.summary;
+            EXPECT_LT(light, 1000.0 * u / 0.5) << rep.summary;
+            EXPECT_GT(cover, 0.5 * 1.02) << rep.summary;
+            EXPECT_LT(cover, u) << rep.summary;
+            EXPECT_GT(rep.layer_coc_px.size(), 4u) << "the volume should reach several layers";
+            std::cout << "volume over CoC 2..30: light " << light << " (flat 1000, unoccluded "
+                      << 1000.0 * u / 0.5 << ")\n";
+        }
+    }
+}
+
+TEST(DeepDefocus, DeepResultFlattensToTheFlatResult)
+{
+    const auto img = deep_image(kW, kH, [](int x, int y) {
+        std::vector<Smp> s;
+        if (in_square(x, y))
+            s.push_back({ 0.45f, 0.25f, 0.05f, 0.5f, -6.0f });
+        const auto b = background(x, y);
+        s.push_back({ 0.5f * b[0], 0.5f * b[1], 0.5f * b[2], 0.5f, 3.0f + float(x % 7) });
+        s.push_back({ b[0], b[1], b[2], 1.0f, 25.0f });
+        return s;
+    });
+    DefocusOptions o = direct_options(DefocusMethod::Layers);
+    OIIO::ImageBuf flat_out, deep_out, flattened;
+    DefocusReport rep;
+    ASSERT_TRUE(defocus(flat_out, img, o, &rep)) << flat_out.geterror();
+    o.deep_output = true;
+    ASSERT_TRUE(defocus(deep_out, img, o)) << deep_out.geterror();
+    ASSERT_TRUE(deep_out.deep());
+    int most = 0;
+    for (int64_t p = 0; p < deep_out.deepdata()->pixels(); ++p)
+        most = std::max(most, deep_out.deepdata()->samples(p));
+    EXPECT_LE(size_t(most), rep.layer_coc_px.size());
+    EXPECT_GT(most, 2);
+    // Its layers are disjoint in depth, so tidying changes nothing and the flatten is the
+    // flat result.
+    ASSERT_TRUE(flatten(flattened, deep_out));
+    OIIO::ImageBuf rgba;
+    ASSERT_TRUE(OIIO::ImageBufAlgo::channels(rgba, flattened, 4, {}, {}));
+    EXPECT_LT(max_difference(rgba, flat_out), 1e-5);
+}
+
+TEST(DeepDefocus, LowResLeftViewRevealsWhatTheFlatImageHides)
+{
+    const std::string balls = shared_data("openexr-images/LowResLeftView_Balls.exr");
+    REQUIRE_SHARED(balls);
+    std::string err;
+    OIIO::ImageBuf b, l, t;
+    ASSERT_TRUE(bokeh::read_image(b, balls, err)) << err;
+    ASSERT_TRUE(bokeh::read_image(l, shared_data("openexr-images/LowResLeftView_Leaves.exr"), err)) << err;
+    ASSERT_TRUE(bokeh::read_image(t, shared_data("openexr-images/LowResLeftView_Trunks.exr"), err)) << err;
+    OIIO::ImageBuf merged;
+    ASSERT_TRUE(deep_merge(merged, { &b, &l, &t }));
+    DefocusOptions o;
+    o.coc.lens.focus_distance = 300.0;
+    o.coc.lens.fstop          = 2.0;
+    o.coc.lens.depth_unit_mm  = 10.0;  // Z in centimetres: CoCs from about -38 to 8 px
+    OIIO::ImageBuf out1, out2;
+    DefocusReport rep;
+    ASSERT_TRUE(defocus(out1, merged, o, &rep, 1)) << out1.geterror();
+    ASSERT_TRUE(defocus(out2, merged, o, nullptr, 2));
+    EXPECT_EQ(max_difference(out1, out2), 0.0) << "results must not depend on the thread count";
+    EXPECT_LT(rep.min_coc_px, -20.0f);
+    const auto stats = OIIO::ImageBufAlgo::computePixelStats(out1);
+    for (int c = 0; c < 4; ++c)
+        EXPECT_TRUE(std::isfinite(stats.avg[c]) && stats.max[c] <= 70000.0f);
+}
