@@ -40,4 +40,21 @@ a, b = first_pixel(sys.argv[1]), first_pixel(sys.argv[2])
 if abs(a + b - 2.0) > 1e-5:
     raise SystemExit(f"--invert:gain=2 gave {b} for {a}")
 PY
+# The Python module, when it was built: imported from the install tree, it finds the
+# installed library, plugins and OCIO config (not the build tree's) and runs.
+module=$(ls "$prefix"/lib/python3*/dist-packages/openbokeh*.so 2>/dev/null | head -1 || true)
+if [[ -n "$module" ]]; then
+    PYTHONPATH=$(dirname "$module") /usr/bin/python3 - "$prefix" <<'PY'
+import sys
+import openbokeh
+prefix = sys.argv[1]
+if not openbokeh.plugin_dir.startswith(prefix + "/"):
+    raise SystemExit(f"the installed module loads its plugins from {openbokeh.plugin_dir}")
+img = openbokeh.to_array(openbokeh.scene("lights", width=64, height=36))
+out, report = openbokeh.defocus(img, focus=6, fstop=2)
+if out.shape != (36, 64, 4) or report.method != "layers":
+    raise SystemExit(f"the installed module's defocus gave {out.shape}, {report.method}")
+PY
+    echo "installed package: Python module OK ($module)"
+fi
 echo "installed package: example and third-party plugin OK"

@@ -9,6 +9,7 @@ packages=(
   libopencolorio-dev opencolorio-tools libtbb-dev libglm-dev libfftw3-dev
   libgtest-dev libbenchmark-dev
   python3-matplotlib
+  pybind11-dev python3-dev python3-numpy python3-openimageio python3-pytest
   libgegl-dev
 )
 

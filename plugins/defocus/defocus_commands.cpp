@@ -1,16 +1,14 @@
 // defocus_commands.cpp — `--defocus`: depth of field from an RGBA + Z image, with the
 // lens, depth modes, aperture, method and diagnostics as options. The work is
 // bokeh::defocus, bokeh::coc_map, bokeh::focal_plane_view and bokeh::layer_map
-// (core/defocus.cpp, core/lens.cpp).
+// (core/defocus.cpp, core/lens.cpp); the options become bokeh::DefocusOptions in
+// plugins/shared/defocus_options.cpp, which the Python module shares.
 
 #include <bokeh/deep.h>
 #include <bokeh/defocus.h>
 #include <bokeh/plugin.h>
 
-#include "aperture_options.h"
-
-#include <charconv>
-#include <cmath>
+#include "defocus_options.h"
 
 #include <OpenImageIO/strutil.h>
 
@@ -20,125 +18,13 @@ using bokeh::CommandContext;
 using bokeh::OptionSpec;
 using OIIO::Strutil::fmt::format;
 
-bool parse_number(std::string_view s, double& v)
-{
-    const char* end = s.data() + s.size();
-    auto r          = std::from_chars(s.data(), end, v);
-    return r.ec == std::errc() && r.ptr == end && std::isfinite(v);
-}
-
-// Millimetres per unit of the depth channel.
-bool unit_mm(const std::string& u, double& mm)
-{
-    static const std::pair<const char*, double> units[] = {
-        { "m", 1000.0 }, { "cm", 10.0 }, { "mm", 1.0 }, { "in", 25.4 }, { "ft", 304.8 }
-    };
-    for (const auto& [name, value] : units)
-        if (u == name) {
-            mm = value;
-            return true;
-        }
-    return false;
-}
-
-bool read_options(CommandContext& c, const OIIO::ImageSpec& spec, bokeh::DefocusOptions& o)
-{
-    const bokeh::OptionValues& v = c.options;
-    bokeh::CocOptions& coc       = o.coc;
-    // Camera facts recorded in the image (our scenes write these) unless given.
-    coc.lens.focal_mm = v.given("focal") ? v.get_float("focal")
-                                         : spec.get_float_attribute("bokeh:focal_mm", 50.0f);
-    coc.lens.fstop    = v.get_float("fstop");
-    const std::string& sensor = v.get_string("sensor");
-    if (!v.given("sensor"))
-        coc.lens.sensor_width_mm = spec.get_float_attribute("bokeh:sensor_width_mm", 36.0f);
-    else if (!bokeh::film_back_width(sensor, coc.lens.sensor_width_mm)
-             && !parse_number(sensor, coc.lens.sensor_width_mm)) {
-        std::string names;
-        for (const bokeh::FilmBack& b : bokeh::film_backs())
-            names += std::string(names.empty() ? "" : ", ") + b.name;
-        return c.fail(format("sensor '{}' is neither a width in mm nor a film back ({})", sensor, names));
-    }
-    if (!unit_mm(v.get_string("unit"), coc.lens.depth_unit_mm))
-        return c.fail(format("unit '{}' is not one of m, cm, mm, in, ft", v.get_string("unit")));
-
-    const std::string& focus = v.get_string("focus");
-    if (focus.find(',') != std::string::npos) {
-        std::vector<std::string> xy;
-        OIIO::Strutil::split(focus, xy, ",");
-        double fx, fy;
-        if (xy.size() != 2 || !parse_number(xy[0], fx) || !parse_number(xy[1], fy)
-            || fx != std::floor(fx) || fy != std::floor(fy) || std::abs(fx) > 1e9 || std::abs(fy) > 1e9)
-            return c.fail(format("focus '{}' is neither a distance nor a pixel x,y", focus));
-        coc.focus_at_pixel = true;
-        coc.focus_x        = int(fx);
-        coc.focus_y        = int(fy);
-    } else if (!parse_number(focus, coc.lens.focus_distance)) {
-        return c.fail(format("focus '{}' is neither a distance nor a pixel x,y", focus));
-    }
-    const std::string& math = v.get_string("math");
-    coc.mode = math == "direct" ? bokeh::DepthMode::Direct
-               : math == "far0" ? bokeh::DepthMode::InverseDepth
-               : math == "far1" ? bokeh::DepthMode::FarIsOne
-                                : bokeh::DepthMode::Depth;
-    coc.negate        = v.get_bool("negate");
-    coc.direct_scale  = v.get_float("scale");
-    coc.infocus_range = v.get_float("range");
-    coc.front_gain    = v.get_float("front");
-    coc.back_gain     = v.get_float("back");
-    coc.max_coc_px    = v.get_float("maxcoc");
-
-    const std::string& shape = v.get_string("kernel");
-    std::string why;
-    if (!bokeh::aperture_options_apply(v, shape, why))
-        return c.fail(why);
-    o.aperture.shape  = shape == "disk" ? bokeh::KernelShape::Disk : bokeh::KernelShape::Polygon;
-    o.aperture.blades = shape == "hex" ? 6 : v.get_int("blades");
-    o.aperture.rotation_deg = float(v.get_float("rotation"));
-    o.aperture.curvature    = float(v.get_float("curvature"));
-    o.aperture.hole         = float(v.get_float("hole"));
-    o.aspect                = float(v.get_float("aspect"));
-
-    // quality= and method= are one option under two spellings (method= the docs' and -v's).
-    if (v.given("quality") && v.given("method") && v.get_string("quality") != v.get_string("method"))
-        return c.fail(format("quality={} and method={} disagree; give one", v.get_string("quality"),
-                             v.get_string("method")));
-    const std::string& method = v.given("quality") ? v.get_string("quality") : v.get_string("method");
-    o.method = method == "layers"      ? bokeh::DefocusMethod::Layers
-               : method == "gather"    ? bokeh::DefocusMethod::Gather
-               : method == "reference" ? bokeh::DefocusMethod::Reference
-                                       : bokeh::DefocusMethod::Auto;
-    o.layers        = v.get_int("layers");
-    o.max_reduction = v.get_int("reduction");
-    std::string budget = v.get_string("budget");
-    if (OIIO::Strutil::iends_with(budget, "db"))
-        budget.resize(budget.size() - 2);
-    double budget_db;
-    if (!parse_number(budget, budget_db) || budget_db <= 0.0 || budget_db > 120.0)
-        return c.fail(format("budget '{}' is not a PSNR in dB within 0..120 (e.g. 40dB)",
-                             v.get_string("budget")));
-    o.budget_db       = float(budget_db);
-    o.bloom_threshold = float(v.get_float("bloom"));
-    o.bloom_gain      = float(v.get_float("bloomgain"));
-    o.iris            = float(v.get_float("iris"));
-    o.depth_dilate_px = v.get_int("zdilate");
-    const std::string& border = v.get_string("border");
-    o.border = border == "black"    ? bokeh::Border::Black
-               : border == "mirror" ? bokeh::Border::Mirror
-                                    : bokeh::Border::Clamp;
-    o.grow      = v.get_bool("grow");
-    o.nonfinite = v.get_string("nonfinite") == "error" ? bokeh::NonFinitePolicy::Error
-                                                       : bokeh::NonFinitePolicy::Zero;
-    o.reference_step_px = float(v.get_float("step"));
-    return true;
-}
-
 bool defocus_command(CommandContext& c)
 {
     const bokeh::StackImage& in = c.inputs[0];
     bokeh::DefocusOptions o;
-    if (!read_options(c, in.buf->spec(), o))
-        return false;
+    std::string err;
+    if (!bokeh::defocus_options_from(c.options, in.buf->spec(), o, err))
+        return c.fail(err);
     bokeh::StackImage out = in;
     out.buf               = std::make_shared<OIIO::ImageBuf>();
     const std::string& what = c.options.get_string("output");

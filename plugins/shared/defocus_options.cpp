@@ -1,0 +1,141 @@
+// defocus_options.cpp — `--defocus`'s option values made into bokeh::DefocusOptions (see
+// defocus_options.h): the lens (camera facts from the image's metadata unless given), the
+// depth interpretation, the aperture, the method and its budget, bloom, iris and borders.
+
+#include "defocus_options.h"
+
+#include "aperture_options.h"
+
+#include <charconv>
+#include <cmath>
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using OIIO::Strutil::fmt::format;
+
+namespace {
+
+bool fail(std::string& err, std::string why)
+{
+    err = std::move(why);
+    return false;
+}
+
+bool parse_number(std::string_view s, double& v)
+{
+    const char* end = s.data() + s.size();
+    auto r          = std::from_chars(s.data(), end, v);
+    return r.ec == std::errc() && r.ptr == end && std::isfinite(v);
+}
+
+// Millimetres per unit of the depth channel.
+bool unit_mm(const std::string& u, double& mm)
+{
+    static const std::pair<const char*, double> units[] = {
+        { "m", 1000.0 }, { "cm", 10.0 }, { "mm", 1.0 }, { "in", 25.4 }, { "ft", 304.8 }
+    };
+    for (const auto& [name, value] : units)
+        if (u == name) {
+            mm = value;
+            return true;
+        }
+    return false;
+}
+
+}  // namespace
+
+bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
+                          std::string& err)
+{
+    CocOptions& coc = o.coc;
+    // Camera facts recorded in the image (our scenes write these) unless given.
+    coc.lens.focal_mm = v.given("focal") ? v.get_float("focal")
+                                         : spec.get_float_attribute("bokeh:focal_mm", 50.0f);
+    coc.lens.fstop    = v.get_float("fstop");
+    const std::string& sensor = v.get_string("sensor");
+    if (!v.given("sensor"))
+        coc.lens.sensor_width_mm = spec.get_float_attribute("bokeh:sensor_width_mm", 36.0f);
+    else if (!film_back_width(sensor, coc.lens.sensor_width_mm)
+             && !parse_number(sensor, coc.lens.sensor_width_mm)) {
+        std::string names;
+        for (const FilmBack& b : film_backs())
+            names += std::string(names.empty() ? "" : ", ") + b.name;
+        return fail(err, format("sensor '{}' is neither a width in mm nor a film back ({})", sensor, names));
+    }
+    if (!unit_mm(v.get_string("unit"), coc.lens.depth_unit_mm))
+        return fail(err, format("unit '{}' is not one of m, cm, mm, in, ft", v.get_string("unit")));
+
+    const std::string& focus = v.get_string("focus");
+    if (focus.find(',') != std::string::npos) {
+        std::vector<std::string> xy;
+        OIIO::Strutil::split(focus, xy, ",");
+        double fx, fy;
+        if (xy.size() != 2 || !parse_number(xy[0], fx) || !parse_number(xy[1], fy)
+            || fx != std::floor(fx) || fy != std::floor(fy) || std::abs(fx) > 1e9 || std::abs(fy) > 1e9)
+            return fail(err, format("focus '{}' is neither a distance nor a pixel x,y", focus));
+        coc.focus_at_pixel = true;
+        coc.focus_x        = int(fx);
+        coc.focus_y        = int(fy);
+    } else if (!parse_number(focus, coc.lens.focus_distance)) {
+        return fail(err, format("focus '{}' is neither a distance nor a pixel x,y", focus));
+    }
+    const std::string& math = v.get_string("math");
+    coc.mode = math == "direct" ? DepthMode::Direct
+               : math == "far0" ? DepthMode::InverseDepth
+               : math == "far1" ? DepthMode::FarIsOne
+                                : DepthMode::Depth;
+    coc.negate        = v.get_bool("negate");
+    coc.direct_scale  = v.get_float("scale");
+    coc.infocus_range = v.get_float("range");
+    coc.front_gain    = v.get_float("front");
+    coc.back_gain     = v.get_float("back");
+    coc.max_coc_px    = v.get_float("maxcoc");
+
+    const std::string& shape = v.get_string("kernel");
+    std::string why;
+    if (!aperture_options_apply(v, shape, why))
+        return fail(err, why);
+    o.aperture.shape  = shape == "disk" ? KernelShape::Disk : KernelShape::Polygon;
+    o.aperture.blades = shape == "hex" ? 6 : v.get_int("blades");
+    o.aperture.rotation_deg = float(v.get_float("rotation"));
+    o.aperture.curvature    = float(v.get_float("curvature"));
+    o.aperture.hole         = float(v.get_float("hole"));
+    o.aspect                = float(v.get_float("aspect"));
+
+    // quality= and method= are one option under two spellings (method= the docs' and -v's).
+    if (v.given("quality") && v.given("method") && v.get_string("quality") != v.get_string("method"))
+        return fail(err, format("quality={} and method={} disagree; give one", v.get_string("quality"),
+                                v.get_string("method")));
+    const std::string& method = v.given("quality") ? v.get_string("quality") : v.get_string("method");
+    o.method = method == "layers"      ? DefocusMethod::Layers
+               : method == "gather"    ? DefocusMethod::Gather
+               : method == "reference" ? DefocusMethod::Reference
+                                       : DefocusMethod::Auto;
+    o.layers        = v.get_int("layers");
+    o.max_reduction = v.get_int("reduction");
+    std::string budget = v.get_string("budget");
+    if (OIIO::Strutil::iends_with(budget, "db"))
+        budget.resize(budget.size() - 2);
+    double budget_db;
+    if (!parse_number(budget, budget_db) || budget_db <= 0.0 || budget_db > 120.0)
+        return fail(err, format("budget '{}' is not a PSNR in dB within 0..120 (e.g. 40dB)",
+                                v.get_string("budget")));
+    o.budget_db       = float(budget_db);
+    o.bloom_threshold = float(v.get_float("bloom"));
+    o.bloom_gain      = float(v.get_float("bloomgain"));
+    o.iris            = float(v.get_float("iris"));
+    o.depth_dilate_px = v.get_int("zdilate");
+    const std::string& border = v.get_string("border");
+    o.border = border == "black"    ? Border::Black
+               : border == "mirror" ? Border::Mirror
+                                    : Border::Clamp;
+    o.grow      = v.get_bool("grow");
+    o.nonfinite = v.get_string("nonfinite") == "error" ? NonFinitePolicy::Error
+                                                       : NonFinitePolicy::Zero;
+    o.reference_step_px = float(v.get_float("step"));
+    return true;
+}
+
+}  // namespace bokeh

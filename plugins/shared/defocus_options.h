@@ -1,0 +1,23 @@
+// defocus_options.h — `--defocus`'s option values made into bokeh::DefocusOptions. Shared
+// by the defocus plugin and the Python module (python/), so that both take the same
+// names, defaults and rules; the option specs themselves are the command's, registered
+// by the plugin (the Python module reads them from the registry).
+#pragma once
+
+#include <bokeh/defocus.h>
+#include <bokeh/plugin.h>
+
+#include <string>
+
+#include <OpenImageIO/imagebuf.h>
+
+namespace bokeh {
+
+/// Fill `o` from `--defocus`'s option values `v` for an image with spec `spec`: its camera
+/// metadata ("bokeh:focal_mm", "bokeh:sensor_width_mm", as the built-in scenes write)
+/// gives the focal length and film back unless the options do. False + `err` naming the
+/// option and why.
+bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
+                          std::string& err);
+
+}  // namespace bokeh
