@@ -146,10 +146,11 @@ double back_of(const DeepLayout& L, const double* s)
 // Raw access to a DeepData's samples: channel offsets inside a sample, found once.
 struct RawDeep {
     const OIIO::DeepData* dd = nullptr;
+    OIIO::cspan<unsigned int> counts;  // samples per pixel, read without a call per pixel
     std::vector<size_t> offset;
     std::vector<OIIO::TypeDesc::BASETYPE> base;
 
-    explicit RawDeep(const OIIO::DeepData& d) : dd(&d)
+    explicit RawDeep(const OIIO::DeepData& d) : dd(&d), counts(d.all_samples())
     {
         const int nch = d.channels();
         // Where each channel sits in a sample: read off a pixel that has samples; OIIO
@@ -221,22 +222,23 @@ struct Faults {
 };
 
 // Read pixel `p` of `raw` into `out` (appending), channels mapped by `to_out` (source
-// channel -> output channel, -1 = dropped), applying the non-finite policy. Returns the
-// number of samples appended.
+// channel -> output channel, -1 = dropped), applying the non-finite policy; p < 0 (outside
+// the image) appends nothing.
 void load_pixel(const RawDeep& raw, int64_t p, const std::vector<int>& to_out, const DeepLayout& L,
                 Samples& out, Faults& f, int px, int py)
 {
     const OIIO::DeepData& dd = *raw.dd;
-    const int ns             = dd.samples(p);
+    const int ns             = p >= 0 ? int(raw.counts[size_t(p)]) : 0;
     if (ns == 0)
         return;
     const char* base     = static_cast<const char*>(dd.data_ptr(p, 0, 0));
     const size_t stride  = dd.samplesize();
     const int src_nch    = dd.channels();
+    // Room for every sample at once; a sample dropped below gives its row back.
+    out.v.resize(size_t(out.n + ns) * size_t(out.nch), 0.0);
     for (int s = 0; s < ns; ++s) {
         const char* sp = base + size_t(s) * stride;
-        double* o      = out.push();
-        std::fill(o, o + out.nch, 0.0);
+        double* o      = out.at(out.n++);
         for (int c = 0; c < src_nch; ++c)
             if (to_out[size_t(c)] >= 0)
                 o[to_out[size_t(c)]] = load_value(sp + raw.offset[size_t(c)], raw.base[size_t(c)]);
@@ -247,7 +249,8 @@ void load_pixel(const RawDeep& raw, int64_t p, const std::vector<int>& to_out, c
             if (f.first.empty())
                 f.first = format("pixel ({}, {}) has a sample with depth {} .. {}", px, py, z, zb);
             ++f.counts.nan_depth;
-            out.v.resize(size_t(--out.n) * size_t(out.nch));
+            std::fill(o, o + out.nch, 0.0);  // the row is reused by the next sample
+            --out.n;
             continue;
         }
         if (zb < z) {
@@ -265,6 +268,7 @@ void load_pixel(const RawDeep& raw, int64_t p, const std::vector<int>& to_out, c
                 o[c] = 0.0;
             }
     }
+    out.v.resize(size_t(out.n) * size_t(out.nch));
 }
 
 // The piece of sample `s` (a volume [Z, ZBack)) over [a, b): alphas -expm1(x log1p(-a)),
@@ -357,6 +361,13 @@ struct TidyScratch {
     std::vector<const double*> group;
 };
 
+// Everything a pixel's work needs besides its result, made once per chunk of rows.
+struct PixelScratch {
+    Samples in, tidy, hin, h, cut;
+    TidyScratch t;
+    std::vector<double> weights;
+};
+
 bool already_tidy(const DeepLayout& L, const Samples& in)
 {
     for (int s = 1; s < in.n; ++s) {
@@ -381,6 +392,29 @@ void tidy_pixel(const DeepLayout& L, const Samples& in, Samples& out, TidyScratc
     if (in.n <= 1 || already_tidy(L, in)) {
         out.v = in.v;
         out.n = in.n;
+        return;
+    }
+    bool any_volume = false;
+    for (int s = 0; s < in.n && !any_volume; ++s)
+        any_volume = back_of(L, in.at(s)) > front_of(L, in.at(s));
+    if (!any_volume) {
+        // Points only (most renders' hard surfaces): nothing to cut; sort by depth, keeping
+        // the input order among equal depths, and merge the points that share one.
+        t.order.resize(size_t(in.n));
+        std::iota(t.order.begin(), t.order.end(), 0);
+        for (size_t i = 1; i < t.order.size(); ++i)  // insertion sort: pixels hold few
+            for (size_t j = i; j > 0 && front_of(L, in.at(t.order[j])) < front_of(L, in.at(t.order[j - 1])); --j)
+                std::swap(t.order[j], t.order[j - 1]);
+        for (size_t i = 0; i < t.order.size();) {
+            size_t j = i + 1;
+            while (j < t.order.size() && front_of(L, in.at(t.order[j])) == front_of(L, in.at(t.order[i])))
+                ++j;
+            t.group.clear();
+            for (size_t m = i; m < j; ++m)
+                t.group.push_back(in.at(t.order[m]));
+            merge_coincident(L, t.group.data(), int(t.group.size()), out.push());
+            i = j;
+        }
         return;
     }
     // Every depth where a sample starts or ends cuts the volumes that span it.
@@ -472,7 +506,7 @@ bool assemble(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const std::vecto
         const int y1 = std::min(res.roi.yend, y0 + DeepResult::kRowsPerChunk);
         size_t k     = 0;
         for (int64_t p = int64_t(y0 - res.roi.ybegin) * w; p < int64_t(y1 - res.roi.ybegin) * w; ++p) {
-            const int ns = dd.samples(p);
+            const int ns = int(res.counts[size_t(p)]);
             if (ns == 0)
                 continue;
             char* base = static_cast<char*>(dd.data_ptr(p, 0, 0));
@@ -486,7 +520,7 @@ bool assemble(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const std::vecto
     return true;
 }
 
-// Run `per_pixel(x, y, Samples& out, Faults&)` over `roi`, collecting the samples each
+// Run `per_pixel(x, y, Samples& out, Faults&, PixelScratch&)` over `roi`, collecting the samples each
 // pixel gives into `res`; then apply the policy.
 template<class PerPixel>
 bool run_pixels(const OIIO::ROI& roi, int nch, const DeepOptions& opt, int nthreads, DeepResult& res,
@@ -500,13 +534,14 @@ bool run_pixels(const OIIO::ROI& roi, int nch, const DeepOptions& opt, int nthre
     std::vector<Faults> faults(static_cast<size_t>(nchunks));
     parallel_for_chunks(0, nchunks, 1, nthreads, [&](int64_t chunk, int64_t) {
         Samples out;
+        PixelScratch scratch;
         std::vector<double>& vals = res.rows[size_t(chunk)];
         const int y0 = roi.ybegin + int(chunk) * DeepResult::kRowsPerChunk;
         const int y1 = std::min(roi.yend, y0 + DeepResult::kRowsPerChunk);
         for (int y = y0; y < y1; ++y)
             for (int x = roi.xbegin; x < roi.xend; ++x) {
                 out.reset(nch);
-                per_pixel(x, y, out, faults[size_t(chunk)]);
+                per_pixel(x, y, out, faults[size_t(chunk)], scratch);
                 res.counts[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)] = uint32_t(out.n);
                 vals.insert(vals.end(), out.v.begin(), out.v.begin() + size_t(out.n) * size_t(nch));
             }
@@ -587,12 +622,10 @@ bool unary_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* what
     const std::vector<int> map = identity_map(L.nch);
     DeepResult res;
     const bool ok = run_pixels(src.roi(), L.nch, opt, nthreads, res, err,
-                               [&](int x, int y, Samples& out, Faults& f) {
-                                   thread_local Samples in;
-                                   thread_local TidyScratch t;
-                                   in.reset(L.nch);
-                                   load_pixel(raw, pixel_of(src, x, y), map, L, in, f, x, y);
-                                   op(L, in, out, t);
+                               [&](int x, int y, Samples& out, Faults& f, PixelScratch& sc) {
+                                   sc.in.reset(L.nch);
+                                   load_pixel(raw, pixel_of(src, x, y), map, L, sc.in, f, x, y);
+                                   op(L, sc.in, out, sc.t);
                                });
     if (!ok) {
         dst.errorfmt("{}: {}", what, err);
@@ -742,20 +775,18 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
     }
     DeepResult res;
     const bool ok = run_pixels(roi, L.nch, opt, nthreads, res, err,
-                               [&](int x, int y, Samples& out, Faults& f) {
-                                   thread_local Samples in;
-                                   thread_local TidyScratch t;
-                                   in.reset(L.nch);
+                               [&](int x, int y, Samples& out, Faults& f, PixelScratch& sc) {
+                                   sc.in.reset(L.nch);
                                    for (size_t i = 0; i < srcs.size(); ++i) {
                                        const int64_t p = pixel_of(*srcs[i], x, y);
                                        if (p >= 0)
-                                           load_pixel(raws[i], p, maps[i], L, in, f, x, y);
+                                           load_pixel(raws[i], p, maps[i], L, sc.in, f, x, y);
                                    }
-                                   tidy_pixel(L, in, out, t);
+                                   tidy_pixel(L, sc.in, out, sc.t);
                                    if (!cull)
                                        return;
                                    // Keep the samples some light of which still shows.
-                                   thread_local std::vector<double> T;
+                                   std::vector<double>& T = sc.weights;
                                    T.assign(size_t(L.nch), 1.0);
                                    int keep = 0;
                                    for (; keep < out.n && shows_through(L, T); ++keep)
@@ -801,11 +832,13 @@ bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::Im
     const std::vector<int> map_src = identity_map(L.nch), map_hold = identity_map(H.nch);
     DeepResult res;
     const bool ok = run_pixels(src.roi(), L.nch, opt, nthreads, res, err,
-                               [&](int x, int y, Samples& out, Faults& f) {
-                                   thread_local Samples in, tidy, hin, h, cut;
-                                   thread_local TidyScratch t;
+                               [&](int x, int y, Samples& out, Faults& f, PixelScratch& sc) {
+                                   Samples &in = sc.in, &tidy = sc.tidy, &hin = sc.hin, &h = sc.h, &cut = sc.cut;
+                                   TidyScratch& t = sc.t;
                                    in.reset(L.nch);
                                    load_pixel(raw_src, pixel_of(src, x, y), map_src, L, in, f, x, y);
+                                   if (in.n == 0)
+                                       return;  // nothing to hold out
                                    tidy_pixel(L, in, tidy, t);
                                    hin.reset(H.nch);
                                    const int64_t hp = pixel_of(holdout, x, y);
@@ -848,7 +881,7 @@ bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::Im
                                    // one volume must keep occluding one another as the
                                    // unscaled volume did (A_i = a_i g_i prod(1 - a_j), and
                                    // a'_i = A_i / (1 - sum_j<i A_j)).
-                                   thread_local std::vector<double> gain;
+                                   std::vector<double>& gain = sc.weights;
                                    gain.assign(size_t(cut.n) * size_t(L.nch), 1.0);
                                    for (int s = 0; s < cut.n; ++s) {
                                        holdout_gains(L, H, hold_alpha, h, cut.at(s), &gain[size_t(s) * size_t(L.nch)]);
@@ -1016,7 +1049,7 @@ bool deepen(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, float z_without_dept
     DeepResult res;
     std::string err;
     DeepOptions opt;
-    run_pixels(src.roi(), like.nchannels, opt, nthreads, res, err, [&](int x, int y, Samples& out, Faults&) {
+    run_pixels(src.roi(), like.nchannels, opt, nthreads, res, err, [&](int x, int y, Samples& out, Faults&, PixelScratch&) {
         const float* px = static_cast<const float*>(f->pixeladdr(x, y));
         bool has        = false;
         for (int c = 0; c < nch && !has; ++c)
