@@ -89,8 +89,8 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     };
     const std::string lr = "LowResLeftView merged";
     add("merge 3 passes", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_merge(d, { &pass[0], &pass[1], &pass[2] }, false, {}, t); }, args.reps);
-    add("merge 3 passes, cull", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_merge(d, { &pass[0], &pass[1], &pass[2] }, true, {}, t); }, args.reps);
-    add("merge 3 passes, cull", "oiio", lr, [&] {
+    add("merge 3 passes (cull)", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_merge(d, { &pass[0], &pass[1], &pass[2] }, true, {}, t); }, args.reps);
+    add("merge 3 passes (cull)", "oiio", lr, [&] {
         OIIO::ImageBuf ab = IBA::deep_merge(pass[0], pass[1], true, {}, t);
         OIIO::ImageBuf abc = IBA::deep_merge(ab, pass[2], true, {}, t);
     }, args.reps);
@@ -100,10 +100,10 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     add("holdout by Leaves", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_holdout(d, merged, pass[1], {}, t); }, args.reps);
     add("holdout by Leaves", "oiio", lr, [&] { OIIO::ImageBuf d = IBA::deep_holdout(merged, pass[1], {}, t); }, args.reps);
     add("slice 200..600", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_slice(d, merged, 200.0, 600.0, {}, t); }, args.reps);
-    add("defocus deep, auto", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Auto, false), nullptr, t); }, args.reps);
-    add("defocus deep, auto, deep out", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Auto, true), nullptr, t); }, args.reps);
-    add("defocus flat of the flatten, auto", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, flat, with(bokeh::DefocusMethod::Auto, false), nullptr, t); }, args.reps);
-    add("defocus deep, reference", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Reference, false), nullptr, t); }, std::max(1, args.reps / 3));
+    add("defocus deep auto", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Auto, false), nullptr, t); }, args.reps);
+    add("defocus deep auto (deep out)", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Auto, true), nullptr, t); }, args.reps);
+    add("defocus flat of the flatten (auto)", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, flat, with(bokeh::DefocusMethod::Auto, false), nullptr, t); }, args.reps);
+    add("defocus deep reference", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Reference, false), nullptr, t); }, std::max(1, args.reps / 3));
     if (have_rep) {
         add("tidy", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::deep_tidy(d, rep_img, {}, t); }, args.reps);
         add("flatten", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::flatten(d, rep_img, {}, t); }, args.reps);
@@ -142,11 +142,11 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
             continue;
         if (c.method == "flatten" && c.peer.empty())
             error_of[i] = measure(flat, oiio_flat);
-        else if (c.method == "defocus deep, auto")
+        else if (c.method == "defocus deep auto")
             error_of[i] = measure(auto_flat, ref);
-        else if (c.method == "defocus deep, auto, deep out")
+        else if (c.method == "defocus deep auto (deep out)")
             error_of[i] = measure(deep_out_flat, ref);
-        else if (c.method == "defocus flat of the flatten, auto")
+        else if (c.method == "defocus flat of the flatten (auto)")
             error_of[i] = measure(flat_dof, ref);
     }
 

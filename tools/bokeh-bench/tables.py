@@ -106,6 +106,23 @@ def iris_table(bench_dir):
     return out
 
 
+def deep_table(bench_dir):
+    rows = read(bench_dir, "deep.csv")
+    out = ["| frame | operation | ours ms | OIIO ms | PSNR dB |", "|---|---|---:|---:|---:|"]
+    keys = []
+    for r in rows:
+        if (r["task"], r["method"]) not in keys:
+            keys.append((r["task"], r["method"]))
+    for task, method in keys:
+        def cell(peer, column):
+            match = [r for r in rows if (r["task"], r["method"], r["peer"]) == (task, method, peer)]
+            return match[0][column] if match and match[0][column] else ""
+        ours, theirs, psnr = cell("", "median_ms"), cell("oiio", "median_ms"), cell("", "psnr_db_tonemapped")
+        out.append(f"| {task.removeprefix('deep ')} | {method} | {ms(float(ours)) if ours else ''} | "
+                   f"{ms(float(theirs)) if theirs else ''} | {f'{float(psnr):.1f}' if psnr else ''} |")
+    return out
+
+
 def resample_table(bench_dir, factor):
     rows = read(bench_dir, "resample.csv")
     artifacts = read(bench_dir, "resample_artifacts.csv")
@@ -148,6 +165,7 @@ TABLES = {
     "blur": blur_table,
     "defocus": defocus_table,
     "iris": iris_table,
+    "deep": deep_table,
     "resample-2": lambda d: resample_table(d, "2"),
     "resample-4": lambda d: resample_table(d, "4"),
     "resample-8": lambda d: resample_table(d, "8"),
