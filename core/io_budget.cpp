@@ -202,18 +202,21 @@ private:
                 return false;
             if (!initialised) {
                 initialised = true;
-                decoder.decode_flags |= EXR_DECODE_SAMPLE_DATA_ONLY;
+                // Individual counts: tiled files store theirs cumulative per tile row,
+                // scanline files per chunk; the library undoes either.
+                decoder.decode_flags |= EXR_DECODE_SAMPLE_DATA_ONLY | EXR_DECODE_SAMPLE_COUNTS_AS_INDIVIDUAL;
                 if (exr_decoding_choose_default_routines(m_ctxt, 0, &decoder) != EXR_ERR_SUCCESS)
                     return false;
             }
             if (exr_decoding_run(m_ctxt, 0, &decoder) != EXR_ERR_SUCCESS || !decoder.sample_count_table)
                 return false;
-            // The table is cumulative: its last entry is the chunk's sample total.
             const int64_t n = int64_t(cinfo.width) * cinfo.height;
-            const int32_t total = n > 0 ? decoder.sample_count_table[n - 1] : 0;
-            if (total < 0)
-                return false;
-            samples += total;
+            for (int64_t i = 0; i < n; ++i) {
+                const int32_t count = decoder.sample_count_table[i];
+                if (count < 0)
+                    return false;
+                samples += count;
+            }
             return true;
         };
         const int64_t base = m_cost.bytes;

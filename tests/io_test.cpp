@@ -7,6 +7,9 @@
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/strutil.h>
+
+#include <unistd.h>
 
 #include "test_util.h"
 
@@ -205,4 +208,49 @@ TEST(Deep, StatsAndDescription)
     EXPECT_NE(d.find("deep samples: 6 total; per pixel min 0, max 4, mean 2.000; 1 of 3 pixels empty"),
               std::string::npos)
         << d;
+}
+
+TEST(ReadCost, DeepSampleCountsAreTheFilesOwn)
+{
+    // The sample-count tables summed before reading equal the samples OIIO reads: a deep
+    // tiled zip file, a scanline one, and one with up to 227 volume samples a pixel.
+    for (const char* rel : { "oiio-testsuite/oiiotool-deep_src_deepalpha.exr",
+                             "openexr-images/LowResLeftView_Trunks.exr",
+                             "gaffer/representativeDeepImage.exr" }) {
+        const std::string path = shared_data(rel);
+        REQUIRE_SHARED(path);
+        SCOPED_TRACE(rel);
+        ReadCost cost;
+        std::string err;
+        ASSERT_TRUE(read_cost(path, int64_t(1) << 40, cost, err)) << err;
+        OIIO::ImageBuf buf;
+        ASSERT_TRUE(read_image(buf, path, err)) << err;
+        EXPECT_FALSE(cost.at_least);
+        EXPECT_EQ(cost.deep_samples, deep_stats(*buf.deepdata()).total_samples);
+        EXPECT_NE(cost.what.find(", deep, "), std::string::npos) << cost.what;
+        // A budget below it stops the count early and refuses the file by name.
+        ReadOptions tight;
+        tight.memory_budget_bytes = cost.bytes - 1;
+        EXPECT_FALSE(read_image(buf, path, tight, err));
+        EXPECT_NE(err.find("more than the memory budget of"), std::string::npos) << err;
+    }
+}
+
+TEST(ReadCost, FlatImageIsFloatPixelsAndChunkTable)
+{
+    const std::string dir = fresh_dir("io_read_cost");
+    const std::string in  = make_exr(dir);
+    ReadCost cost;
+    std::string err;
+    ASSERT_TRUE(read_cost(in, int64_t(1) << 40, cost, err)) << err;
+    // 40 x 30 x 5 x 4 bytes, plus the offsets of the chunks (OIIO's default EXR
+    // compression, zip: 16 lines a chunk, so 2 chunks).
+    EXPECT_EQ(cost.bytes, 40 * 30 * 5 * 4 + 2 * 8);
+    EXPECT_EQ(cost.what, "40 x 30, 5 channels");
+    EXPECT_EQ(memory_size_text(1536), "1.5 KiB");
+    EXPECT_EQ(memory_size_text(int64_t(3) << 30), "3.0 GiB");
+    EXPECT_GT(default_memory_budget_bytes(), int64_t(1) << 28);
+    const std::string tmp = partial_write_name(dir + "/out.exr");
+    EXPECT_NE(tmp.find("/.out.exr.openbokeh-partial."), std::string::npos) << tmp;
+    EXPECT_TRUE(OIIO::Strutil::ends_with(tmp, "." + std::to_string(getpid()) + ".exr")) << tmp;
 }

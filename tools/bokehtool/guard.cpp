@@ -147,7 +147,7 @@ Watchdog::Watchdog(double seconds)
             return;
         bokeh::remove_partial_writes();
         write_text(OIIO::Strutil::fmt::format("bokehtool ERROR: --timeout: still running after "
-                                              "{} s (in {}); stopped, temporary output files "
+                                              "{:g} s (in {}); stopped, temporary output files "
                                               "removed\n",
                                               seconds, g_command)
                        .c_str());

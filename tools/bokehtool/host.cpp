@@ -661,6 +661,9 @@ int Host::main(const std::vector<std::string>& args)
 
     install_guards();
     set_current("");
+    // OIIO's debug messages ("OIIO DEBUG: ImageBuf unable to allocate ...") would make a
+    // second line under the one-line error that reports the same failure.
+    OIIO::attribute("debug", 0);
     try {
         return run_frames(args);
     } catch (const std::bad_alloc&) {
