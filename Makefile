@@ -3,11 +3,12 @@
 #   make test   build and run every test (ctest)
 #   make bench  run the speed/accuracy benchmarks
 #   make test-asan  the tests built with AddressSanitizer + UndefinedBehaviorSanitizer
+#   make fuzz   fuzz the image reader (libFuzzer, clang-14) for FUZZ_SECONDS
 BUILD ?= build
 JOBS  ?= 2
 BOKEHTOOL = $(BUILD)/bin/bokehtool
 
-.PHONY: all deps configure build demo test test-asan bench micro install clean
+.PHONY: all deps configure build demo test test-asan fuzz bench micro install clean
 
 all: build
 
@@ -47,6 +48,20 @@ test-asan: deps
 	  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 	  ctest --output-on-failure -j $(JOBS) -E '^(installed_package|bench_smoke)$$'
 
+# libFuzzer on bokeh::read_image (tests/fuzz/fuzz_read_image.cpp): our io sources built
+# into the target with ASan + UBSan, seeded by tests/fuzz/make_seeds.py; the corpus grows
+# in $(FUZZ_BUILD)/corpus, findings land in $(FUZZ_BUILD) as crash-*/timeout-*/oom-*.
+FUZZ_BUILD   ?= build-fuzz
+FUZZ_SECONDS ?= 60
+fuzz: deps
+	@mkdir -p $(FUZZ_BUILD)/corpus
+	clang++-14 -std=c++17 -O1 -g -fsanitize=fuzzer,address,undefined -Iinclude \
+	  -I/usr/include/OpenEXR -I/usr/include/Imath tests/fuzz/fuzz_read_image.cpp core/io.cpp \
+	  core/io_budget.cpp -lOpenImageIO -lOpenImageIO_Util -lOpenEXRCore -o $(FUZZ_BUILD)/fuzz_read_image
+	/usr/bin/python3 tests/fuzz/make_seeds.py $(FUZZ_BUILD)/seeds
+	cd $(FUZZ_BUILD) && ASAN_OPTIONS=detect_leaks=0 ./fuzz_read_image -max_total_time=$(FUZZ_SECONDS) \
+	  -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 corpus seeds
+
 bench: build
 	@mkdir -p docs/bench
 	$(BUILD)/bin/bokeh-bench --threads 2 --reps 5 --csv docs/bench/blur.csv
@@ -67,4 +82,4 @@ install: build
 	cmake --install $(BUILD) --prefix $(or $(PREFIX),/usr/local)
 
 clean:
-	rm -rf $(BUILD) $(ASAN_BUILD) out
+	rm -rf $(BUILD) $(ASAN_BUILD) $(FUZZ_BUILD) out

@@ -1,7 +1,9 @@
 // io.cpp — reading and writing flat and deep images through OpenImageIO.
 //
-// Reads force the whole file into memory so that a truncated or corrupt file fails at
-// read time with the file's name, not later in a filter. Writes use ImageOutput on a
+// Reads first check what the file declares against a memory budget (io_budget.cpp), then
+// force the whole file into memory so that a truncated or corrupt file fails at read
+// time with the file's name, not later in a filter; exceptions from the readers become
+// errors. Writes use ImageOutput on a
 // temporary file in the target's directory (same filesystem, so the final rename is
 // atomic) and keep the spec: channel names, data/display windows, tiling, metadata.
 

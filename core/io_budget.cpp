@@ -195,28 +195,41 @@ private:
                 exr_decoding_destroy(m_ctxt, &decoder);
             return ok;
         };
+        const bool tiled = storage == EXR_STORAGE_DEEP_TILED;
         auto chunk = [&](const exr_chunk_info_t& cinfo) {
+            if (cinfo.width < 1 || cinfo.height < 1)
+                return false;
             exr_result_t r = initialised ? exr_decoding_update(m_ctxt, 0, &cinfo, &decoder)
                                          : exr_decoding_initialize(m_ctxt, 0, &cinfo, &decoder);
             if (r != EXR_ERR_SUCCESS)
                 return false;
             if (!initialised) {
                 initialised = true;
-                // Individual counts: tiled files store theirs cumulative per tile row,
-                // scanline files per chunk; the library undoes either.
-                decoder.decode_flags |= EXR_DECODE_SAMPLE_DATA_ONLY | EXR_DECODE_SAMPLE_COUNTS_AS_INDIVIDUAL;
+                // Cumulative counts, as stored (OpenEXRCore 3.1.5's individual-count
+                // decoding fails with EXR_ERR_INVALID_SAMPLE_DATA on valid uncompressed
+                // deep scanline files).
+                decoder.decode_flags |= EXR_DECODE_SAMPLE_DATA_ONLY;
                 if (exr_decoding_choose_default_routines(m_ctxt, 0, &decoder) != EXR_ERR_SUCCESS)
                     return false;
             }
             if (exr_decoding_run(m_ctxt, 0, &decoder) != EXR_ERR_SUCCESS || !decoder.sample_count_table)
                 return false;
-            const int64_t n = int64_t(cinfo.width) * cinfo.height;
-            for (int64_t i = 0; i < n; ++i) {
-                const int32_t count = decoder.sample_count_table[i];
-                if (count < 0)
-                    return false;
-                samples += count;
+            // A tiled chunk's table is cumulative along each row of the tile (measured on
+            // oiiotool-deep_src_deepalpha.exr: the row ends sum to the 28846 samples OIIO
+            // reads, the chunk ends to 269); a scanline chunk's is cumulative over the
+            // chunk. Deep scanline chunks hold one line except with ZIP (16); there the
+            // larger of the two readings is taken, an overestimate if anything.
+            const int32_t* table = decoder.sample_count_table;
+            int64_t row_ends = 0, previous = 0;
+            for (int64_t y = 0; y < cinfo.height; ++y) {
+                const int32_t* row = table + y * int64_t(cinfo.width);
+                for (int64_t x = 0; x < cinfo.width; ++x)
+                    if (row[x] < (x ? row[x - 1] : 0))
+                        return false;  // a cumulative table never decreases along a row
+                row_ends += row[cinfo.width - 1];
+                previous = row[cinfo.width - 1];
             }
+            samples += tiled || cinfo.height == 1 ? row_ends : std::max(row_ends, previous);
             return true;
         };
         const int64_t base = m_cost.bytes;

@@ -1,10 +1,11 @@
 // io.h — reading and writing images (flat and deep) the way a farm step needs.
 //
 // Reads check what OIIO would otherwise report late or vaguely (missing file, a
-// directory, unreadable or truncated data) and return one clear message. Writes go to a
-// temporary file beside the target and are renamed into place, so an interrupted or
-// failed write never leaves a half file at the output path, and keep the pixel types,
-// channel names, windows and metadata of the image written.
+// directory, a declared size over the memory budget, unreadable or truncated data) and
+// return one clear message. Writes go to a temporary file beside the target and are
+// renamed into place, so an interrupted or failed write never leaves a half file at the
+// output path, and keep the pixel types, channel names, windows and metadata of the
+// image written.
 #pragma once
 
 #include <cstdint>
