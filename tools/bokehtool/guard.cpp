@@ -97,8 +97,10 @@ void install_guards()
         g_stderr = fd;
     for (int sig : { SIGINT, SIGTERM, SIGHUP })
         signal(sig, stop_signal);
+#if !defined(__SANITIZE_ADDRESS__)  // under ASan its own report says more
     for (int sig : { SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT })
         signal(sig, fault_signal);
+#endif
     std::set_terminate(on_terminate);
 }
 
