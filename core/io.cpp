@@ -22,6 +22,7 @@
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagecache.h>
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
 
@@ -48,6 +49,12 @@ static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, std::stri
     const bool deep = probe->spec().deep;
     probe.reset();
 
+    // ImageBuf keeps what it learned of a file (spec, an open reader) in OIIO's shared
+    // ImageCache under the file's name; a file replaced under the same name since then
+    // would be read with the old size into a buffer of the new one (heap corruption inside
+    // OIIO, found by the read fuzzer). Forget it first.
+    OIIO::ImageCache* cache = OIIO::ImageCache::create(true);
+    cache->invalidate(OIIO::ustring(path), true);
     OIIO::ImageBuf buf(path);
     const bool ok = deep ? buf.read(0, 0, true) : buf.read(0, 0, true, OIIO::TypeFloat);
     if (!ok || buf.has_error()) {

@@ -138,7 +138,6 @@ void add_truncations(std::vector<Case>& cases, const Source& s, const ExrLayout&
 {
     std::vector<size_t> at = { 0, 8 };
     if (L.ok) {
-        at.push_back(L.header_end / 2);
         at.push_back(L.header_end);
         at.push_back((L.header_end + L.chunks_at) / 2);
         at.push_back(L.chunks_at + 4);
@@ -216,7 +215,6 @@ void add_exr_field_damage(std::vector<Case>& cases, const Source& s, const ExrLa
     }
     if (const ExrAttr* c = L.find("compression")) {
         with("compression 200", [&](std::string& b) { b[c->value_at] = char(200); });
-        with("compression changed to PIZ", [&](std::string& b) { b[c->value_at] = char(4); });
     }
     if (const ExrAttr* t = L.find("tiles")) {
         with("tile size 1 x 1", [&](std::string& b) {
@@ -508,13 +506,13 @@ TEST(DamagedInput, NeverCrashesOrHangs)
         add_truncations(cases, s, L);
         if (s.ext == ".exr") {
             ASSERT_TRUE(L.ok) << s.label << ": the test's EXR layout reader failed";
-            add_bit_flips(cases, s, "header", 8, L.header_end, big ? 3 : 4, rng);
-            add_bit_flips(cases, s, "offset table", L.header_end, L.chunks_at, 2, rng);
-            add_bit_flips(cases, s, "pixel data", L.chunks_at, s.bytes.size(), big ? 2 : 3, rng);
+            add_bit_flips(cases, s, "header", 8, L.header_end, big ? 2 : 4, rng);
+            add_bit_flips(cases, s, "offset table", L.header_end, L.chunks_at, big ? 1 : 2, rng);
+            add_bit_flips(cases, s, "pixel data", L.chunks_at, s.bytes.size(), big ? 1 : 2, rng);
             add_exr_field_damage(cases, s, L);
         } else {
-            add_bit_flips(cases, s, "header", 8, 33, 4, rng);
-            add_bit_flips(cases, s, "pixel data", 33, s.bytes.size(), 3, rng);
+            add_bit_flips(cases, s, "header", 8, 33, 3, rng);
+            add_bit_flips(cases, s, "pixel data", 33, s.bytes.size(), 2, rng);
             add_png_field_damage(cases, s);
         }
         source_of.resize(cases.size(), si);

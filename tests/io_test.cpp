@@ -254,3 +254,28 @@ TEST(ReadCost, FlatImageIsFloatPixelsAndChunkTable)
     EXPECT_NE(tmp.find("/.out.exr.openbokeh-partial."), std::string::npos) << tmp;
     EXPECT_TRUE(OIIO::Strutil::ends_with(tmp, "." + std::to_string(getpid()) + ".exr")) << tmp;
 }
+
+TEST(Read, AFileRewrittenInPlaceIsReadAfresh)
+{
+    // The same name, the same file (inode), new content within the same second: OIIO's
+    // shared ImageCache still held the first file's spec, and the read wrote the new
+    // 64 x 40 x 4 pixels into a buffer made for 8 x 8 x 3 (a heap overflow inside OIIO,
+    // found by the read fuzzer).
+    const std::string dir = fresh_dir("io_rewritten");
+    OIIO::ImageBuf small(OIIO::ImageSpec(8, 8, 3, OIIO::TypeFloat)), large(OIIO::ImageSpec(64, 40, 4, OIIO::TypeFloat));
+    ASSERT_TRUE(small.write(dir + "/small.exr"));
+    ASSERT_TRUE(large.write(dir + "/large.exr"));
+    const std::string path = dir + "/same.exr";
+    std::string err;
+    std::ofstream(path, std::ios::binary) << file_bytes(dir + "/small.exr");
+    OIIO::ImageBuf first, second;
+    ASSERT_TRUE(read_image(first, path, err)) << err;
+    {
+        std::ofstream rewrite(path, std::ios::binary | std::ios::trunc);  // same inode
+        rewrite << file_bytes(dir + "/large.exr");
+    }
+    ASSERT_TRUE(read_image(second, path, err)) << err;
+    EXPECT_EQ(second.spec().width, 64);
+    EXPECT_EQ(second.spec().height, 40);
+    EXPECT_EQ(second.nchannels(), 4);
+}
