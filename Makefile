@@ -49,8 +49,10 @@ test-asan: deps
 	  ctest --output-on-failure -j $(JOBS) -E '^(installed_package|bench_smoke)$$'
 
 # libFuzzer on bokeh::read_image (tests/fuzz/fuzz_read_image.cpp): our io sources built
-# into the target with ASan + UBSan, seeded by tests/fuzz/make_seeds.py; the corpus grows
-# in $(FUZZ_BUILD)/corpus, findings land in $(FUZZ_BUILD) as crash-*/timeout-*/oom-*.
+# into the target with ASan + UBSan, seeded by tests/fuzz/make_seeds.py, the committed
+# corpus (tests/fuzz/corpus) and past findings (tests/fuzz/regressions, replayed first);
+# the corpus grows in $(FUZZ_BUILD)/corpus, findings land in $(FUZZ_BUILD) as
+# crash-*/timeout-*/oom-*.
 FUZZ_BUILD   ?= build-fuzz
 FUZZ_SECONDS ?= 60
 fuzz: deps
@@ -59,8 +61,10 @@ fuzz: deps
 	  -I/usr/include/OpenEXR -I/usr/include/Imath tests/fuzz/fuzz_read_image.cpp core/io.cpp \
 	  core/io_budget.cpp -lOpenImageIO -lOpenImageIO_Util -lOpenEXRCore -o $(FUZZ_BUILD)/fuzz_read_image
 	/usr/bin/python3 tests/fuzz/make_seeds.py $(FUZZ_BUILD)/seeds
+	cd $(FUZZ_BUILD) && ASAN_OPTIONS=detect_leaks=0 ./fuzz_read_image -timeout=10 -rss_limit_mb=2048 \
+	  ../tests/fuzz/regressions/*
 	cd $(FUZZ_BUILD) && ASAN_OPTIONS=detect_leaks=0 ./fuzz_read_image -max_total_time=$(FUZZ_SECONDS) \
-	  -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 corpus seeds
+	  -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 corpus seeds ../tests/fuzz/corpus
 
 bench: build
 	@mkdir -p docs/bench

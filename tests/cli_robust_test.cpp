@@ -67,11 +67,12 @@ TEST(Robust, MaxMemoryRefusesAFileByName)
     const std::string dir = fresh_dir("robust_maxmemory");
     const std::string in = small_exr(dir), out = dir + "/out.exr";
     // 64 x 48 x 5 channels x 4 bytes = 61440, plus 3 chunk offsets of 8 bytes (ZIP: 16
-    // lines a chunk) = 61464 bytes = 60.0 KiB.
-    RunResult r = bokehtool(format("--maxmemory 59K {} -o {}", in, out));
-    expect_clean_failure(r, "in.exr: reading it needs 60.0 KiB (64 x 48, 5 channels), more "
-                            "than --maxmemory of 59.0 KiB", out);
-    r = bokehtool(format("--maxmemory 61K {} -o {}", in, out));
+    // lines a chunk), plus 3 rows of chunks as stored (16 x 64 x 5 floats = 20480 bytes):
+    // 122904 bytes = 120.0 KiB.
+    RunResult r = bokehtool(format("--maxmemory 119K {} -o {}", in, out));
+    expect_clean_failure(r, "in.exr: reading it needs 120.0 KiB (64 x 48, 5 channels), more "
+                            "than --maxmemory of 119.0 KiB", out);
+    r = bokehtool(format("--maxmemory 121K {} -o {}", in, out));
     EXPECT_EQ(r.status, 0) << r.err;
     EXPECT_TRUE(exists(out));
     for (const char* bad : { "4X", "0", "-1", "K", "1.5Q" }) {

@@ -244,8 +244,9 @@ TEST(ReadCost, FlatImageIsFloatPixelsAndChunkTable)
     std::string err;
     ASSERT_TRUE(read_cost(in, int64_t(1) << 40, cost, err)) << err;
     // 40 x 30 x 5 x 4 bytes, plus the offsets of the chunks (OIIO's default EXR
-    // compression, zip: 16 lines a chunk, so 2 chunks).
-    EXPECT_EQ(cost.bytes, 40 * 30 * 5 * 4 + 2 * 8);
+    // compression, zip: 16 lines a chunk, so 2 chunks), plus three rows of chunks in the
+    // file's types (16 lines x 40 pixels x (4 half + 1 float = 12 bytes)).
+    EXPECT_EQ(cost.bytes, 40 * 30 * 5 * 4 + 2 * 8 + 3 * 16 * 40 * 12);
     EXPECT_EQ(cost.what, "40 x 30, 5 channels");
     EXPECT_EQ(memory_size_text(1536), "1.5 KiB");
     EXPECT_EQ(memory_size_text(int64_t(3) << 30), "3.0 GiB");
