@@ -256,7 +256,8 @@ bool hexagon_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::R
         };
         io.out_row = [](int, int, int) -> float* { return nullptr; };
         const size_t pitch = size_t(dst.spec().width) * ncs;  // prepare_destination: roi-sized
-        io.store           = [&](int y, int n, int x0, int x1, const float* rows) {
+        // `pitch` by value: this block ends before hexagon_sweep calls the lambda.
+        io.store = [&, pitch](int y, int n, int x0, int x1, const float* rows) {
             const size_t row_len = size_t(x1 - x0) * ncs;
             float* d = static_cast<float*>(dst.pixeladdr(region.xbegin + y, region.ybegin + x0));
             const size_t bytes = size_t(n) * ncs * sizeof(float);

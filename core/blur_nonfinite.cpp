@@ -107,6 +107,7 @@ bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::ve
         ispec.x = data.xbegin;
         ispec.y = data.ybegin;
         OIIO::ImageBuf indicators(ispec, OIIO::InitializePixels::Yes);
+        detail::require_pixels(indicators);
         parallel_rows(data, nthreads, [&](int y0, int y1) {
             for (int y = y0; y < y1; ++y) {
                 const auto* row = static_cast<const float*>(in.pixeladdr(data.xbegin, y, data.zbegin));

@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <new>
 #include <type_traits>
 
 #if defined(__SSE2__)
@@ -310,9 +311,16 @@ void prefer_huge_pages(void* p, size_t bytes)
 #endif
 }
 
+void require_pixels(const OIIO::ImageBuf& buf)
+{
+    if (buf.spec().image_bytes() > 0 && !buf.localpixels())
+        throw std::bad_alloc();
+}
+
 void reset_uninitialised(OIIO::ImageBuf& dst, const OIIO::ImageSpec& spec)
 {
     dst.reset(spec, OIIO::InitializePixels::No);
+    require_pixels(dst);
     if (dst.localpixels())
         prefer_huge_pages(dst.localpixels(), size_t(dst.spec().image_bytes()));
 }

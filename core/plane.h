@@ -45,7 +45,13 @@ namespace bokeh::detail {
 void prefer_huge_pages(void* p, size_t bytes);
 
 /// dst.reset(spec) with its pixels uninitialised and on huge pages (prefer_huge_pages).
+/// Throws std::bad_alloc when the pixels cannot be allocated (require_pixels).
 void reset_uninitialised(OIIO::ImageBuf& dst, const OIIO::ImageSpec& spec);
+
+/// Throw std::bad_alloc when `buf` has a size but no pixels: OIIO's ImageBuf catches a
+/// failed allocation itself (it prints "ImageBuf unable to allocate N bytes" and keeps
+/// no pixels), and code writing the pixels would then write through a null pointer.
+void require_pixels(const OIIO::ImageBuf& buf);
 
 /// One RGBA pixel as a vector (GCC vector extensions), for loops over four channels that
 /// the compiler's per-channel (SLP) vectorisation left scalar in every clone (generic

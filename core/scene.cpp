@@ -27,6 +27,8 @@
 #include <bokeh/parallel.h>
 #include <bokeh/scene.h>
 
+#include "plane.h"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -613,6 +615,7 @@ bool make_scene(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions
     spec.attribute("bokeh:fstop", float(info->fstop));
     spec.attribute("oiio:ColorSpace", "lin_rec709");
     OIIO::ImageBuf buf(spec);
+    detail::require_pixels(buf);
 
     if (name == "lights")
         render(buf, LightsScene(opts), opts.aa, nthreads);

@@ -7,6 +7,9 @@
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/strutil.h>
+
+#include <unistd.h>
 
 #include "test_util.h"
 
@@ -205,4 +208,75 @@ TEST(Deep, StatsAndDescription)
     EXPECT_NE(d.find("deep samples: 6 total; per pixel min 0, max 4, mean 2.000; 1 of 3 pixels empty"),
               std::string::npos)
         << d;
+}
+
+TEST(ReadCost, DeepSampleCountsAreTheFilesOwn)
+{
+    // The sample-count tables summed before reading equal the samples OIIO reads: a deep
+    // tiled zip file, a scanline one, and one with up to 227 volume samples a pixel.
+    for (const char* rel : { "oiio-testsuite/oiiotool-deep_src_deepalpha.exr",
+                             "openexr-images/LowResLeftView_Trunks.exr",
+                             "gaffer/representativeDeepImage.exr" }) {
+        const std::string path = shared_data(rel);
+        REQUIRE_SHARED(path);
+        SCOPED_TRACE(rel);
+        ReadCost cost;
+        std::string err;
+        ASSERT_TRUE(read_cost(path, int64_t(1) << 40, cost, err)) << err;
+        OIIO::ImageBuf buf;
+        ASSERT_TRUE(read_image(buf, path, err)) << err;
+        EXPECT_FALSE(cost.at_least);
+        EXPECT_EQ(cost.deep_samples, deep_stats(*buf.deepdata()).total_samples);
+        EXPECT_NE(cost.what.find(", deep, "), std::string::npos) << cost.what;
+        // A budget below it stops the count early and refuses the file by name.
+        ReadOptions tight;
+        tight.memory_budget_bytes = cost.bytes - 1;
+        EXPECT_FALSE(read_image(buf, path, tight, err));
+        EXPECT_NE(err.find("more than the memory budget of"), std::string::npos) << err;
+    }
+}
+
+TEST(ReadCost, FlatImageIsFloatPixelsAndChunkTable)
+{
+    const std::string dir = fresh_dir("io_read_cost");
+    const std::string in  = make_exr(dir);
+    ReadCost cost;
+    std::string err;
+    ASSERT_TRUE(read_cost(in, int64_t(1) << 40, cost, err)) << err;
+    // 40 x 30 x 5 x 4 bytes, plus the offsets of the chunks (OIIO's default EXR
+    // compression, zip: 16 lines a chunk, so 2 chunks), plus three rows of chunks in the
+    // file's types (16 lines x 40 pixels x (4 half + 1 float = 12 bytes)).
+    EXPECT_EQ(cost.bytes, 40 * 30 * 5 * 4 + 2 * 8 + 3 * 16 * 40 * 12);
+    EXPECT_EQ(cost.what, "40 x 30, 5 channels");
+    EXPECT_EQ(memory_size_text(1536), "1.5 KiB");
+    EXPECT_EQ(memory_size_text(int64_t(3) << 30), "3.0 GiB");
+    EXPECT_GT(default_memory_budget_bytes(), int64_t(1) << 28);
+    const std::string tmp = partial_write_name(dir + "/out.exr");
+    EXPECT_NE(tmp.find("/.out.exr.openbokeh-partial."), std::string::npos) << tmp;
+    EXPECT_TRUE(OIIO::Strutil::ends_with(tmp, "." + std::to_string(getpid()) + ".exr")) << tmp;
+}
+
+TEST(Read, AFileRewrittenInPlaceIsReadAfresh)
+{
+    // The same name, the same file (inode), new content within the same second: OIIO's
+    // shared ImageCache still held the first file's spec, and the read wrote the new
+    // 64 x 40 x 4 pixels into a buffer made for 8 x 8 x 3 (a heap overflow inside OIIO,
+    // found by the read fuzzer).
+    const std::string dir = fresh_dir("io_rewritten");
+    OIIO::ImageBuf small(OIIO::ImageSpec(8, 8, 3, OIIO::TypeFloat)), large(OIIO::ImageSpec(64, 40, 4, OIIO::TypeFloat));
+    ASSERT_TRUE(small.write(dir + "/small.exr"));
+    ASSERT_TRUE(large.write(dir + "/large.exr"));
+    const std::string path = dir + "/same.exr";
+    std::string err;
+    std::ofstream(path, std::ios::binary) << file_bytes(dir + "/small.exr");
+    OIIO::ImageBuf first, second;
+    ASSERT_TRUE(read_image(first, path, err)) << err;
+    {
+        std::ofstream rewrite(path, std::ios::binary | std::ios::trunc);  // same inode
+        rewrite << file_bytes(dir + "/large.exr");
+    }
+    ASSERT_TRUE(read_image(second, path, err)) << err;
+    EXPECT_EQ(second.spec().width, 64);
+    EXPECT_EQ(second.spec().height, 40);
+    EXPECT_EQ(second.nchannels(), 4);
 }

@@ -1,10 +1,11 @@
 // io.h — reading and writing images (flat and deep) the way a farm step needs.
 //
 // Reads check what OIIO would otherwise report late or vaguely (missing file, a
-// directory, unreadable or truncated data) and return one clear message. Writes go to a
-// temporary file beside the target and are renamed into place, so an interrupted or
-// failed write never leaves a half file at the output path, and keep the pixel types,
-// channel names, windows and metadata of the image written.
+// directory, a declared size over the memory budget, unreadable or truncated data) and
+// return one clear message. Writes go to a temporary file beside the target and are
+// renamed into place, so an interrupted or failed write never leaves a half file at the
+// output path, and keep the pixel types, channel names, windows and metadata of the
+// image written.
 #pragma once
 
 #include <cstdint>
@@ -16,9 +17,37 @@
 
 namespace bokeh {
 
+/// The memory a read may take by default: half the machine's physical memory.
+int64_t default_memory_budget_bytes();
+
+/// "12.0 GiB", "640.0 KiB", "512 bytes".
+std::string memory_size_text(int64_t bytes);
+
+struct ReadOptions {
+    /// Largest memory (bytes) reading one file may allocate, checked against what the
+    /// file's header declares before anything is allocated; 0 = default_memory_budget_bytes().
+    int64_t memory_budget_bytes = 0;
+    /// How an error names the budget (a host names its own option here).
+    std::string budget_name = "the memory budget";
+};
+
+/// What reading `path` with read_image will allocate, from its header (and, for deep EXR,
+/// its sample-count tables, counted only until the total passes `budget_bytes`).
+struct ReadCost {
+    int64_t bytes = 0;
+    bool at_least = false;  ///< deep samples counted only until past the budget
+    int64_t deep_samples = 0;  ///< counted so far (all of them unless `at_least`)
+    std::string what;  ///< "1920 x 1080, 4 channels" (+ ", deep, N samples")
+};
+bool read_cost(const std::string& path, int64_t budget_bytes, ReadCost& cost, std::string& err);
+
 /// Read all channels of subimage 0 of `path` into `dst`: flat images as float (the file's
 /// own types are kept in `dst.nativespec()` for writing back), deep images as stored.
-/// The whole file is decoded now, so truncation is found here. False + `err` on failure.
+/// The declared size is checked against the memory budget first, then the whole file is
+/// decoded now, so truncation is found here. Exceptions from the readers (bad_alloc
+/// included) become errors. False + `err` on failure.
+bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions& opts,
+                std::string& err);
 bool read_image(OIIO::ImageBuf& dst, const std::string& path, std::string& err);
 
 struct WriteOptions {
@@ -33,6 +62,16 @@ struct WriteOptions {
 /// untouched). False + `err` on failure.
 bool write_image(const OIIO::ImageBuf& img, const std::string& path,
                  const WriteOptions& opts, std::string& err);
+
+/// The temporary file write_image uses for `path` in this process:
+/// ".<file>.openbokeh-partial.<host>.<pid><ext>" beside it. A write removes such files
+/// for its target left by processes of this host that no longer run; any other one may
+/// be deleted once its process has ended.
+std::string partial_write_name(const std::string& path);
+
+/// Remove the temporary files of the writes now in progress (those writes then fail).
+/// Async-signal-safe: for a host's SIGINT/SIGTERM handler or a watchdog.
+void remove_partial_writes() noexcept;
 
 /// Pixel types by channel name, as a file stored them (from a native spec).
 using ChannelTypes = std::map<std::string, OIIO::TypeDesc>;

@@ -1,13 +1,16 @@
 // host.cpp — bokehtool's host. See host.h for the two-pass design.
 
 #include "host.h"
+#include "guard.h"
 #include "help_markdown.h"
 #include "sequence.h"
 
 #include <algorithm>
 #include <cstdlib>
+#include <cmath>
 #include <exception>
 #include <iostream>
+#include <new>
 #include <string_view>
 
 #include <OpenImageIO/argparse.h>
@@ -32,6 +35,33 @@ using bokeh::StackImage;
 using OIIO::Strutil::fmt::format;
 
 static const char* kProgram = "bokehtool";
+
+// "4G", "512M", "100K" (binary units, optional "iB"/"B"), "1.5G", or a byte count.
+static bool parse_memory_size(const std::string& text, int64_t& bytes)
+{
+    OIIO::string_view s(text);
+    float value = 0;
+    if (!OIIO::Strutil::parse_float(s, value) || !(value > 0) || !std::isfinite(value))
+        return false;
+    std::string unit = OIIO::Strutil::lower(std::string(s));
+    if (unit == "b" || OIIO::Strutil::ends_with(unit, "ib"))
+        unit = unit.substr(0, unit.size() - (unit == "b" ? 1 : 2));
+    else if (unit.size() == 2 && unit[1] == 'b')
+        unit = unit.substr(0, 1);
+    const char* units = "kmgt";
+    double scale      = 1;
+    if (!unit.empty()) {
+        const char* u = unit.size() == 1 ? std::strchr(units, unit[0]) : nullptr;
+        if (!u)
+            return false;
+        scale = std::ldexp(1.0, 10 * int(u - units + 1));
+    }
+    const double b = double(value) * scale;
+    if (b < 1 || b > 9.0e18)
+        return false;
+    bytes = int64_t(b);
+    return true;
+}
 
 Host::Host()
 {
@@ -87,6 +117,35 @@ void Host::register_host_commands()
                                                                "(0..1024, 0 = all cores)",
                                                                c.args[0]));
                                       m_threads = n;
+                                      return true;
+                                  }),
+                     true);
+    add_host_command(host_command("--maxmemory", "SIZE", 0, 0,
+                                  "Memory one input file may take once read (4G, 512M, 100K or "
+                                  "bytes); a file whose header declares more is refused before "
+                                  "it is read. Default: half the physical memory",
+                                  [this](CommandContext& c) {
+                                      int64_t bytes = 0;
+                                      if (!parse_memory_size(c.args[0], bytes))
+                                          return c.fail(format("'{}' is not a memory size "
+                                                               "(4G, 512M, 100K or bytes; > 0)",
+                                                               c.args[0]));
+                                      m_read_options.memory_budget_bytes = bytes;
+                                      return true;
+                                  }),
+                     true);
+    add_host_command(host_command("--timeout", "SECONDS", 0, 0,
+                                  "Stop the run with an error after this long (a last resort on "
+                                  "farms; temporary output files are removed)",
+                                  [this](CommandContext& c) {
+                                      OIIO::string_view s(c.args[0]);
+                                      float t = 0;
+                                      if (!OIIO::Strutil::parse_float(s, t) || !s.empty()
+                                          || !(t > 0) || !std::isfinite(t))
+                                          return c.fail(format("'{}' is not a time in seconds "
+                                                               "(> 0)",
+                                                               c.args[0]));
+                                      m_timeout_seconds = t;
                                       return true;
                                   }),
                      true);
@@ -378,10 +437,12 @@ void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool
     const std::string& head = words[0];
     const bool is_file      = head.empty() || head[0] != '-' || head == "-";
     if (is_file) {
-        if (checking)
+        if (checking) {
             ++m_depth;
-        else
+        } else {
+            set_current("-i");
             read_input(head);
+        }
         return;
     }
     const size_t colon          = head.find(':');
@@ -408,6 +469,7 @@ void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool
     }
     if (m_global[name])
         return;
+    set_current(name);
     std::string err;
     bokeh::parse_options(cmd->options, modifiers, opts, err);  // checked in pass 1
     run_command(*cmd, opts, args);
@@ -464,6 +526,8 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     bool ok = false;
     try {
         ok = cmd.run(ctx);
+    } catch (const std::bad_alloc&) {
+        ctx.error = "out of memory (std::bad_alloc)";
     } catch (const std::exception& e) {
         ctx.error = format("failed with an exception: {}", e.what());
     } catch (...) {
@@ -501,8 +565,14 @@ bool Host::read_input(const std::string& path)
 {
     auto buf = std::make_shared<OIIO::ImageBuf>();
     std::string err;
-    if (!bokeh::read_image(*buf, path, err))
+    StderrCapture capture;
+    const bool read = bokeh::read_image(*buf, path, m_read_options, err);
+    const std::string said = OIIO::Strutil::strip(capture.finish());
+    if (!read)
         return fail("-i", err);
+    if (!said.empty())
+        warn(format("{}: read, with the reader's message: {}", path,
+                    OIIO::Strutil::join(OIIO::Strutil::splits(said, "\n"), " / ")));
     bokeh::NonFiniteCount count;
     if (!bokeh::scrub_nonfinite(*buf, m_nan_policy, count, m_threads))
         return fail("-i", format("{}: {} non-finite (NaN/Inf) value(s) and --nan:policy=error",
@@ -531,8 +601,15 @@ static bool integer_only_format(const std::string& path)
     return std::any_of(std::begin(names), std::end(names), [&](const char* n) { return ext == n; });
 }
 
+void Host::set_current(const std::string& command)
+{
+    m_current = command;
+    set_guard_command(command);
+}
+
 bool Host::write_one(const PendingWrite& w)
 {
+    set_current("-o");
     const StackImage& img = w.image;
     std::vector<OIIO::TypeDesc> formats = bokeh::formats_for(img.buf->spec(), img.file_types);
     for (int c = 0; c < img.buf->nchannels(); ++c) {
@@ -615,6 +692,27 @@ int Host::main(const std::vector<std::string>& args)
         return 1;
     }
 
+    install_guards();
+    set_current("");
+    // OIIO's debug messages ("OIIO DEBUG: ImageBuf unable to allocate ...") would make a
+    // second line under the one-line error that reports the same failure.
+    OIIO::attribute("debug", 0);
+    try {
+        return run_frames(args);
+    } catch (const std::bad_alloc&) {
+        fail(m_current, "out of memory (std::bad_alloc)");
+    } catch (const std::exception& e) {
+        std::string what = OIIO::Strutil::strip(e.what());
+        fail(m_current, "failed with an exception: " + what.substr(0, what.find('\n')));
+    } catch (...) {
+        fail(m_current, "failed with an unknown exception");
+    }
+    bokeh::remove_partial_writes();
+    return 1;
+}
+
+int Host::run_frames(const std::vector<std::string>& args)
+{
     FramePlan plan;
     std::string err;
     if (!plan_frames(args, plan, err))
@@ -628,6 +726,10 @@ int Host::main(const std::vector<std::string>& args)
     if (!m_colors.load(bokeh::resolve_color_config(m_colorconfig, shipped_color_config()), err))
         return fail("--colorconfig", err), 1;
     OIIO::attribute("threads", m_threads);
+    m_read_options.budget_name = m_read_options.memory_budget_bytes > 0 ? "--maxmemory"
+                                                                        : "the memory budget "
+                                                                          "(--maxmemory)";
+    Watchdog watchdog(m_timeout_seconds);
 
     for (size_t i = 0; i < frames.size(); ++i) {
         OIIO::Timer timer;

@@ -14,6 +14,7 @@
 
 #include <bokeh/color.h>
 #include <bokeh/image.h>
+#include <bokeh/io.h>
 #include <bokeh/plugin.h>
 
 namespace OIIO_NAMESPACE {
@@ -56,6 +57,8 @@ private:
     bool read_input(const std::string& path);
     bool write_pending();
     bool write_one(const PendingWrite& w);
+    int run_frames(const std::vector<std::string>& args);
+    void set_current(const std::string& command);
     bool fail(const std::string& command, const std::string& why);
     void warn(const std::string& what) const;
     void message(const std::string& what) const;
@@ -70,6 +73,8 @@ private:
     bool m_info = false, m_no_clobber = false, m_progress = false;
     bokeh::NonFinitePolicy m_nan_policy = bokeh::NonFinitePolicy::Zero;
     std::string m_colorconfig;
+    bokeh::ReadOptions m_read_options;
+    double m_timeout_seconds = 0;  // 0 = no limit
 
     // Per-frame state (pass 2), and the stack depth pass 1 simulates.
     std::vector<bokeh::StackImage> m_stack;
@@ -77,7 +82,8 @@ private:
     std::map<std::string, OIIO::TypeDesc> m_datatypes;
     int m_depth = 0;
     bool m_failed = false;
-    std::string m_where;  // appended to errors: which frame of a sequence
+    std::string m_where;    // appended to errors: which frame of a sequence
+    std::string m_current;  // the command running, named by errors that are not its own
 };
 
 }  // namespace bokehtool

@@ -1,0 +1,189 @@
+// bokehtool on a farm node: the memory budget (--maxmemory), running out of memory,
+// --timeout, SIGTERM during a write, and temporary files left by a killed run.
+#include <gtest/gtest.h>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <chrono>
+#include <fstream>
+#include <thread>
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/strutil.h>
+
+#include "test_util.h"
+
+using namespace bokeh_test;
+using OIIO::Strutil::fmt::format;
+
+namespace {
+
+std::string small_exr(const std::string& dir)
+{
+    OIIO::ImageBuf img = rgbaz_image(64, 48, [](int x, int y) {
+        return std::array<float, 5>{ x / 64.0f, y / 48.0f, 0.5f, 1.0f, 3.0f };
+    });
+    const std::string path = dir + "/in.exr";
+    img.specmod().attribute("compression", "zip");
+    EXPECT_TRUE(img.write(path));
+    return path;
+}
+
+std::vector<std::string> files_in(const std::string& dir)
+{
+    std::vector<std::string> files;
+    OIIO::Filesystem::get_directory_entries(dir, files);
+    for (std::string& f : files)
+        f = OIIO::Filesystem::filename(f);
+    std::sort(files.begin(), files.end());
+    return files;
+}
+
+// This machine's name as the temporary files spell it (up to the first dot; other than
+// letters, digits, '-' and '_' become '_').
+std::string host_name()
+{
+    char buf[256] = {};
+    gethostname(buf, sizeof buf - 1);
+    std::string h(buf);
+    h = h.substr(0, h.find('.'));
+    for (char& c : h)
+        if (!std::isalnum(static_cast<unsigned char>(c)) && c != '-' && c != '_')
+            c = '_';
+    return h.empty() ? "host" : h;
+}
+
+}  // namespace
+
+TEST(Robust, MaxMemoryRefusesAFileByName)
+{
+    const std::string dir = fresh_dir("robust_maxmemory");
+    const std::string in = small_exr(dir), out = dir + "/out.exr";
+    // 64 x 48 x 5 channels x 4 bytes = 61440, plus 3 chunk offsets of 8 bytes (ZIP: 16
+    // lines a chunk), plus 3 rows of chunks as stored (16 x 64 x 5 floats = 20480 bytes):
+    // 122904 bytes = 120.0 KiB.
+    RunResult r = bokehtool(format("--maxmemory 119K {} -o {}", in, out));
+    expect_clean_failure(r, "in.exr: reading it needs 120.0 KiB (64 x 48, 5 channels), more "
+                            "than --maxmemory of 119.0 KiB", out);
+    r = bokehtool(format("--maxmemory 121K {} -o {}", in, out));
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(exists(out));
+    for (const char* bad : { "4X", "0", "-1", "K", "1.5Q" }) {
+        r = bokehtool(format("--maxmemory {} {} -o {}/bad.exr", bad, in, dir));
+        expect_clean_failure(r, format("--maxmemory: '{}' is not a memory size", bad), dir + "/bad.exr");
+    }
+    r = bokehtool(format("--maxmemory 0.5GiB {} -o {}/ok.exr", in, dir));
+    EXPECT_EQ(r.status, 0) << r.err;
+}
+
+TEST(Robust, DeepFileRefusedOnItsSampleCount)
+{
+    const std::string deep = shared_data("gaffer/representativeDeepImage.exr");
+    REQUIRE_SHARED(deep);
+    const std::string dir = fresh_dir("robust_deep_budget"), out = dir + "/out.exr";
+    // 150 x 100 pixels x (16 + 8 x 6) bytes = 960000 bytes: under 1M, so the samples
+    // (191482 of 4 half + 2 float channels = 16 bytes) are counted and pass it.
+    const RunResult r = bokehtool(format("--maxmemory 1M {} -o {}", deep, out));
+    expect_clean_failure(r, "(150 x 100, 6 channels, deep, more than ", out);
+    EXPECT_NE(r.err.find("samples), more than --maxmemory of 1.0 MiB"), std::string::npos) << r.err;
+    EXPECT_EQ(bokehtool(format("--maxmemory 5M {} -o {}", deep, out)).status, 0);
+}
+
+TEST(Robust, OutOfMemoryIsTheOneLineError)
+{
+#if defined(__SANITIZE_ADDRESS__)
+    GTEST_SKIP() << "under ASan (it reserves terabytes of address space, so ulimit -v cannot be used)";
+#endif
+    const std::string dir = fresh_dir("robust_oom"), out = dir + "/out.exr";
+    // 1.5 GB of address space: the 8 GB frame cannot be allocated.
+    RunResult r = bokehtool(format("--scene lights:width=20000:height=20000 -o {}", out),
+                            "ulimit -v 1500000;");
+    expect_clean_failure(r, "--scene: out of memory (std::bad_alloc)", out);
+    r = bokehtool(format("--scene lights:width=6000:height=6000:aa=1 --blur 5x5 -o {}", out),
+                  "ulimit -v 1500000;");
+    expect_clean_failure(r, "out of memory (std::bad_alloc)", out);
+    EXPECT_TRUE(files_in(dir).empty());
+}
+
+TEST(Robust, TimeoutStopsTheRunCleanly)
+{
+    const std::string dir = fresh_dir("robust_timeout"), out = dir + "/out.exr";
+    // About 1.7 s on one core of the project's machine.
+    const auto t0 = std::chrono::steady_clock::now();
+    RunResult r = bokehtool(format("--threads 1 --timeout 0.3 --scene lights:width=2000:height=1000:aa=1 "
+                                   "--defocus -o {}",
+                                   out));
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    expect_clean_failure(r, "--timeout: still running after 0.3 s (in --", out);
+    EXPECT_LT(seconds, 1.5) << "stopped near its limit";
+    EXPECT_TRUE(files_in(dir).empty());
+    for (const char* bad : { "0", "-2", "abc", "nan" }) {
+        r = bokehtool(format("--timeout {} --scene lights:width=8:height=8 -o {}", bad, out));
+        expect_clean_failure(r, format("--timeout: '{}' is not a time in seconds", bad), out);
+    }
+    r = bokehtool(format("--timeout 60 --scene lights:width=8:height=8 -o {}", out));
+    EXPECT_EQ(r.status, 0) << r.err;
+}
+
+TEST(Robust, SigtermDuringAWriteRemovesItsTemporaryFile)
+{
+    const std::string dir = fresh_dir("robust_sigterm"), out = dir + "/big.exr";
+    const std::string scene = "lights:width=2000:height=1500:aa=1";
+    const pid_t pid = fork();
+    if (pid == 0) {
+        const int n = open("/dev/null", O_RDWR);
+        dup2(n, 0), dup2(n, 1), dup2(n, 2);
+        execl(BOKEHTOOL, BOKEHTOOL, "--scene", scene.c_str(), "-o", out.c_str(),
+              static_cast<char*>(nullptr));
+        _exit(127);
+    }
+    // Wait for the temporary file to appear, then stop the run.
+    bool seen     = false;
+    const auto t0 = std::chrono::steady_clock::now();
+    while (!seen && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(30)) {
+        for (const std::string& f : files_in(dir))
+            seen = seen || f.find(".openbokeh-partial.") != std::string::npos;
+        if (!seen)
+            std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    kill(pid, SIGTERM);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ASSERT_TRUE(seen) << "the write's temporary file never appeared";
+    EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << "ends by the signal";
+    EXPECT_TRUE(files_in(dir).empty()) << "left: " << OIIO::Strutil::join(files_in(dir), " ");
+}
+
+TEST(Robust, StaleTemporaryFilesOfDeadRunsAreRemoved)
+{
+    const std::string dir = fresh_dir("robust_stale");
+    const std::string in = small_exr(dir), out = dir + "/out.exr";
+    // A pid that no longer runs: a child that has ended and been reaped.
+    const pid_t dead = fork();
+    if (dead == 0)
+        _exit(0);
+    waitpid(dead, nullptr, 0);
+    const std::string host = host_name();
+    const std::string stale = format(".out.exr.openbokeh-partial.{}.{}.exr", host, dead);
+    const std::string alive = format(".out.exr.openbokeh-partial.{}.{}.exr", host, getpid());
+    const std::string other_host = format(".out.exr.openbokeh-partial.{}x.{}.exr", host, dead);
+    const std::string other_file = format(".other.exr.openbokeh-partial.{}.{}.exr", host, dead);
+    for (const std::string& f : { stale, alive, other_host, other_file })
+        std::ofstream(dir + "/" + f) << "partial";
+    const RunResult r = bokehtool(format("{} -o {}", in, out));
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::vector<std::string> left = files_in(dir);
+    auto has = [&](const std::string& f) { return std::find(left.begin(), left.end(), f) != left.end(); };
+    EXPECT_FALSE(has(stale)) << "a dead run's temporary file for this target is removed";
+    EXPECT_TRUE(has(alive)) << "a running process's is kept";
+    EXPECT_TRUE(has(other_host)) << "another host's is kept (its process may run)";
+    EXPECT_TRUE(has(other_file)) << "another target's is kept";
+    EXPECT_TRUE(has("out.exr"));
+}
