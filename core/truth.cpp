@@ -169,9 +169,48 @@ struct Scene {
     std::vector<Cell> cells;
     std::vector<TruthSample> samples;
     float coc_lo = 0.0f, coc_hi = 0.0f;
+    // The CoC range of the samples in each kTile x kTile block of cells (empty: lo > hi):
+    // a pixel's rays need only the range of the blocks they can reach.
+    static constexpr int kTile = 16;
+    int tiles_x = 0, tiles_y = 0;
+    std::vector<float> tile_lo, tile_hi;
     const Cell& cell(int x, int y) const
     {
         return cells[size_t(y - data.ybegin) * size_t(data.width()) + size_t(x - data.xbegin)];
+    }
+    void build_tiles()
+    {
+        tiles_x = (data.width() + kTile - 1) / kTile;
+        tiles_y = (data.height() + kTile - 1) / kTile;
+        tile_lo.assign(size_t(tiles_x) * size_t(tiles_y), std::numeric_limits<float>::infinity());
+        tile_hi.assign(tile_lo.size(), -std::numeric_limits<float>::infinity());
+        for (int y = 0; y < data.height(); ++y)
+            for (int x = 0; x < data.width(); ++x) {
+                const Cell& c = cells[size_t(y) * size_t(data.width()) + size_t(x)];
+                if (c.count == 0)
+                    continue;
+                const size_t t = size_t(y / kTile) * size_t(tiles_x) + size_t(x / kTile);
+                tile_lo[t]     = std::min(tile_lo[t], c.coc_min);
+                tile_hi[t]     = std::max(tile_hi[t], c.coc_max);
+            }
+    }
+    // The CoC range of the samples in the blocks that cells [x0, x1] x [y0, y1] touch.
+    void range_near(int x0, int x1, int y0, int y1, float& lo, float& hi) const
+    {
+        lo = std::numeric_limits<float>::infinity();
+        hi = -std::numeric_limits<float>::infinity();
+        x0 = std::max(x0, data.xbegin);
+        y0 = std::max(y0, data.ybegin);
+        x1 = std::min(x1, data.xend - 1);
+        y1 = std::min(y1, data.yend - 1);
+        if (x0 > x1 || y0 > y1)
+            return;
+        for (int ty = (y0 - data.ybegin) / kTile; ty <= (y1 - data.ybegin) / kTile; ++ty)
+            for (int tx = (x0 - data.xbegin) / kTile; tx <= (x1 - data.xbegin) / kTile; ++tx) {
+                const size_t t = size_t(ty) * size_t(tiles_x) + size_t(tx);
+                lo             = std::min(lo, tile_lo[t]);
+                hi             = std::max(hi, tile_hi[t]);
+            }
     }
 };
 
@@ -370,12 +409,14 @@ bool visit_cell(const Scene& sc, const Cell& cell, float c_in, float c_out, cons
 }
 
 // Trace the ray from sensor position (px, py) through aperture offset (sx, sy) (per px
-// of CoC): its image position at CoC c is (px - sx c, py - sy c).
-void trace(const Scene& sc, double px, double py, double sx, double sy, const CocOfDepth& coc_of, RayState& r)
+// of CoC): its image position at CoC c is (px - sx c, py - sy c), for c over [lo, hi],
+// the CoC range of every sample the ray can reach.
+void trace(const Scene& sc, float lo, float hi, double px, double py, double sx, double sy, const CocOfDepth& coc_of,
+           RayState& r)
 {
     const OIIO::ROI& d = sc.data;
     const double dx = -sx, dy = -sy;
-    double ca = sc.coc_lo, cb = sc.coc_hi;
+    double ca = lo, cb = hi;
     // Clip [ca, cb] to where the ray is over the cells.
     auto clip = [&](double p, double dir, double lo, double hi) {
         if (dir == 0.0) {
@@ -394,8 +435,8 @@ void trace(const Scene& sc, double px, double py, double sx, double sy, const Co
     if (!(ca <= cb))
         return;
     // The first interval is open below unless the window cut it, the last open above.
-    const float lower = ca > sc.coc_lo ? float(ca) : -std::numeric_limits<float>::infinity();
-    const float upper = cb < sc.coc_hi ? float(cb) : std::numeric_limits<float>::infinity();
+    const float lower = ca > lo ? float(ca) : -std::numeric_limits<float>::infinity();
+    const float upper = cb < hi ? float(cb) : std::numeric_limits<float>::infinity();
     int ix = std::clamp(int(std::floor(px + dx * ca)), d.xbegin, d.xend - 1);
     int iy = std::clamp(int(std::floor(py + dy * ca)), d.ybegin, d.yend - 1);
     const int stepx = dx > 0.0 ? 1 : -1, stepy = dy > 0.0 ? 1 : -1;
@@ -565,12 +606,13 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     Scene sc;
     if (!build_scene(sc, tidy, coc_of, nthreads, err))
         return fail(err);
+    sc.build_tiles();
     rep.min_coc_px = sc.coc_lo;
     rep.max_coc_px = sc.coc_hi;
 
-    OIIO::ROI out = sc.data;
+    const float extreme = std::max(std::abs(sc.coc_lo), std::abs(sc.coc_hi));
+    OIIO::ROI out       = sc.data;
     if (opt.grow) {
-        const float extreme   = std::max(std::abs(sc.coc_lo), std::abs(sc.coc_hi));
         const OIIO::ROI display(spec.full_x, spec.full_x + spec.full_width, spec.full_y,
                                 spec.full_y + spec.full_height);
         const int gx = int(std::ceil(0.5f * extreme)), gy = int(std::ceil(0.5f * extreme * opt.aspect));
@@ -588,6 +630,9 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     OIIO::ImageBuf result(ospec);
 
     const ApertureSampler aperture(opt.aperture, opt.aspect);
+    // How far from its pixel a ray can go: half the largest CoC (the aperture's offsets are
+    // within 1/2 px per px of CoC, times the aspect in y), plus the pixel.
+    const int reach_x = int(std::ceil(0.5f * extreme)) + 1, reach_y = int(std::ceil(0.5f * extreme * opt.aspect)) + 1;
     const SobolTable& table = sobol_table();
     const int n_first = (opt.spp + 1) / 2, n_second = opt.spp / 2;
     const double inv_n = 1.0 / opt.spp;
@@ -597,7 +642,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
 
     struct Part {
         double sq = 0.0, sq_tone = 0.0;
-        int64_t cells = 0;
+        int64_t cells = 0, rays = 0;
     };
     const int64_t rows = out.height(), row_chunk = 2;
     const int64_t nchunks = (rows + row_chunk - 1) / row_chunk;
@@ -616,14 +661,17 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                 for (int x = out.xbegin; x < out.xend; ++x) {
                     const uint32_t px_seed = hash_combine(hash_combine(opt.seed, uint32_t(x)), uint32_t(y));
                     double sum[2][4]       = {};
-                    for (int half = 0; half < 2; ++half) {
+                    float lo, hi;
+                    sc.range_near(x - reach_x, x + reach_x, y - reach_y, y + reach_y, lo, hi);
+                    for (int half = 0; half < 2 && lo <= hi; ++half) {
                         PixelSequence seq(table, hash_combine(px_seed, uint32_t(half)));
                         const int n = half == 0 ? n_first : n_second;
                         for (int i = 0; i < n; ++i) {
                             seq.next(u);
                             const auto s = aperture(u[0], u[1]);
                             ray.reset();
-                            trace(sc, x + u[2], y + u[3], s[0], s[1], coc_of, ray);
+                            trace(sc, lo, hi, x + u[2], y + u[3], s[0], s[1], coc_of, ray);
+                            ++part.rays;
                             for (int c = 0; c < 4; ++c)
                                 sum[half][c] += ray.acc[c];
                         }
@@ -653,9 +701,10 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
             acc.sq += p.sq;
             acc.sq_tone += p.sq_tone;
             acc.cells += p.cells;
+            acc.rays += p.rays;
         });
 
-    rep.rays          = out.npixels() * int64_t(opt.spp);
+    rep.rays          = total.rays;
     rep.cells_visited = total.cells;
     const double values = double(out.npixels()) * 4.0;
     if (n_second > 0 && values > 0) {

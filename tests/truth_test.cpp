@@ -550,3 +550,54 @@ TEST(Truth, BadInput)
     EXPECT_TRUE(bokeh::defocus_truth(out, bad, o, &rep));
     EXPECT_EQ(rep.repairs.nan_depth, 1);
 }
+
+// Gaffer's Arnold render: every sample a volume, up to 227 a pixel, samples of alpha 0
+// with colour. At zero aperture the truth is its tidy flatten; focused on its centre
+// pixel, the rays cut the volumes at cell boundaries and the render stays finite with
+// its alpha within [0, 1].
+TEST(Truth, VolumesOfGaffersImage)
+{
+    const std::string path = bokeh_test::shared_data("gaffer/representativeDeepImage.exr");
+    REQUIRE_SHARED(path);
+    OIIO::ImageBuf deep(path), tidy, flat;
+    ASSERT_TRUE(deep.read(0, 0, true)) << deep.geterror();
+    ASSERT_TRUE(bokeh::deep_tidy(tidy, deep));
+    ASSERT_TRUE(bokeh::flatten(flat, tidy));
+    bokeh::TruthOptions o;
+    o.coc.max_coc_px = 0.0;
+    o.spp            = 4;
+    OIIO::ImageBuf out;
+    bokeh::TruthReport rep;
+    ASSERT_TRUE(bokeh::defocus_truth(out, deep, o, &rep, 2)) << out.geterror();
+    double worst = 0.0;
+    for (int y = flat.roi().ybegin; y < flat.roi().yend; ++y)
+        for (int x = flat.roi().xbegin; x < flat.roi().xend; ++x)
+            for (int c = 0; c < 4; ++c) {
+                const double f = flat.getchannel(x, y, 0, c);
+                worst = std::max(worst, std::abs(f - out.getchannel(x, y, 0, c)) / std::max(1.0, std::abs(f)));
+            }
+    std::cout << "zero aperture: largest difference from the tidy flatten " << worst << "\n";
+    EXPECT_LE(worst, 1.2e-7);
+
+    o                       = bokeh::TruthOptions{};
+    o.coc.lens.focal_mm     = 35.0;
+    o.coc.lens.fstop        = 16.0;
+    o.coc.lens.depth_unit_mm = 10.0;
+    o.coc.focus_at_pixel    = true;
+    o.coc.focus_x           = 75;
+    o.coc.focus_y           = 50;
+    o.spp                   = 16;
+    ASSERT_TRUE(bokeh::defocus_truth(out, deep, o, &rep, 2)) << out.geterror();
+    std::cout << rep.summary << "\n";
+    EXPECT_GT(rep.max_coc_px - rep.min_coc_px, 4.0f);
+    float lo = 1.0f, hi = 0.0f;
+    for (int y = out.roi().ybegin; y < out.roi().yend; ++y)
+        for (int x = out.roi().xbegin; x < out.roi().xend; ++x) {
+            for (int c = 0; c < 4; ++c)
+                ASSERT_TRUE(std::isfinite(out.getchannel(x, y, 0, c))) << x << "," << y;
+            lo = std::min(lo, out.getchannel(x, y, 0, 3));
+            hi = std::max(hi, out.getchannel(x, y, 0, 3));
+        }
+    EXPECT_GE(lo, 0.0f);
+    EXPECT_LE(hi, 1.0f + 1e-6f);
+}

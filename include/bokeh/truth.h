@@ -72,7 +72,7 @@ struct TruthOptions {
 };
 
 struct TruthReport {
-    int64_t rays          = 0;  ///< rays traced
+    int64_t rays          = 0;  ///< rays traced (pixels whose rays can reach no sample trace none)
     int64_t cells_visited = 0;  ///< pixel cells the rays walked through
     double seconds        = 0.0;
     float min_coc_px = 0.0f, max_coc_px = 0.0f;  ///< over the samples
