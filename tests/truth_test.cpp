@@ -10,7 +10,6 @@
 #include <iostream>
 #include <random>
 
-#include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/imagebufalgo.h>
 
 #include <bokeh/deep.h>
@@ -23,32 +22,14 @@ namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-struct Smp {
-    float r, g, b, a, z, zb;  // zb == z: a point
-};
-using Pixel = std::vector<Smp>;
+using Smp   = bokeh_test::DeepSample;
+using Pixel = bokeh_test::DeepPixel;
 
-// A deep R, G, B, A, Z, ZBack image over w x h at (x0, y0); display window = data window.
-OIIO::ImageBuf make_deep(int w, int h, const std::vector<Pixel>& px, int x0 = 0, int y0 = 0)
+// A deep R, G, B, A, Z, ZBack image over w x h at (x0, y0), display window = data window.
+OIIO::ImageBuf framed_deep(int w, int h, const std::vector<Pixel>& px, int x0 = 0, int y0 = 0)
 {
-    OIIO::ImageSpec spec(w, h, 6, OIIO::TypeFloat);
-    spec.x = spec.full_x = x0;
-    spec.y = spec.full_y = y0;
-    spec.channelnames  = { "R", "G", "B", "A", "Z", "ZBack" };
-    spec.alpha_channel = 3;
-    spec.z_channel     = 4;
-    spec.deep          = true;
-    OIIO::ImageBuf buf(spec);
-    OIIO::DeepData& dd = *buf.deepdata();
-    for (size_t p = 0; p < px.size(); ++p)
-        dd.set_samples(int64_t(p), int(px[p].size()));
-    for (size_t p = 0; p < px.size(); ++p)
-        for (size_t s = 0; s < px[p].size(); ++s) {
-            const Smp& m      = px[p][s];
-            const float v[6] = { m.r, m.g, m.b, m.a, m.z, m.zb };
-            for (int ch = 0; ch < 6; ++ch)
-                dd.set_deep_value(int64_t(p), ch, int(s), v[ch]);
-        }
+    OIIO::ImageBuf buf = bokeh_test::make_deep(w, h, px, false, x0, y0);
+    buf.set_full(x0, x0 + w, y0, y0 + h, 0, 1);
     return buf;
 }
 
@@ -108,7 +89,7 @@ OIIO::ImageBuf lone_point(int n, float coc)
 {
     std::vector<Pixel> px(size_t(n) * n);
     px[size_t(n / 2) * n + size_t(n / 2)] = { { 1, 1, 1, 1, coc, coc } };
-    return make_deep(n, n, px);
+    return framed_deep(n, n, px);
 }
 
 // A random scene: points and volumes, alpha 0 and 1 among them, up to 4 samples a pixel.
@@ -126,7 +107,7 @@ OIIO::ImageBuf random_scene(int w, int h, uint32_t seed, int x0 = 0, int y0 = 0,
             p.push_back({ a * u(rng), a * u(rng), a * u(rng) + (a == 0.0f ? 0.05f : 0.0f), a, z, zb });
         }
     }
-    return make_deep(w, h, px, x0, y0);
+    return framed_deep(w, h, px, x0, y0);
 }
 
 double rms_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b, int dx = 0, int dy = 0)
@@ -425,7 +406,7 @@ TEST(Truth, RevealsHiddenBackground)
             else
                 p = { { 0, 0, 1, 1, 1000, 1000 } };  // visible blue
         }
-    const OIIO::ImageBuf deep = make_deep(kW, kH, px);
+    const OIIO::ImageBuf deep = framed_deep(kW, kH, px);
     bokeh::TruthOptions o;
     o.coc.lens.focal_mm        = 50.0;
     o.coc.lens.fstop           = 2.0;
@@ -500,7 +481,7 @@ TEST(Truth, VolumeSlabStaysUniform)
 {
     constexpr int kN = 24;
     std::vector<Pixel> px(size_t(kN) * kN, Pixel{ { 0.3f, 0.2f, 0.1f, 0.6f, -10.0f, 10.0f } });
-    const OIIO::ImageBuf deep = make_deep(kN, kN, px);
+    const OIIO::ImageBuf deep = framed_deep(kN, kN, px);
     bokeh::TruthOptions o     = direct_options(64);
     o.grow                    = false;
     OIIO::ImageBuf out, flat;
@@ -540,7 +521,7 @@ TEST(Truth, BadInput)
     // A NaN depth under the error policy: refused, naming it; under Zero: dropped, counted.
     std::vector<Pixel> px(4, Pixel{ { 1, 1, 1, 1, 2, 2 } });
     px[1] = { { 1, 1, 1, 1, std::nanf(""), std::nanf("") } };
-    const OIIO::ImageBuf bad = make_deep(2, 2, px);
+    const OIIO::ImageBuf bad = framed_deep(2, 2, px);
     o                        = direct_options(4);
     o.nonfinite              = bokeh::NonFinitePolicy::Error;
     EXPECT_FALSE(bokeh::defocus_truth(out, bad, o));
