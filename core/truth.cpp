@@ -316,9 +316,10 @@ bool build_scene(Scene& sc, const OIIO::ImageBuf& tidy, const CocOfDepth& coc_of
         });
     if (all.bad >= 0) {
         err = format("pixel ({}, {}): the CoC falls from {} to {} px as Z grows from {} to {}; the depth "
-                     "mode must read Z as a distance (nearer = smaller Z)",
+                     "mode must read Z as a distance (nearer = smaller Z){}",
                      sc.data.xbegin + int(all.bad % w), sc.data.ybegin + int(all.bad / w), all.bad_c0, all.bad_c1,
-                     all.bad_z0, all.bad_z1);
+                     all.bad_z0, all.bad_z1,
+                     all.bad_z0 <= 0.0f ? " and a Z of 0 or below reads as no depth (infinitely far)" : "");
         return false;
     }
     sc.coc_lo = total ? all.lo : 0.0f;

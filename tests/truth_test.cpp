@@ -582,3 +582,28 @@ TEST(Truth, VolumesOfGaffersImage)
     EXPECT_GE(lo, 0.0f);
     EXPECT_LE(hi, 1.0f + 1e-6f);
 }
+
+// A sample at Z = 0 in front of others reads as "no depth" (infinitely far) under the
+// depth mode, which contradicts its place in the pixel: refused, saying why.
+TEST(Truth, ZeroDepthInFrontIsRefused)
+{
+    std::vector<Pixel> px(4, Pixel{ { 1, 1, 1, 0.5, 0, 0 }, { 1, 1, 1, 1, 3, 3 } });
+    bokeh::TruthOptions o;
+    o.coc.lens.focus_distance = 2.0;
+    OIIO::ImageBuf out;
+    EXPECT_FALSE(bokeh::defocus_truth(out, framed_deep(2, 2, px), o));
+    EXPECT_NE(out.geterror().find("no depth"), std::string::npos) << out.geterror();
+}
+
+// Progress goes up to 1 in rising steps.
+TEST(Truth, ProgressRises)
+{
+    bokeh::TruthOptions o = direct_options(4);
+    std::vector<float> seen;
+    o.progress = [&](float f) { seen.push_back(f); };
+    OIIO::ImageBuf out;
+    ASSERT_TRUE(bokeh::defocus_truth(out, random_scene(20, 40, 2), o, nullptr, 2));
+    ASSERT_FALSE(seen.empty());
+    EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
+    EXPECT_FLOAT_EQ(seen.back(), 1.0f);
+}
