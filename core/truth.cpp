@@ -15,8 +15,12 @@
 // the CoC is the sample's; half-open intervals, the first and last open-ended so a
 // zero-size aperture composites exactly the pixel's own samples, in the order and
 // arithmetic of flatten), the two half renders for the noise estimate, the per-pixel
-// seeds. Limits as truth.h says; cost is rays x cells crossed, the cells crossed growing
-// with the CoC range and stopping at the first opaque surface.
+// seeds, and the blocks: each 16 x 16 block of cells keeps its samples' CoC range, and a
+// pixel's rays walk only the range of the blocks they can reach (on the merged
+// LowResLeftView passes, 2.6 cells a ray instead of 15.3, the same pixels:
+// build/bin/truth_measure, docs/methods/truth.md). Limits as truth.h says; cost is rays x
+// cells crossed, the cells growing with the CoC range, stopping at the first opaque
+// surface; about 200 ns a ray on one core, mostly the sampler and the walk's set-up.
 
 #include <bokeh/parallel.h>
 #include <bokeh/truth.h>
