@@ -21,8 +21,8 @@
 // in-focus range and the CoC limit agree. Those shapings keep the CoC monotone in depth
 // but not linear in 1/z; the walk never assumes the linearity: cells are found by CoC,
 // and where a volume is cut by a cell boundary, the depth where the CoC reaches the
-// boundary is found from CocOfDepth itself (the thin lens's 1/z interpolation as the first
-// guess, exact there; bisection on the float depth otherwise). The CoC must not fall as
+// boundary is found from CocOfDepth itself (regula falsi in 1/z: its first step is the
+// thin lens's exact answer, a few more where the curve is bent). The CoC must not fall as
 // Z grows within a pixel (a depth mode that reads Z backwards is refused).
 //
 // Sampling: per output pixel, a 4-D Sobol' sequence (Joe and Kuo's direction numbers)
