@@ -26,37 +26,8 @@ using namespace bokeh_test;
 
 namespace {
 
-struct Smp {
-    double r, g, b, a, z, zb;  // zb == z: a point
-};
-using Pixel = std::vector<Smp>;
-
-// A deep R, G, B, A, Z, ZBack image (colour half when `half_colour`), pixels row by row.
-OIIO::ImageBuf make_deep(int w, int h, const std::vector<Pixel>& px, bool half_colour = false, int x0 = 0,
-                         int y0 = 0)
-{
-    OIIO::ImageSpec spec(w, h, 6, OIIO::TypeFloat);
-    spec.x            = x0;
-    spec.y            = y0;
-    spec.channelnames = { "R", "G", "B", "A", "Z", "ZBack" };
-    const OIIO::TypeDesc c = half_colour ? OIIO::TypeHalf : OIIO::TypeFloat;
-    spec.channelformats    = { c, c, c, c, OIIO::TypeFloat, OIIO::TypeFloat };
-    spec.alpha_channel     = 3;
-    spec.z_channel         = 4;
-    spec.deep              = true;
-    OIIO::ImageBuf buf(spec);
-    OIIO::DeepData& dd = *buf.deepdata();
-    for (size_t p = 0; p < px.size(); ++p)
-        dd.set_samples(int64_t(p), int(px[p].size()));
-    for (size_t p = 0; p < px.size(); ++p)
-        for (size_t s = 0; s < px[p].size(); ++s) {
-            const Smp& m = px[p][s];
-            const double v[6] = { m.r, m.g, m.b, m.a, m.z, m.zb };
-            for (int ch = 0; ch < 6; ++ch)
-                dd.set_deep_value(int64_t(p), ch, int(s), float(v[ch]));
-        }
-    return buf;
-}
+using Smp   = DeepSample;
+using Pixel = DeepPixel;
 
 Pixel read_pixel(const OIIO::ImageBuf& img, int x, int y)
 {

@@ -14,6 +14,7 @@
 #include <OpenImageIO/strutil.h>
 
 #include <gtest/gtest.h>
+#include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/imagebufalgo.h>
 
 namespace bokeh_test {
@@ -90,6 +91,31 @@ OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5
         for (int x = x0; x < x0 + w; ++x)
             img.setpixel(x, y, fn(x, y).data());
     return img;
+}
+
+OIIO::ImageBuf make_deep(int w, int h, const std::vector<DeepPixel>& px, bool half_colour, int x0, int y0)
+{
+    OIIO::ImageSpec spec(w, h, 6, OIIO::TypeFloat);
+    spec.x            = x0;
+    spec.y            = y0;
+    spec.channelnames = { "R", "G", "B", "A", "Z", "ZBack" };
+    const OIIO::TypeDesc c = half_colour ? OIIO::TypeHalf : OIIO::TypeFloat;
+    spec.channelformats    = { c, c, c, c, OIIO::TypeFloat, OIIO::TypeFloat };
+    spec.alpha_channel     = 3;
+    spec.z_channel         = 4;
+    spec.deep              = true;
+    OIIO::ImageBuf buf(spec);
+    OIIO::DeepData& dd = *buf.deepdata();
+    for (size_t p = 0; p < px.size(); ++p)
+        dd.set_samples(int64_t(p), int(px[p].size()));
+    for (size_t p = 0; p < px.size(); ++p)
+        for (size_t s = 0; s < px[p].size(); ++s) {
+            const DeepSample& m = px[p][s];
+            const double v[6] = { m.r, m.g, m.b, m.a, m.z, m.zb };
+            for (int ch = 0; ch < 6; ++ch)
+                dd.set_deep_value(int64_t(p), ch, int(s), float(v[ch]));
+        }
+    return buf;
 }
 
 void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output)

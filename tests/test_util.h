@@ -4,6 +4,7 @@
 #include <array>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include <OpenImageIO/imagebuf.h>
 
@@ -37,6 +38,17 @@ void expect_clean_failure(const RunResult& r, const std::string& what, const std
 /// (x0, y0), display window `full` (default: the data window); `fn(x, y)` gives the pixel.
 OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5>(int, int)>& fn,
                            int x0 = 0, int y0 = 0, OIIO::ROI full = {});
+
+/// One sample of a deep R, G, B, A, Z, ZBack image (zb == z: a point).
+struct DeepSample {
+    double r, g, b, a, z, zb;
+};
+using DeepPixel = std::vector<DeepSample>;
+
+/// A deep R, G, B, A, Z, ZBack image over w x h at (x0, y0) (display window: w x h at the
+/// origin), colour half when `half_colour`, Z and ZBack float; `px` row by row.
+OIIO::ImageBuf make_deep(int w, int h, const std::vector<DeepPixel>& px, bool half_colour = false, int x0 = 0,
+                         int y0 = 0);
 
 /// Largest absolute difference of two images over all channels (inf if sizes differ).
 double max_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b);
