@@ -7,6 +7,7 @@
 #include <bokeh/deep.h>
 #include <bokeh/defocus.h>
 #include <bokeh/plugin.h>
+#include <bokeh/truth.h>
 
 #include "defocus_options.h"
 
@@ -35,8 +36,35 @@ bool defocus_command(CommandContext& c)
     if (diagnostic && in.buf->deep() && !bokeh::flatten(flat, *in.buf, {}, c.nthreads))
         return c.fail(flat.geterror());
     const OIIO::ImageBuf& src = diagnostic && in.buf->deep() ? flat : *in.buf;
+    const std::string& method = c.options.given("quality") ? c.options.get_string("quality")
+                                                           : c.options.get_string("method");
+    for (const char* name : { "spp", "seed" })
+        if (c.options.given(name) && method != "truth")
+            return c.fail(format("{}= is for method=truth", name));
     bool ok;
-    if (what == "coc")
+    if (method == "truth") {
+        // The thin-lens rays through the scene a deep image encodes (truth.h).
+        if (!in.buf->deep())
+            return c.fail("method=truth traces rays through a deep image; this one is flat (--deepen makes one)");
+        if (what != "image")
+            return c.fail(format("method=truth gives an image, not output={}", what));
+        for (const char* name : { "layers", "reduction", "budget", "bloom", "bloomgain", "iris", "zdilate",
+                                  "step", "border" })
+            if (c.options.given(name))
+                return c.fail(format("{}= does not apply to method=truth", name));
+        bokeh::TruthOptions t;
+        t.coc       = o.coc;
+        t.aperture  = o.aperture;
+        t.aspect    = o.aspect;
+        t.grow      = o.grow;
+        t.nonfinite = o.nonfinite;
+        t.spp       = c.options.get_int("spp");
+        t.seed      = uint32_t(c.options.get_int("seed"));
+        bokeh::TruthReport report;
+        ok = bokeh::defocus_truth(*out.buf, *in.buf, t, &report, c.nthreads);
+        if (ok && c.verbosity >= 1)
+            c.message("  defocus truth: " + report.summary);
+    } else if (what == "coc")
         ok = bokeh::coc_map(*out.buf, src, o.coc, c.nthreads);
     else if (what == "focalplane")
         ok = bokeh::focal_plane_view(*out.buf, src, o.coc, 32.0f, c.nthreads);
@@ -81,10 +109,10 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         defocus_command);
     c.needs_scene_linear = true;
     c.options = {
-        OptionSpec::Choice("method", { "auto", "layers", "gather", "reference" },
+        OptionSpec::Choice("method", { "auto", "layers", "gather", "reference", "truth" },
                            "auto: layers set by the budget; gather: the seed's method; "
-                           "reference: exact, slow"),
-        OptionSpec::Choice("quality", { "auto", "layers", "gather", "reference" },
+                           "reference: exact, slow; truth: thin-lens rays through a deep image (spp=)"),
+        OptionSpec::Choice("quality", { "auto", "layers", "gather", "reference", "truth" },
                            "the same as method"),
         OptionSpec::Choice("output", { "image", "deep", "coc", "focalplane", "layers" },
                            "image; deep (a deep input's result kept deep: a sample a layer); or a "
@@ -127,6 +155,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Choice("nonfinite", { "zero", "error" },
                            "NaN/Inf: colour -> 0, depth -> far (counted, warned); or fail"),
         OptionSpec::Float("step", 0.25, 1.0 / 64.0, 8.0, "reference: CoC quantisation step px"),
+        OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
+        OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
     };
     r.add(c);
 }
