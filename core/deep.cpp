@@ -520,6 +520,28 @@ bool assemble(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const std::vecto
     return true;
 }
 
+// The chunks' repairs summed into opt.repairs; under the Error policy, false + `err`
+// naming the count and the first bad sample.
+bool apply_policy(const std::vector<Faults>& faults, const DeepOptions& opt, std::string& err)
+{
+    DeepRepairs total;
+    std::string first;
+    for (const Faults& f : faults) {
+        total.nan_depth += f.counts.nan_depth;
+        total.back_before += f.counts.back_before;
+        total.nonfinite += f.counts.nonfinite;
+        if (first.empty())
+            first = f.first;
+    }
+    if (opt.repairs)
+        *opt.repairs = total;
+    if (opt.policy == NonFinitePolicy::Error && total.total() > 0) {
+        err = format("{} bad samples ({}; NaN policy 'error')", total.total(), first);
+        return false;
+    }
+    return true;
+}
+
 // Run `per_pixel(x, y, Samples& out, Faults&, PixelScratch&)` over `roi`, collecting the samples each
 // pixel gives into `res`; then apply the policy.
 template<class PerPixel>
@@ -546,22 +568,7 @@ bool run_pixels(const OIIO::ROI& roi, int nch, const DeepOptions& opt, int nthre
                 vals.insert(vals.end(), out.v.begin(), out.v.begin() + size_t(out.n) * size_t(nch));
             }
     });
-    DeepRepairs total;
-    std::string first;
-    for (const Faults& f : faults) {
-        total.nan_depth += f.counts.nan_depth;
-        total.back_before += f.counts.back_before;
-        total.nonfinite += f.counts.nonfinite;
-        if (first.empty())
-            first = f.first;
-    }
-    if (opt.repairs)
-        *opt.repairs = total;
-    if (opt.policy == NonFinitePolicy::Error && total.total() > 0) {
-        err = format("{} bad samples ({}; NaN policy 'error')", total.total(), first);
-        return false;
-    }
-    return true;
+    return apply_policy(faults, opt, err);
 }
 
 // The checks every deep operation makes on an input.
@@ -985,19 +992,8 @@ bool flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& 
             }
         }
     });
-    DeepRepairs total;
-    std::string first;
-    for (const Faults& f : faults) {
-        total.nan_depth += f.counts.nan_depth;
-        total.back_before += f.counts.back_before;
-        total.nonfinite += f.counts.nonfinite;
-        if (first.empty())
-            first = f.first;
-    }
-    if (opt.repairs)
-        *opt.repairs = total;
-    if (opt.policy == NonFinitePolicy::Error && total.total() > 0) {
-        dst.errorfmt("flatten: {} bad samples ({}; NaN policy 'error')", total.total(), first);
+    if (!apply_policy(faults, opt, err)) {
+        dst.errorfmt("flatten: {}", err);
         return false;
     }
     dst = std::move(result);
