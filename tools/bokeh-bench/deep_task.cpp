@@ -16,13 +16,16 @@
 #include <bokeh/defocus.h>
 #include <bokeh/io.h>
 #include <bokeh/metrics.h>
+#include <bokeh/truth.h>
 
+#include <cmath>
 #include <cstdio>
 #include <functional>
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
+#include <OpenImageIO/timer.h>
 
 namespace bokeh_bench {
 
@@ -148,6 +151,75 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
             error_of[i] = measure(deep_out_flat, ref);
         else if (c.method == "defocus flat of the flatten (auto)")
             error_of[i] = measure(flat_dof, ref);
+    }
+
+    // Against the thin-lens truth (the layered methods with a black border: the rays see
+    // nothing past the frame), over the frame and over the disocclusion mask: the pixels
+    // where the truth of the deep image and the truth of its flatten differ by more than
+    // 0.01, what the flat image hides.
+    {
+        bokeh::TruthOptions to;
+        to.coc      = lens.coc;
+        to.aperture = lens.aperture;
+        to.spp      = args.reps >= 5 ? 256 : 64;
+        OIIO::ImageBuf truth, truth_flat, flat_deep;
+        bokeh::TruthReport tr;
+        OIIO::Timer timer;
+        const bool ok = bokeh::defocus_truth(truth, merged, to, &tr, t);
+        const double truth_ms = timer() * 1e3;
+        if (!ok || !bokeh::deepen(flat_deep, flat, 1.0f, t) || !bokeh::defocus_truth(truth_flat, flat_deep, to, nullptr, t)) {
+            std::fprintf(stderr, "bokeh-bench: deep: truth: %s%s\n", truth.geterror().c_str(), truth_flat.geterror().c_str());
+            return false;
+        }
+        const OIIO::ROI roi = truth.roi();
+        const OIIO::ImageBuf tr4 = rgba_of(truth, roi), tf4 = rgba_of(truth_flat, roi);
+        std::vector<uint8_t> mask(size_t(roi.npixels()), 0);
+        int64_t in_mask = 0;
+        for (int y = roi.ybegin; y < roi.yend; ++y)
+            for (int x = roi.xbegin; x < roi.xend; ++x) {
+                float a[4], b[4];
+                tr4.getpixel(x, y, a, 4);
+                tf4.getpixel(x, y, b, 4);
+                bool differs = false;
+                for (int c = 0; c < 4; ++c)
+                    differs |= std::abs(a[c] - b[c]) > 0.01f;
+                mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)] = differs;
+                in_mask += differs;
+            }
+        std::printf("truth: %d rays a pixel, %.0f ms, noise %.1f dB; disocclusion mask %lld px (%.1f %%)\n",
+                    to.spp, truth_ms, tr.noise_psnr_db, (long long)in_mask, 100.0 * double(in_mask) / double(roi.npixels()));
+        rows.push_back(format("deep {},truth {} spp,,0,{},{:.3f},1,,{:.2f},", lr, to.spp, t, truth_ms, tr.noise_psnr_db));
+        auto vs_truth = [&](const std::string& name, const OIIO::ImageBuf& src, bokeh::DefocusMethod m) {
+            bokeh::DefocusOptions o = with(m, false);
+            o.border                = bokeh::Border::Black;
+            OIIO::ImageBuf out;
+            if (!bokeh::defocus(out, src, o, nullptr, t))
+                return;
+            const OIIO::ImageBuf got = rgba_of(out, roi);
+            bokeh::ImageError frame, inside;
+            std::string why;
+            bokeh::compare(frame, got, tr4, why, {}, t);
+            // The mask's error: outside it the result is set to the truth, so the mean
+            // squared error over the frame is the mask's times its share of the frame.
+            OIIO::ImageBuf masked = got;
+            for (int y = roi.ybegin; y < roi.yend; ++y)
+                for (int x = roi.xbegin; x < roi.xend; ++x)
+                    if (!mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)]) {
+                        float v[4];
+                        tr4.getpixel(x, y, v, 4);
+                        masked.setpixel(x, y, v, 4);
+                    }
+            bokeh::compare(inside, masked, tr4, why, {}, t);
+            const double share = in_mask > 0 ? double(in_mask) / double(roi.npixels()) : 1.0;
+            const double mask_db = inside.psnr_db + 10.0 * std::log10(share);
+            std::printf("  %-34s vs truth: frame %.2f dB, disocclusion mask %.2f dB\n", name.c_str(), frame.psnr_db, mask_db);
+            rows.push_back(format("deep {},{} vs truth,,0,{},,,{}", lr, name, t, error_fields(frame)));
+            rows.push_back(format("deep {},{} vs truth (mask),,0,{},,,,{:.2f},", lr, name, t, mask_db));
+        };
+        vs_truth("deep reference", merged, bokeh::DefocusMethod::Reference);
+        vs_truth("deep auto", merged, bokeh::DefocusMethod::Auto);
+        vs_truth("flat reference of the flatten", flat, bokeh::DefocusMethod::Reference);
+        vs_truth("flat auto of the flatten", flat, bokeh::DefocusMethod::Auto);
     }
 
     std::printf("%-38s %-5s %-24s %10s %10s\n", "method", "peer", "frame", "median_ms", "psnr_db");
