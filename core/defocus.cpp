@@ -832,15 +832,8 @@ void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads)
 
 bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
 {
-    Kernel k    = o.aperture;
-    k.width_px  = 1.0f;
-    k.height_px = 1.0f;
-    if (!validate(k, err))
+    if (!validate_aperture(o.aperture, o.aspect, err))
         return false;
-    if (!(o.aspect >= 0.05f && o.aspect <= 20.0f)) {
-        err = format("aspect {} is outside 0.05..20", o.aspect);
-        return false;
-    }
     if (o.layers < 0 || o.layers > 1024) {
         err = format("layers {} is outside 0..1024 (0: automatic)", o.layers);
         return false;

@@ -103,6 +103,20 @@ std::optional<std::pair<std::vector<double>, std::vector<double>>> filter_factor
 
 }  // namespace
 
+bool validate_aperture(const Kernel& aperture, float aspect, std::string& err)
+{
+    Kernel k    = aperture;
+    k.width_px  = 1.0f;
+    k.height_px = 1.0f;
+    if (!validate(k, err))
+        return false;
+    if (!(aspect >= 0.05f && aspect <= 20.0f)) {
+        err = format("aspect {} is outside 0.05..20", aspect);
+        return false;
+    }
+    return true;
+}
+
 bool validate(const Kernel& k, std::string& err)
 {
     auto bad_size = [](float v) { return !std::isfinite(v) || v < 0.0f || v > 4096.0f; };

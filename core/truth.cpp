@@ -493,15 +493,8 @@ bool check_options(const TruthOptions& o, std::string& err)
         err = "the aperture must be a disk or a polygon";
         return false;
     }
-    Kernel k    = o.aperture;
-    k.width_px  = 1.0f;
-    k.height_px = 1.0f;
-    if (!validate(k, err))
+    if (!validate_aperture(o.aperture, o.aspect, err))
         return false;
-    if (!(o.aspect >= 0.05f && o.aspect <= 20.0f)) {
-        err = format("aspect {} is outside 0.05..20", o.aspect);
-        return false;
-    }
     if (o.spp < 1 || o.spp > (1 << 20)) {
         err = format("spp {} is outside 1..1048576", o.spp);
         return false;

@@ -127,6 +127,11 @@ double reduction_factor(const Kernel& k);
 /// Check a kernel's parameters; false + `err` naming the bad one.
 bool validate(const Kernel& k, std::string& err);
 
+/// Check an aperture as the depth-defocus methods take it: the kernel's shape at unit size
+/// (each depth's CoC sets the size) and the anamorphic aspect (bokeh height / width,
+/// 0.05..20). False + `err` naming the bad one.
+bool validate_aperture(const Kernel& aperture, float aspect, std::string& err);
+
 /// The exact weights of `k` (what every exact method computes with). Anti-aliased edges
 /// use 64 x 64 stratified samples per boundary pixel (area error below 3e-4 of a pixel).
 /// `nthreads` as for the blurs; the weights do not depend on it.
