@@ -302,6 +302,36 @@ void volume_piece(const DeepLayout& L, const double* s, double a, double b, doub
     }
 }
 
+// The depths where the samples of `px` start or end, sorted, each once.
+void sample_bounds(const DeepLayout& L, const Samples& px, std::vector<double>& bounds)
+{
+    bounds.clear();
+    for (int s = 0; s < px.n; ++s) {
+        bounds.push_back(front_of(L, px.at(s)));
+        bounds.push_back(back_of(L, px.at(s)));
+    }
+    std::sort(bounds.begin(), bounds.end());
+    bounds.erase(std::unique(bounds.begin(), bounds.end()), bounds.end());
+}
+
+// Append `smp` to `out`; a volume is cut at every depth of `bounds` (sorted, each once)
+// strictly inside it.
+void push_cut(const DeepLayout& L, const double* smp, const std::vector<double>& bounds, Samples& out)
+{
+    const double z0 = front_of(L, smp), z1 = back_of(L, smp);
+    auto it         = std::upper_bound(bounds.begin(), bounds.end(), z0);
+    if (!(z1 > z0) || it == bounds.end() || *it >= z1) {  // a point, or nothing cuts it
+        out.push(smp);
+        return;
+    }
+    double a = z0;
+    for (; it != bounds.end() && *it < z1; ++it) {
+        volume_piece(L, smp, a, *it, out.push());
+        a = *it;
+    }
+    volume_piece(L, smp, a, z1, out.push());
+}
+
 // Merge `k` coincident samples (rows of `g`, same Z and ZBack) into `out`.
 void merge_coincident(const DeepLayout& L, const double* const* g, int k, double* out)
 {
@@ -418,32 +448,10 @@ void tidy_pixel(const DeepLayout& L, const Samples& in, Samples& out, TidyScratc
         return;
     }
     // Every depth where a sample starts or ends cuts the volumes that span it.
-    t.bounds.clear();
-    for (int s = 0; s < in.n; ++s) {
-        t.bounds.push_back(front_of(L, in.at(s)));
-        t.bounds.push_back(back_of(L, in.at(s)));
-    }
-    std::sort(t.bounds.begin(), t.bounds.end());
-    t.bounds.erase(std::unique(t.bounds.begin(), t.bounds.end()), t.bounds.end());
+    sample_bounds(L, in, t.bounds);
     t.pieces.reset(in.nch);
-    for (int s = 0; s < in.n; ++s) {
-        const double* smp = in.at(s);
-        const double z0 = front_of(L, smp), z1 = back_of(L, smp);
-        if (!(z1 > z0)) {
-            t.pieces.push(smp);
-            continue;
-        }
-        auto it = std::upper_bound(t.bounds.begin(), t.bounds.end(), z0);
-        if (it == t.bounds.end() || *it >= z1) {  // nothing cuts it
-            t.pieces.push(smp);
-            continue;
-        }
-        double a = z0;
-        for (; it != t.bounds.end() && *it <= z1; ++it) {
-            volume_piece(L, smp, a, *it, t.pieces.push());
-            a = *it;
-        }
-    }
+    for (int s = 0; s < in.n; ++s)
+        push_cut(L, in.at(s), t.bounds, t.pieces);
     // Sort by (Z, ZBack); stable, so merged colours do not depend on the sort's whims.
     t.order.resize(size_t(t.pieces.n));
     std::iota(t.order.begin(), t.order.end(), 0);
@@ -858,30 +866,10 @@ bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::Im
                                        return;
                                    }
                                    // Cut the image's volumes where holdout samples start or end.
-                                   t.bounds.clear();
-                                   for (int s = 0; s < h.n; ++s) {
-                                       t.bounds.push_back(front_of(H, h.at(s)));
-                                       t.bounds.push_back(back_of(H, h.at(s)));
-                                   }
-                                   std::sort(t.bounds.begin(), t.bounds.end());
+                                   sample_bounds(H, h, t.bounds);
                                    cut.reset(L.nch);
-                                   for (int s = 0; s < tidy.n; ++s) {
-                                       const double* smp = tidy.at(s);
-                                       const double z0 = front_of(L, smp), z1 = back_of(L, smp);
-                                       auto it = std::upper_bound(t.bounds.begin(), t.bounds.end(), z0);
-                                       if (!(z1 > z0) || it == t.bounds.end() || *it >= z1) {
-                                           cut.push(smp);
-                                           continue;
-                                       }
-                                       double a = z0;
-                                       for (; it != t.bounds.end() && *it < z1; ++it) {
-                                           if (*it == a)
-                                               continue;
-                                           volume_piece(L, smp, a, *it, cut.push());
-                                           a = *it;
-                                       }
-                                       volume_piece(L, smp, a, z1, cut.push());
-                                   }
+                                   for (int s = 0; s < tidy.n; ++s)
+                                       push_cut(L, tidy.at(s), t.bounds, cut);
                                    // Each piece's light and coverage scaled by its gain, then
                                    // its alpha and colour chosen so that "over" front to back
                                    // composites to those scaled contributions: the pieces of
@@ -938,12 +926,13 @@ bool flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& 
     spec.channelformats.clear();
     OIIO::ImageBuf result(spec);
     const OIIO::ROI roi = src.roi();
-    std::vector<Faults> faults(static_cast<size_t>((roi.height() + 7) / 8));
+    constexpr int rows = DeepResult::kRowsPerChunk;
+    std::vector<Faults> faults(static_cast<size_t>((roi.height() + rows - 1) / rows));
     parallel_for_chunks(0, int64_t(faults.size()), 1, nthreads, [&](int64_t chunk, int64_t) {
         Samples in, tidy;
         TidyScratch t;
         std::vector<double> acc(size_t(L.nch)), T(size_t(L.nch));
-        const int y0 = roi.ybegin + int(chunk) * 8, y1 = std::min(roi.yend, y0 + 8);
+        const int y0 = roi.ybegin + int(chunk) * rows, y1 = std::min(roi.yend, y0 + rows);
         for (int y = y0; y < y1; ++y) {
             float* row = static_cast<float*>(result.pixeladdr(roi.xbegin, y));
             for (int x = roi.xbegin; x < roi.xend; ++x, row += L.nch) {
