@@ -16,8 +16,9 @@
 // rung's CoC to the next rung's (the last a point), so a later merge with another deep
 // element interleaves by depth, and the flatten of the result is the flat output.
 //
-// Limits: samples between two rungs are blurred by a mix of the two kernels (as in the
-// flat method); within a layer, the order of a pixel's pieces is kept but their blur is
+// Limits: every layer holds a dense RGBA and visibility plane over the data window (20
+// bytes a pixel a layer: 18 layers of LowResLeftView's 1024x576, 212 MB); samples between
+// two rungs are blurred by a mix of the two kernels (as in the flat method); within a layer, the order of a pixel's pieces is kept but their blur is
 // one; iris mode and depth dilation are flat-image tools and are refused here; the
 // gather method is flat only.
 
@@ -170,14 +171,16 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     f.layer_vis.assign(K, std::vector<float>(size_t(npx), 1.0f));
     std::vector<double> rung_depth(K, 0.0);
     const bool have_depths = zlo <= zhi;
-    for (size_t k = 0; k < K && have_depths; ++k) {
+    if (have_depths) {
         const float c_lo = coc_of(float(zlo)), c_hi = coc_of(float(zhi));
-        const float target = std::clamp(m.coc_px[k], std::min(c_lo, c_hi), std::max(c_lo, c_hi));
-        rung_depth[k] = depth_of_coc(coc_of, zlo, zhi, target);
+        for (size_t k = 0; k < K; ++k)
+            rung_depth[k] = depth_of_coc(coc_of, zlo, zhi,
+                                         std::clamp(m.coc_px[k], std::min(c_lo, c_hi), std::max(c_lo, c_hi)));
     }
     const float bloom_t = o.bloom_threshold, bloom_g = o.bloom_gain;
     parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
         std::vector<Piece> pieces;
+        std::vector<double> cuts;
         std::vector<float> T(K, 1.0f), self(K), nearer_t(K), in_layer_t(K);
         for (int64_t p = b; p < e; ++p) {
             const int ns = dd.samples(p);
@@ -201,7 +204,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                     continue;
                 }
                 // A volume: cut where its CoC crosses a rung, each piece at its middle's CoC.
-                std::vector<double> cuts = { z };
+                cuts.assign(1, z);
                 for (size_t k = 0; k < K; ++k)
                     if ((m.coc_px[k] > std::min(c0, c1)) && (m.coc_px[k] < std::max(c0, c1)))
                         cuts.push_back(depth_of_coc(coc_of, z, zb, m.coc_px[k]));
