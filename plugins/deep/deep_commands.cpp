@@ -52,12 +52,20 @@ bool finish(CommandContext& c, std::shared_ptr<OIIO::ImageBuf> result, bool ok,
     return true;
 }
 
-bool tidy(CommandContext& c)
+// The command's result from `op(dst, options)`, a deep function of deep.h.
+template<class Op> bool run_deep(CommandContext& c, Op&& op)
 {
     bokeh::DeepRepairs rep;
     auto dst      = std::make_shared<OIIO::ImageBuf>();
-    const bool ok = bokeh::deep_tidy(*dst, *c.inputs[0].buf, deep_options(c, rep), c.nthreads);
+    const bool ok = op(*dst, deep_options(c, rep));
     return finish(c, dst, ok, rep);
+}
+
+bool tidy(CommandContext& c)
+{
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
+        return bokeh::deep_tidy(dst, *c.inputs[0].buf, o, c.nthreads);
+    });
 }
 
 bool merge(CommandContext& c)
@@ -65,28 +73,23 @@ bool merge(CommandContext& c)
     std::vector<const OIIO::ImageBuf*> srcs;
     for (const StackImage& in : c.inputs)
         srcs.push_back(in.buf.get());
-    bokeh::DeepRepairs rep;
-    auto dst      = std::make_shared<OIIO::ImageBuf>();
-    const bool ok = bokeh::deep_merge(*dst, srcs, c.options.get_bool("cull"), deep_options(c, rep),
-                                      c.nthreads);
-    return finish(c, dst, ok, rep);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
+        return bokeh::deep_merge(dst, srcs, c.options.get_bool("cull"), o, c.nthreads);
+    });
 }
 
 bool holdout(CommandContext& c)
 {
-    bokeh::DeepRepairs rep;
-    auto dst      = std::make_shared<OIIO::ImageBuf>();
-    const bool ok = bokeh::deep_holdout(*dst, *c.inputs[0].buf, *c.inputs[1].buf, deep_options(c, rep),
-                                        c.nthreads);
-    return finish(c, dst, ok, rep);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
+        return bokeh::deep_holdout(dst, *c.inputs[0].buf, *c.inputs[1].buf, o, c.nthreads);
+    });
 }
 
 bool flatten(CommandContext& c)
 {
-    bokeh::DeepRepairs rep;
-    auto dst      = std::make_shared<OIIO::ImageBuf>();
-    const bool ok = bokeh::flatten(*dst, *c.inputs[0].buf, deep_options(c, rep), c.nthreads);
-    return finish(c, dst, ok, rep);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
+        return bokeh::flatten(dst, *c.inputs[0].buf, o, c.nthreads);
+    });
 }
 
 bool deepen(CommandContext& c)
@@ -123,10 +126,9 @@ bool slice(CommandContext& c)
         return c.fail(format("NEAR '{}' is not a depth (a number, or -inf)", c.args[0]));
     if (!parse_depth(c.args[1], zfar))
         return c.fail(format("FAR '{}' is not a depth (a number, or inf)", c.args[1]));
-    bokeh::DeepRepairs rep;
-    auto dst      = std::make_shared<OIIO::ImageBuf>();
-    const bool ok = bokeh::deep_slice(*dst, *c.inputs[0].buf, znear, zfar, deep_options(c, rep), c.nthreads);
-    return finish(c, dst, ok, rep);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
+        return bokeh::deep_slice(dst, *c.inputs[0].buf, znear, zfar, o, c.nthreads);
+    });
 }
 
 }  // namespace

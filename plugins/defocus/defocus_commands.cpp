@@ -36,8 +36,7 @@ bool defocus_command(CommandContext& c)
     if (diagnostic && in.buf->deep() && !bokeh::flatten(flat, *in.buf, {}, c.nthreads))
         return c.fail(flat.geterror());
     const OIIO::ImageBuf& src = diagnostic && in.buf->deep() ? flat : *in.buf;
-    const std::string& method = c.options.given("quality") ? c.options.get_string("quality")
-                                                           : c.options.get_string("method");
+    const std::string& method = bokeh::defocus_method_named(c.options);
     for (const char* name : { "spp", "seed" })
         if (c.options.given(name) && method != "truth")
             return c.fail(format("{}= is for method=truth", name));

@@ -46,6 +46,11 @@ bool unit_mm(const std::string& u, double& mm)
 
 }  // namespace
 
+const std::string& defocus_method_named(const OptionValues& v)
+{
+    return v.given("quality") ? v.get_string("quality") : v.get_string("method");
+}
+
 bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
                           std::string& err)
 {
@@ -108,7 +113,7 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
     if (v.given("quality") && v.given("method") && v.get_string("quality") != v.get_string("method"))
         return fail(err, format("quality={} and method={} disagree; give one", v.get_string("quality"),
                                 v.get_string("method")));
-    const std::string& method = v.given("quality") ? v.get_string("quality") : v.get_string("method");
+    const std::string& method = defocus_method_named(v);
     o.method = method == "layers"      ? DefocusMethod::Layers
                : method == "gather"    ? DefocusMethod::Gather
                : method == "reference" ? DefocusMethod::Reference

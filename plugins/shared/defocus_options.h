@@ -20,4 +20,8 @@ namespace bokeh {
 bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
                           std::string& err);
 
+/// The method `v` names: `quality=` and `method=` are one option under two spellings
+/// (defocus_options_from refuses them when they disagree).
+const std::string& defocus_method_named(const OptionValues& v);
+
 }  // namespace bokeh
