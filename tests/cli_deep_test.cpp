@@ -19,23 +19,9 @@ namespace {
 // A small deep file with a volume, a point and, at one pixel, a bad sample of `kind`.
 std::string write_deep(const std::string& dir, const std::string& name, const std::string& kind = "")
 {
-    OIIO::ImageSpec spec(8, 6, 6, OIIO::TypeFloat);
-    spec.channelnames   = { "R", "G", "B", "A", "Z", "ZBack" };
-    spec.channelformats = { OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeFloat,
-                            OIIO::TypeFloat };
-    spec.alpha_channel  = 3;
-    spec.z_channel      = 4;
-    spec.deep           = true;
-    OIIO::ImageBuf buf(spec);
-    OIIO::DeepData& dd = *buf.deepdata();
-    for (int64_t p = 0; p < dd.pixels(); ++p)
-        dd.set_samples(p, 2);
-    for (int64_t p = 0; p < dd.pixels(); ++p) {
-        const float a[2][6] = { { 0.2f, 0.1f, 0.0f, 0.4f, 2.0f, 4.0f }, { 0.0f, 0.3f, 0.6f, 1.0f, 3.0f, 3.0f } };
-        for (int s = 0; s < 2; ++s)
-            for (int c = 0; c < 6; ++c)
-                dd.set_deep_value(p, c, s, a[s][c]);
-    }
+    const DeepPixel px = { { 0.2f, 0.1f, 0.0f, 0.4f, 2.0f, 4.0f }, { 0.0f, 0.3f, 0.6f, 1.0f, 3.0f, 3.0f } };
+    OIIO::ImageBuf buf  = make_deep(8, 6, std::vector<DeepPixel>(48, px), true);
+    OIIO::DeepData& dd  = *buf.deepdata();
     if (kind == "nan")
         dd.set_deep_value(9, 4, 0, NAN);
     else if (kind == "back")

@@ -28,30 +28,18 @@ struct Smp {
     float r, g, b, a, z;
 };
 
-// A deep R, G, B, A, Z image over w x h at the origin; `fn(x, y)` lists a pixel's samples.
+// A deep image of point samples over w x h at the origin; `fn(x, y)` lists a pixel's samples.
 OIIO::ImageBuf deep_image(int w, int h, const std::function<std::vector<Smp>(int, int)>& fn)
 {
-    OIIO::ImageSpec spec(w, h, 5, OIIO::TypeFloat);
-    spec.channelnames  = { "R", "G", "B", "A", "Z" };
-    spec.alpha_channel = 3;
-    spec.z_channel     = 4;
-    spec.deep          = true;
-    OIIO::ImageBuf buf(spec);
-    OIIO::DeepData& dd = *buf.deepdata();
-    std::vector<std::vector<Smp>> px;
+    std::vector<DeepPixel> px;
     for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x)
-            px.push_back(fn(x, y));
-    for (size_t p = 0; p < px.size(); ++p)
-        dd.set_samples(int64_t(p), int(px[p].size()));
-    for (size_t p = 0; p < px.size(); ++p)
-        for (size_t s = 0; s < px[p].size(); ++s) {
-            const Smp& m = px[p][s];
-            const float v[5] = { m.r, m.g, m.b, m.a, m.z };
-            for (int c = 0; c < 5; ++c)
-                dd.set_deep_value(int64_t(p), c, int(s), v[c]);
+        for (int x = 0; x < w; ++x) {
+            DeepPixel p;
+            for (const Smp& m : fn(x, y))
+                p.push_back({ m.r, m.g, m.b, m.a, m.z, m.z });
+            px.push_back(std::move(p));
         }
-    return buf;
+    return make_deep(w, h, px);
 }
 
 DefocusOptions direct_options(DefocusMethod m)
