@@ -1,0 +1,136 @@
+// wave_optics.h — scalar wave optics of a defocused lens: Fresnel integrals and the exact
+// straight-edge law for the fringes at a bokeh's rim.
+//
+// Units. Functions that take physical lengths take them all in one unit of the caller's
+// choice (the parameter names say which quantity), so `fringe_scale(0.0005, 2, 12)` with
+// millimetres returns millimetres. Helpers with `_px`, `_nm`, `_mm` in their names convert
+// from the project's units (CoC in pixels, wavelength in nanometres, pixel pitch in mm).
+//
+// Symbols (../shared/OPTICS.md): N working f-number, lambda wavelength, c geometric CoC
+// diameter on the sensor, d distance inward from the geometric edge of the bokeh.
+#pragma once
+
+#include <memory>
+#include <vector>
+
+namespace bokeh {
+
+/// The Fresnel integrals C(x) = int_0^x cos(pi t^2 / 2) dt and S(x) = int_0^x sin(pi t^2 / 2) dt
+/// (odd in x; both tend to 1/2 as x -> +inf). Absolute error below 1e-12 for every finite x.
+struct FresnelCS {
+    double C = 0.0;
+    double S = 0.0;
+};
+FresnelCS fresnel_integrals(double x);
+
+/// The straight-edge (knife-edge) Fresnel diffraction law, relative to the unobstructed
+/// intensity: I / I_geo = 1/2 [ (C(v) + 1/2)^2 + (S(v) + 1/2)^2 ], v > 0 on the lit side
+/// (inside the bokeh), v < 0 in the shadow (outside); 1/4 at the edge, 1 far inside.
+double fresnel_edge_intensity(double v);
+
+/// The length scale of the fringes at a defocused bokeh's edge, sqrt(lambda N c), in the
+/// unit of the arguments (wavelength and coc in one unit). A distance d inward from the
+/// geometric edge has edge-law argument v = sqrt(2) d / fringe_scale (edge_v below).
+/// Returns NaN unless wavelength > 0, fnumber > 0, coc >= 0.
+double fringe_scale(double wavelength, double fnumber, double coc);
+
+/// fringe_scale in pixels from the project's units: a CoC diameter in pixels, a wavelength
+/// in nanometres, the pixel pitch in millimetres.
+double fringe_scale_px(double coc_px, double fnumber, double wavelength_nm, double pixel_pitch_mm);
+
+/// The edge-law argument of a point `distance` inward from the geometric edge (negative:
+/// outside), `distance` in the unit of fringe_scale_length.
+inline double edge_v(double distance, double fringe_scale_length)
+{
+    return 1.4142135623730951 * distance / fringe_scale_length;
+}
+
+
+// ---------------------------------------------------------------------------------------
+// The exact defocused PSF of a circular pupil (OPTICS.md section 1; Born & Wolf 8.8)
+//
+//     I(v) = | 2 int_0^1 exp(i 2 pi W(rho)) J0(v rho) rho drho |^2,   v = k NA r = pi r / (lambda N)
+//
+// with W the pupil wavefront in waves. Normalisation: the in-focus peak is 1, and for every
+// wavefront int_0^inf I(v) v dv = 2, i.e. I / (4 pi) is the energy per unit area of the
+// (v_x, v_y) plane (in the sensor plane: I pi NA^2 / lambda^2 per unit area, NA = 1 / (2N)).
+// Pure defocus W = W20 rho^2: geometric edge at v = u = 4 pi W20, flat geometric intensity
+// I_geo = (2 / u)^2.
+
+/// A rotationally symmetric pupil wavefront, all amplitudes in waves (units of lambda):
+/// W(rho) = W20 rho^2 + W40 rho^4 + W60 rho^6 + a cos(pi K rho), K = ripple cycles across the
+/// pupil diameter (concentric machining marks: onion rings, OPTICS.md section 4).
+struct RadialWavefront {
+    double defocus_waves     = 0.0;  ///< W20
+    double spherical_waves   = 0.0;  ///< W40
+    double spherical6_waves  = 0.0;  ///< W60
+    double ripple_waves      = 0.0;  ///< a
+    double ripple_cycles     = 0.0;  ///< K, cycles per pupil diameter
+    /// W(rho) in waves.
+    double waves(double rho) const;
+    /// max over the pupil of |dW/drho| in waves (bounds the integrand's frequency).
+    double max_slope_waves() const;
+};
+
+/// The Hankel integral above by composite Simpson on a fixed node set, made once for a
+/// wavefront and the largest v it will be asked for: 64 + 100 (max |dW/drho| + v_max / 2 pi)
+/// nodes (about 100 per cycle of the integrand; Simpson's error is then ~1e-7 relative).
+/// J0 from its Hankel asymptotic expansion for arguments >= 20, a cubic Hermite table of
+/// the library's cyl_bessel_j below (within 5e-13 everywhere). Thread-safe to evaluate.
+class HankelPsf {
+public:
+    HankelPsf(const RadialWavefront& wavefront, double v_max);
+    /// I(v) as normalised above; v beyond v_max is still computed, less accurately.
+    double operator()(double v) const;
+    int nodes() const { return int(rho_.size()); }
+    const RadialWavefront& wavefront() const { return wavefront_; }
+
+private:
+    RadialWavefront wavefront_;
+    std::vector<double> rho_, re_, im_;  // node, Simpson weight x rho x cos / sin(2 pi W)
+    double step_ = 0.0;
+};
+
+/// The same PSF for pure defocus by Lommel's functions (Born & Wolf 8.8.1): u = 4 pi W20,
+/// inside (v < u) from V0, V1, outside from U1, U2. For u > 0; u = 0 gives the Airy pattern.
+double defocus_psf_lommel(double u, double v);
+
+/// J0 as the Hankel integral evaluates it (exposed for its test).
+double bessel_j0(double x);
+
+/// u = 4 pi W20 / lambda: the geometric edge in v.
+inline double defocus_u(double defocus_waves) { return 12.566370614359172 * defocus_waves; }
+
+/// W20 in waves of a geometric CoC diameter: c / (8 N lambda) (c, lambda in one unit).
+double defocus_waves(double coc, double fnumber, double wavelength);
+/// The same from the project's units.
+double defocus_waves_px(double coc_px, double fnumber, double wavelength_nm, double pixel_pitch_mm);
+
+// ---------------------------------------------------------------------------------------
+// Radial profiles: interchangeable models of a round bokeh's intensity against rho = r / R
+// (R the geometric CoC radius), each at one wavelength, given w = W20 / lambda = c / (8 N lambda)
+// (the only parameter of a defocused aberration-free pupil: OPTICS.md section 1).
+// Normalised to unit energy with R as the unit of length, int_0^inf 2 pi rho I drho = 1, so a
+// flat disc is 1 / pi inside.
+
+class RadialProfile {
+public:
+    virtual ~RadialProfile() = default;
+    /// Intensity at rho = r / R, unit energy.
+    virtual double operator()(double rho) const = 0;
+    /// rho beyond which the profile is taken as 0 (where rasterising may stop).
+    virtual double extent() const = 0;
+    virtual const char* name() const = 0;
+};
+
+/// The exact profile: HankelPsf at v = u rho, times u^2 / (4 pi). `wavefront.defocus_waves`
+/// must be > 0 (it sets R). Evaluated out to rho_max (default 1.25).
+std::unique_ptr<RadialProfile> exact_radial_profile(const RadialWavefront& wavefront,
+                                                    double rho_max = 1.25);
+
+/// The straight-edge law (fresnel_edge_intensity) at v = 2 (1 - rho) sqrt(w), flat inside,
+/// scaled to unit energy over rho <= extent = 1 + 3 / sqrt(w) (the law's shadow side
+/// falls to 1 % of I_geo about 2.3 fringe scales out). `defocus_waves` > 0.
+std::unique_ptr<RadialProfile> edge_law_radial_profile(double defocus_waves);
+
+}  // namespace bokeh
