@@ -26,6 +26,7 @@
 // outside. A polygon's inside test takes the largest projection on its edge normals, not
 // the polar angle (atan2, two fmod, cos), up to 32 blades (Shape).
 
+#include <bokeh/aperture.h>
 #include <bokeh/blur.h>
 #include <bokeh/parallel.h>
 
@@ -348,18 +349,15 @@ struct Shape {
         const double r = std::sqrt(u * u + v * v);
         double d       = 1.0;
         if (polygon && r > 0.0) {  // at the centre any d > 0 gives the same answer
-            double d_poly;
             if (!normals.empty()) {
                 double p = 0.0;
                 for (const auto& [nx, ny] : normals)
                     p = std::max(p, u * nx + v * ny);
-                d_poly = apothem * r / p;
+                const double d_poly = apothem * r / p;
+                d = d_poly + k.curvature * (1.0 - d_poly);
             } else {
-                const double phi = std::fmod(std::fmod(std::atan2(v, u) - vertex, alpha) + alpha, alpha)
-                                   - 0.5 * alpha;
-                d_poly = apothem / std::cos(phi);
+                d = polygon_edge_distance(k.blades, k.curvature, std::atan2(v, u) - vertex);
             }
-            d = d_poly + k.curvature * (1.0 - d_poly);
         }
         return r < d && r >= k.hole * d;
     }

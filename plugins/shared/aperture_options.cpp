@@ -16,8 +16,9 @@ bool aperture_options_apply(const OptionValues& v, const std::string& kernel, st
     };
     const Rule rules[] = {
         { "sigma", kernel == "gaussian", "kernel=gaussian" },
-        { "blades", kernel == "polygon", "kernel=polygon; kernel=hex has 6" },
-        { "rotation", polygon, "kernel=polygon and hex; a disk's squeeze stays on the frame's axes" },
+        { "blades", kernel == "polygon" || kernel == "star", "kernel=polygon (and star, its points); kernel=hex has 6" },
+        { "rotation", polygon || kernel == "star", "kernel=polygon, hex and star; a disk's squeeze stays on the frame's axes" },
+        { "inner", kernel == "star", "kernel=star" },
         { "curvature", polygon, "kernel=polygon and hex" },
         { "hole", polygon || kernel == "disk", "kernel=disk, polygon and hex" },
     };

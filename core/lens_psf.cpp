@@ -1,0 +1,764 @@
+// lens_psf.cpp — the PSF of a lens with character at one signed CoC and field position
+// (optics.h has the model), the PSF cache the highlight sprites read, and the contact
+// sheet `--bokeh:sheet=1` draws.
+//
+// How a PSF is drawn (SEEDS.md section 8: a beam-map column rotated about the axis and
+// distorted by the aperture's radial LUT):
+//  1. Per wavelength, a radial table: rays at 8K pupil radii s in (0, 1) land at r(s) =
+//     s (c/2 - a(s, l)); each ray's mass s ds is spread over the R interval its s step
+//     covers, into bins 0.5 px wide; the bins' densities (mass over annulus area) are
+//     kept at K + 1 pupil radii s = k / K, cumulatively, so the PSF of any pupil span
+//     [lo, hi] along a direction is D(R, hi) - D(R, lo) (linear in s and R between).
+//  2. A pixel maps to the reference image by the field's linear map (squeeze,
+//     astigmatism, anamorphic focus: image = M p for pure defocus, so p = M^-1 X), then
+//     to polar (R, phi); pupil directions phi (rays landing at +R) and phi + pi (rays
+//     landing at -R, the point-reflected front bokeh) each add their span's density. The
+//     span along a direction is [hole e, e] of the aperture's edge distance e(psi), cut
+//     by the cat's-eye barrel circle.
+//  3. Diffraction at the rim (DiffractionModel::EdgeLaw): the geometric rim of the span
+//     is at |r(hi)|; the intensity near it is the plateau density times the Fresnel edge
+//     law F(v) (core/wave_optics.cpp), v = sqrt(2) d / sqrt(l N c_eff), d the distance
+//     across the edge in image px and c_eff = 2 |dr/ds| at the rim (OPTICS.md section 2).
+//     Where the rim is not the outermost ray (a caustic), the law does not hold and the
+//     rim stays geometric. Pixels in the fringe band are averaged over 4 x 4 samples, so
+//     fringes finer than a pixel fade to their mean (the seed's Nyquist fade).
+//  4. Onion rings and surface noise multiply the density by a pattern in the pupil
+//     (the pupil point a pixel comes from taken as s = R / |c/2|).
+//  5. Each wavelength's PSF is normalised to unit energy and added with its RGB weights.
+// Limits: astigmatic and anamorphic PSFs carry the spherical aberration of the larger
+// axis' CoC scaled along the other; their fringes use the mean scale. The hole's inner
+// rim has no fringes.
+
+#include <bokeh/optics.h>
+#include <bokeh/parallel.h>
+#include <bokeh/wave_optics.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using OIIO::Strutil::fmt::format;
+
+namespace {
+
+constexpr double kPi    = 3.14159265358979323846;
+constexpr double kBinPx = 0.5;   // radial table bin width, reference px
+constexpr double kBandV = 8.0;   // edge-law band half-width in v: |F - 1| < 4 % past it
+constexpr double kFadeV = 6.0;   // from here to kBandV, F fades to its mean (1 in, 0 out)
+
+// The edge law F(v) (core/wave_optics.cpp) tabulated over the band once, 1/256 apart in v
+// (a period is 2 / v: 32 entries at the band's edge), faded to its mean from kFadeV on,
+// so a pixel past the band gets F's mean without a step (the seed's Nyquist fade).
+double edge_law(double v)
+{
+    static const std::vector<float> table = [] {
+        const int n = int(2.0 * kBandV * 256.0) + 1;
+        std::vector<float> t(size_t(n) + 1);
+        for (int i = 0; i < n; ++i) {
+            const double x    = -kBandV + i / 256.0;
+            const double mean = x > 0.0 ? 1.0 : 0.0;
+            const double fade = std::clamp((kBandV - std::abs(x)) / (kBandV - kFadeV), 0.0, 1.0);
+            t[size_t(i)] = float(mean + fade * (fresnel_edge_intensity(x) - mean));
+        }
+        t[size_t(n)] = t[size_t(n) - 1];
+        return t;
+    }();
+    if (v <= -kBandV)
+        return 0.0;
+    if (v >= kBandV)
+        return 1.0;
+    const double f = (v + kBandV) * 256.0;
+    const int i    = int(f);
+    return table[size_t(i)] + (f - i) * (table[size_t(i) + 1] - table[size_t(i)]);
+}
+
+// The landing radius of one wavelength, px: r(s) = s (c/2 - a(s, l)).
+struct Landing {
+    const LensCharacter& lens;
+    double c_half, na_per_pitch, nm;
+    double r(double s) const
+    {
+        return s * (c_half - na_per_pitch * longitudinal_aberration_mm(lens, s, nm));
+    }
+    double drds(double s) const
+    {
+        const double h = 1e-5;
+        return (r(s + h) - r(std::max(0.0, s - h))) / (s + h - std::max(0.0, s - h));
+    }
+};
+
+// Cumulative radial densities in RGB (step 1 of the header) and the rim's fringe factor
+// (step 3), both over the spectrum.
+struct RgbTable {
+    int K = 0, half_bins = 0;
+    std::vector<float> dens;  // (K + 1) x bins x 3: density of the span [0, k / K]
+
+    // Fringes: at Kf + 1 pupil radii s_j = s_lo + j (1 - s_lo) / Kf, the middle
+    // wavelength's rim radius, the plateau radius (the innermost rim less two bins), the
+    // side the rim lands on (+1, -1; 0 where a caustic hides it) and the factor per channel
+    // against the distance d inward from the rim (-d_out .. d_in, step kFringeStep px).
+    int Kf = 0;
+    double s_lo = 1.0, d_in = 0.0, d_out = 0.0;
+    int nd = 0;
+    std::vector<float> rim, plateau, gain;
+    std::vector<int8_t> side;
+    std::vector<float> fringe;  // (Kf + 1) x nd x 3
+    static constexpr double kFringeStep = 0.125;
+
+    int bins() const { return 2 * half_bins; }
+
+    // Channel densities of the span [0, s] at signed R (linear in s between snapshots and
+    // in |R| between bin centres on R's own side of the axis: rays landing at +R and -R
+    // come from opposite pupil directions and never mix).
+    void cumulative(double R, double s, double out[3]) const
+    {
+        out[0] = out[1] = out[2] = 0.0;
+        if (s <= 0.0)
+            return;
+        const double fk = std::min(s, 1.0) * K;
+        const int k0    = std::min(int(fk), K - 1);
+        const double tk = fk - k0;
+        const bool negative = std::signbit(R);
+        const double u = std::max(0.0, std::abs(R) / kBinPx - 0.5);
+        const int b0   = int(u);
+        if (b0 >= half_bins)
+            return;
+        const double tb = u - b0;
+        const int nb    = bins();
+        auto idx = [&](int j) { return negative ? half_bins - 1 - j : half_bins + j; };
+        const int i0 = idx(b0);
+        const bool has1 = b0 + 1 < half_bins;
+        const int i1 = has1 ? idx(b0 + 1) : i0;
+        const double w1 = has1 ? tb : 0.0, w0 = 1.0 - tb;
+        for (int kk = 0; kk < 2; ++kk) {
+            const double wk = kk == 0 ? 1.0 - tk : tk;
+            const float* row = &dens[(size_t(k0 + kk) * nb) * 3];
+            for (int c = 0; c < 3; ++c)
+                out[c] += wk * (w0 * row[size_t(i0) * 3 + c] + w1 * row[size_t(i1) * 3 + c]);
+        }
+    }
+
+    struct Rim {
+        double radius, plateau, gain;
+        int side;
+        int j0;
+        double tj;
+    };
+    Rim rim_at(double s) const
+    {
+        const double f = Kf > 0 ? std::clamp((s - s_lo) / (1.0 - s_lo), 0.0, 1.0) * Kf : 0.0;
+        const int j0   = std::min(int(f), std::max(Kf - 1, 0));
+        const double t = Kf > 0 ? f - j0 : 0.0;
+        const int j1   = std::min(j0 + 1, Kf);
+        Rim r;
+        r.radius  = (1.0 - t) * rim[size_t(j0)] + t * rim[size_t(j1)];
+        r.plateau = (1.0 - t) * plateau[size_t(j0)] + t * plateau[size_t(j1)];
+        r.gain    = (1.0 - t) * gain[size_t(j0)] + t * gain[size_t(j1)];
+        r.side    = side[size_t(j0)] != 0 ? side[size_t(j0)] : side[size_t(j1)];
+        r.j0      = j0;
+        r.tj      = t;
+        return r;
+    }
+    void fringe_at(const Rim& r, double d, double out[3]) const
+    {
+        const double f = std::clamp((d + d_out) / kFringeStep, 0.0, double(nd - 1));
+        const int i0   = std::min(int(f), nd - 2);
+        const double t = f - i0;
+        const int j1   = std::min(r.j0 + 1, Kf);
+        for (int c = 0; c < 3; ++c) {
+            auto at = [&](int j, int i) { return double(fringe[(size_t(j) * nd + i) * 3 + c]); };
+            const double a = at(r.j0, i0) + t * (at(r.j0, i0 + 1) - at(r.j0, i0));
+            const double b = at(j1, i0) + t * (at(j1, i0 + 1) - at(j1, i0));
+            out[c]         = a + r.tj * (b - a);
+        }
+    }
+};
+
+// Adds one wavelength's geometric densities, times its RGB weights, into `t`: rays at 8K
+// pupil radii, each ray's mass s ds spread over the R interval its step covers.
+void add_wavelength(RgbTable& t, const Landing& L, const std::array<double, 3>& w,
+                    std::vector<double>& mass, std::vector<double>& d)
+{
+    const int K = t.K, nb = t.bins();
+    std::fill(mass.begin(), mass.end(), 0.0);
+    constexpr int kSub = 8;  // rays per snapshot step
+    const double ds    = 1.0 / (double(K) * kSub);
+    auto snapshot = [&](int k) {
+        for (int b = 0; b < nb; ++b) {
+            const double r0 = std::abs((b - t.half_bins) * kBinPx), r1 = std::abs((b - t.half_bins + 1) * kBinPx);
+            d[size_t(b)] = mass[size_t(b)] / (0.5 * std::abs(r1 * r1 - r0 * r0));  // per unit angle
+        }
+        // Pre-filtered along R by a pixel-wide tent (1/4, 1/2, 1/4 of the half-pixel
+        // bins), each side of the axis alone: a pixel-centre sample then weighs an edge
+        // about as the pixel's area does (the flat kernels' anti-aliasing).
+        float* row = &t.dens[size_t(k) * nb * 3];
+        for (int b = 0; b < nb; ++b) {
+            const bool pos  = b >= t.half_bins;
+            const int first = pos ? t.half_bins : 0, last = pos ? nb - 1 : t.half_bins - 1;
+            const double v  = 0.25 * d[size_t(std::max(b - 1, first))] + 0.5 * d[size_t(b)]
+                             + 0.25 * d[size_t(std::min(b + 1, last))];
+            if (v != 0.0)
+                for (int c = 0; c < 3; ++c)
+                    row[size_t(b) * 3 + c] += float(w[size_t(c)] * v);
+        }
+    };
+    snapshot(0);
+    double r_prev = L.r(0.0);
+    for (int i = 0; i < K * kSub; ++i) {
+        const double s_mid  = (i + 0.5) * ds;
+        const double r_next = L.r((i + 1) * ds);
+        const double m      = s_mid * ds;  // pupil area per unit angle
+        const double lo = std::min(r_prev, r_next), hi = std::max(r_prev, r_next);
+        const double f_lo = lo / kBinPx + t.half_bins, f_hi = hi / kBinPx + t.half_bins;
+        const int b_lo = std::clamp(int(std::floor(f_lo)), 0, nb - 1);
+        const int b_hi = std::clamp(int(std::floor(f_hi)), 0, nb - 1);
+        if (b_lo == b_hi || f_hi - f_lo < 1e-12) {
+            mass[size_t(b_lo)] += m;
+        } else {
+            const double span = f_hi - f_lo;
+            for (int b = b_lo; b <= b_hi; ++b) {
+                const double a = std::max(f_lo, double(b)), e = std::min(f_hi, double(b + 1));
+                if (e > a)
+                    mass[size_t(b)] += m * (e - a) / span;
+            }
+        }
+        r_prev = r_next;
+        if ((i + 1) % kSub == 0)
+            snapshot((i + 1) / kSub);
+    }
+}
+
+// Everything about one request that does not depend on the wavelength.
+struct Geometry {
+    double m_inv[2][2]{};  // image px -> pupil units (pure defocus)
+    double m[2][2]{};
+    double c_ref  = 0.0;   // signed reference CoC, px
+    double kappa  = 1.0;   // image distance per reference distance (mean)
+    double field_h = 0.0, dir_x = 1.0, dir_y = 0.0;  // field height and direction
+    bool barrel = false;
+    double barrel_x = 0.0, barrel_y = 0.0;
+    double onion_x = 0.0, onion_y = 0.0;
+    int ss = 1;            // samples per pixel side
+};
+
+Geometry make_geometry(const LensCharacter& lens, const PsfRequest& req)
+{
+    Geometry g;
+    g.field_h = std::hypot(req.field_x, req.field_y);
+    if (g.field_h > 0.0) {
+        g.dir_x = req.field_x / g.field_h;
+        g.dir_y = req.field_y / g.field_h;
+    }
+    const double h2 = g.field_h * g.field_h;
+    const double c  = req.coc_px + lens.field_curvature_px * h2;
+    // B = c I + (anamorphic / 2) diag(1, -1) + (astigmatism H^2 / 2) (t t' - n n'),
+    // t the field direction (tangential), n its normal (sagittal).
+    const double a = 0.5 * lens.anamorphic_focus_px, s = 0.5 * lens.astigmatism_px * h2;
+    const double tx = g.dir_x, ty = g.dir_y;
+    double b00 = c + a + s * (tx * tx - ty * ty);
+    double b11 = c - a + s * (ty * ty - tx * tx);
+    double b01 = s * 2.0 * tx * ty;
+    // Eigen-decomposition of the symmetric B; each eigenvalue kept at least 0.25 px from
+    // 0 (a line-shaped bokeh is still a pixel wide), sign kept.
+    const double mean = 0.5 * (b00 + b11), diff = 0.5 * (b00 - b11);
+    const double rad  = std::hypot(diff, b01);
+    double e1 = mean + rad, e2 = mean - rad;
+    const double theta = 0.5 * std::atan2(2.0 * b01, b00 - b11);
+    auto floor_mag = [](double e) { return std::abs(e) < 0.25 ? (e < 0.0 ? -0.25 : 0.25) : e; };
+    e1 = floor_mag(e1);
+    e2 = floor_mag(e2);
+    const double cs = std::cos(theta), sn = std::sin(theta);
+    b00 = e1 * cs * cs + e2 * sn * sn;
+    b11 = e1 * sn * sn + e2 * cs * cs;
+    b01 = (e1 - e2) * cs * sn;
+    g.c_ref = std::abs(e1) >= std::abs(e2) ? e1 : e2;
+    // M = S B / 2, S = diag(1, aspect) (x right, y up).
+    g.m[0][0] = 0.5 * b00;
+    g.m[0][1] = 0.5 * b01;
+    g.m[1][0] = 0.5 * lens.aspect * b01;
+    g.m[1][1] = 0.5 * lens.aspect * b11;
+    const double det = g.m[0][0] * g.m[1][1] - g.m[0][1] * g.m[1][0];
+    g.m_inv[0][0] = g.m[1][1] / det;
+    g.m_inv[0][1] = -g.m[0][1] / det;
+    g.m_inv[1][0] = -g.m[1][0] / det;
+    g.m_inv[1][1] = g.m[0][0] / det;
+    g.kappa = std::sqrt(std::abs(det)) / (0.5 * std::abs(g.c_ref));
+    const double narrow = std::min(std::abs(e1), std::abs(e2)) * std::min(1.0, lens.aspect);  // px across
+    g.ss = std::clamp(int(std::ceil(16.0 / narrow)), 1, 8);  // PSFs under 16 px: 2 x 2 and more
+    g.barrel = lens.catseye > 0.0 && g.field_h > 0.0;
+    g.barrel_x = lens.catseye * g.field_h * g.dir_x;
+    g.barrel_y = lens.catseye * g.field_h * g.dir_y;
+    const double onion_sign = lens.onion_behind_stop ? 1.0 : -1.0;
+    g.onion_x = onion_sign * lens.onion_offset * g.field_h * g.dir_x;
+    g.onion_y = onion_sign * lens.onion_offset * g.field_h * g.dir_y;
+    return g;
+}
+
+// The pupil span [lo, hi] along direction psi: the aperture's [hole e, e] cut by the
+// barrel circle |p - o| < 1 (OPTICS.md section 4, cat's eye). False when empty.
+bool pupil_span(const LensCharacter& lens, const Geometry& g, double psi, double& lo, double& hi)
+{
+    const double e = lens.aperture.edge(psi);
+    hi = e;
+    lo = lens.aperture.hole() * e;
+    if (g.barrel) {
+        const double ux = std::cos(psi), uy = std::sin(psi);
+        const double uo = ux * g.barrel_x + uy * g.barrel_y;
+        const double disc = uo * uo - (g.barrel_x * g.barrel_x + g.barrel_y * g.barrel_y) + 1.0;
+        if (disc <= 0.0)
+            return false;
+        const double root = std::sqrt(disc);
+        hi = std::min(hi, uo + root);
+        lo = std::max(lo, uo - root);
+    }
+    return hi > lo;
+}
+
+// A smooth value noise in the pupil (surface noise), fixed, zero mean, unit-ish amplitude.
+double pupil_noise(double x, double y)
+{
+    auto hash = [](int i, int j) {
+        uint32_t h = uint32_t(i) * 374761393u + uint32_t(j) * 668265263u;
+        h          = (h ^ (h >> 13)) * 1274126177u;
+        return double(h ^ (h >> 16)) / 4294967295.0 * 2.0 - 1.0;
+    };
+    double sum = 0.0, amp = 0.5, f = 6.0;
+    for (int octave = 0; octave < 3; ++octave, amp *= 0.5, f *= 2.0) {
+        const double u = (x + 2.0) * f, v = (y + 2.0) * f;
+        const int i = int(std::floor(u)), j = int(std::floor(v));
+        const double tu = u - i, tv = v - j;
+        const double su = tu * tu * (3 - 2 * tu), sv = tv * tv * (3 - 2 * tv);
+        const double n0 = hash(i, j) + su * (hash(i + 1, j) - hash(i, j));
+        const double n1 = hash(i, j + 1) + su * (hash(i + 1, j + 1) - hash(i, j + 1));
+        sum += amp * (n0 + sv * (n1 - n0));
+    }
+    return sum;
+}
+
+bool wavelength_independent(const LensCharacter& lens)
+{
+    const bool colour = lens.preset != LensPreset::Off && lens.chromatic != 0.0;
+    const bool sphero = lens.preset != LensPreset::Off && lens.monochromatic != 0.0
+                        && lens.spherochromatism != 0.0;
+    return !colour && !sphero && lens.diffraction == DiffractionModel::Off && lens.onion_waves == 0.0;
+}
+
+// The fringe tables of `t` (step 3): the middle wavelength's rim sets the distance axis;
+// each wavelength adds its plateau density times the edge law at its own rim and scale.
+void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
+                 const std::vector<SpectralSample>& spectrum, double na_per_pitch)
+{
+    // The smallest outer pupil radius any direction uses.
+    double s_min = 1.0;
+    for (int i = 0; i < 720; ++i) {
+        double lo, hi;
+        if (pupil_span(lens, g, 2.0 * kPi * i / 720.0, lo, hi))
+            s_min = std::min(s_min, hi);
+    }
+    t.s_lo = std::max(0.0, std::min(s_min - 1.0 / t.K, 1.0 - 1.0 / t.K));
+    t.Kf   = std::clamp(int(std::ceil((1.0 - t.s_lo) * 32.0)), 1, 32);
+    const SpectralSample& mid = spectrum[spectrum.size() / 2];
+    const Landing Lmid{ lens, 0.5 * g.c_ref, na_per_pitch, mid.wavelength_nm };
+    // The distance axis: the band of the widest fringes, plus how far the other
+    // wavelengths' rims lie from the middle one's.
+    double scale_max = 0.0, spread = 0.0;
+    for (int j = 0; j <= t.Kf; ++j) {
+        const double s = t.s_lo + (1.0 - t.s_lo) * j / t.Kf;
+        for (const SpectralSample& smp : spectrum) {
+            const Landing L{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm };
+            const double c_eff = std::max(2.0 * std::abs(L.drds(s)) * g.kappa, 1e-3);
+            scale_max = std::max(scale_max, fringe_scale_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm) / g.kappa);
+            spread    = std::max(spread, std::abs(std::abs(L.r(s)) - std::abs(Lmid.r(s))));
+        }
+    }
+    const double band = kBandV / std::sqrt(2.0) * scale_max + 1.0;
+    t.d_in  = band + spread;
+    t.d_out = band + spread;
+    t.nd    = int(std::ceil((t.d_in + t.d_out) / RgbTable::kFringeStep)) + 2;
+    t.rim.assign(size_t(t.Kf) + 1, 0.0f);
+    t.plateau.assign(size_t(t.Kf) + 1, 0.0f);
+    t.side.assign(size_t(t.Kf) + 1, 0);
+    t.gain.assign(size_t(t.Kf) + 1, 0.0f);
+    // Every row starts as the geometric step (1 inside the rim, 0 outside): rows without
+    // fringes (a caustic) keep it, and rim_at's interpolation between rows stays a blend
+    // of rims.
+    t.fringe.assign(size_t(t.Kf + 1) * t.nd * 3, 0.0f);
+    for (int j = 0; j <= t.Kf; ++j)
+        for (int i = 0; i < t.nd; ++i)
+            if (-t.d_out + i * RgbTable::kFringeStep > 0.0)
+                for (int c = 0; c < 3; ++c)
+                    t.fringe[(size_t(j) * t.nd + i) * 3 + c] = 1.0f;
+    std::vector<double> num(size_t(t.nd) * 3), den(3);
+    constexpr int kSubsamples = 8;  // per distance step, then a pixel-wide box
+    for (int j = 0; j <= t.Kf; ++j) {
+        const double s     = t.s_lo + (1.0 - t.s_lo) * j / t.Kf;
+        const double r_mid = Lmid.r(s);
+        const double slope = Lmid.drds(s);
+        const int sd       = r_mid > 0.0 ? 1 : -1;
+        // The rim bounds the beam when it moves outward with s there; toward a caustic
+        // (dr/ds -> 0, where the edge law fails: OPTICS.md section 2) the fringes fade
+        // out, from a slope of a quarter of the unaberrated one (c/2) to a twentieth, so
+        // that a rim crossing the caustic as the aperture's edge turns shows no seam.
+        // Rim and plateau radii are kept for every j, fringed or not: rim_at interpolates
+        // them between neighbours.
+        double innermost = std::abs(r_mid);
+        for (const SpectralSample& smp : spectrum)
+            innermost = std::min(innermost, std::abs(Landing{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm }.r(s)));
+        t.rim[size_t(j)]     = float(std::abs(r_mid));
+        t.plateau[size_t(j)] = float(std::max(0.0, innermost - 2.0 * kBinPx));
+        const double rel = slope * sd / (0.5 * std::abs(g.c_ref));
+        const double x   = std::clamp((rel - 0.05) / 0.2, 0.0, 1.0);
+        t.gain[size_t(j)] = float(x * x * (3.0 - 2.0 * x));
+        if (t.gain[size_t(j)] <= 0.0f)
+            continue;
+        t.side[size_t(j)] = int8_t(sd);
+        std::fill(num.begin(), num.end(), 0.0);
+        std::fill(den.begin(), den.end(), 0.0);
+        for (const SpectralSample& smp : spectrum) {
+            const Landing L{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm };
+            const double r = std::abs(L.r(s)), drds = L.drds(s) * sd;
+            // This wavelength's own way to a caustic, as the middle one's above: its
+            // fringes fade into a geometric step at its rim.
+            const double rel_l = drds / (0.5 * std::abs(g.c_ref));
+            const double xl    = std::clamp((rel_l - 0.05) / 0.2, 0.0, 1.0);
+            const double gain_l = xl * xl * (3.0 - 2.0 * xl);
+            const double slope_l = std::max(drds, 0.05 * 0.5 * std::abs(g.c_ref));
+            // The geometric density at the rim, s / (R |dr/ds|) (OPTICS.md section 4).
+            const double p     = s / (std::max(r, 1e-6) * slope_l);
+            const double c_eff = std::max(2.0 * slope_l * g.kappa, 1e-3);
+            const double scale = fringe_scale_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm);
+            for (int c = 0; c < 3; ++c)
+                den[size_t(c)] += smp.rgb_weight[size_t(c)] * p;
+            for (int i = 0; i < t.nd; ++i) {
+                // A pixel-wide box about d, in reference px (kappa px of image each).
+                double f = 0.0;
+                for (int k = 0; k < kSubsamples; ++k) {
+                    const double d_mid = -t.d_out + i * RgbTable::kFringeStep + (k + 0.5) / kSubsamples / g.kappa - 0.5 / g.kappa;
+                    const double d_l   = d_mid + r - std::abs(r_mid);
+                    f += gain_l * edge_law(edge_v(d_l * g.kappa, scale)) + (1.0 - gain_l) * (d_l > 0.0 ? 1.0 : 0.0);
+                }
+                f /= kSubsamples;
+                for (int c = 0; c < 3; ++c)
+                    num[size_t(i) * 3 + c] += smp.rgb_weight[size_t(c)] * p * f;
+            }
+        }
+        // A channel whose weighted rim densities nearly cancel (negative colour-matching
+        // lobes against a bright rim of one wavelength) keeps its geometric rim.
+        for (int i = 0; i < t.nd; ++i)
+            for (int c = 0; c < 3; ++c)
+                t.fringe[(size_t(j) * t.nd + i) * 3 + c]
+                    = den[size_t(c)] > 0.0 ? float(std::clamp(num[size_t(i) * 3 + c] / den[size_t(c)], -1.0, 4.0))
+                                           : float(-t.d_out + i * RgbTable::kFringeStep > 0.0 ? 1.0 : 0.0);
+    }
+}
+
+}  // namespace
+
+bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::string& err,
+              int nthreads)
+{
+    out = Psf();
+    if (!validate_lens(lens, err))
+        return false;
+    if (!std::isfinite(req.coc_px) || std::abs(req.coc_px) > 4096.0) {
+        err = format("coc {:g} is outside -4096..4096 px", req.coc_px);
+        return false;
+    }
+    if (!(std::isfinite(req.field_x) && std::isfinite(req.field_y)) || std::hypot(req.field_x, req.field_y) > 1.5) {
+        err = "field position is outside the frame (field height over 1.5 half-diagonals)";
+        return false;
+    }
+    if (req.size_px < 0 || req.size_px > 8191) {
+        err = format("size {} is outside 0..8191 px", req.size_px);
+        return false;
+    }
+    std::vector<SpectralSample> spectrum;
+    if (wavelength_independent(lens)) {
+        SpectralSample white;
+        white.rgb_weight = { 1.0, 1.0, 1.0 };
+        spectrum.push_back(white);
+    } else if (!spectral_samples(spectrum, lens.spectrum, nullptr, err)) {
+        return false;
+    }
+
+    const Geometry g          = make_geometry(lens, req);
+    const double na_per_pitch = 0.5 / lens.fstop / lens.pixel_pitch_mm;
+    // The reference extent: the largest landing radius over the spectrum.
+    double r_max = 0.5 * std::abs(g.c_ref);
+    for (const SpectralSample& smp : spectrum) {
+        const Landing L{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm };
+        for (int i = 0; i <= 256; ++i)
+            r_max = std::max(r_max, std::abs(L.r(i / 256.0)));
+    }
+    const bool edge_law_on = lens.diffraction == DiffractionModel::EdgeLaw;
+
+    RgbTable table;
+    table.K         = std::clamp(int(std::ceil(4.0 * r_max)), 32, 1024);  // a quarter px of radius apart
+    table.half_bins = int(std::ceil(r_max / kBinPx)) + 2;
+    table.dens.assign(size_t(table.K + 1) * table.bins() * 3, 0.0f);
+    {
+        std::vector<double> mass(size_t(table.bins())), scratch(size_t(table.bins()));
+        for (const SpectralSample& smp : spectrum)
+            add_wavelength(table, Landing{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm },
+                           smp.rgb_weight, mass, scratch);
+    }
+    if (edge_law_on)
+        add_fringes(table, lens, g, spectrum, na_per_pitch);
+
+    // Onion-ring contrast per channel: procedural, plus the physical law per wavelength
+    // 2 (2 pi a) sin(pi K^2 / (8 w)), w = W20 / l = c / (8 N l) in waves (OPTICS.md 4).
+    std::array<double, 3> onion{ lens.onion, lens.onion, lens.onion };
+    if (lens.onion_waves > 0.0)
+        for (const SpectralSample& smp : spectrum) {
+            const double w20 = std::abs(g.c_ref) * lens.pixel_pitch_mm / (8.0 * lens.fstop * smp.wavelength_nm * 1e-6);
+            const double contrast = w20 > 0.0 ? std::abs(4.0 * kPi * lens.onion_waves
+                                                         * std::sin(kPi * lens.onion_cycles * lens.onion_cycles / (8.0 * w20)))
+                                              : 0.0;
+            for (int c = 0; c < 3; ++c)
+                onion[size_t(c)] += smp.rgb_weight[size_t(c)] * contrast;
+        }
+    for (double& o : onion)
+        o = std::clamp(o, 0.0, 1.0);
+    const bool modulated = onion[0] > 0.0 || onion[1] > 0.0 || onion[2] > 0.0 || lens.surface_noise > 0.0;
+    // |cos|^p has mean m_p = Gamma((p + 1) / 2) / (sqrt(pi) Gamma(p / 2 + 1)); the ring
+    // pattern (|cos|^p - m_p) / max(m_p, 1 - m_p) has mean 0 and stays within -1..1.
+    const double p_sharp = lens.onion_sharpness;
+    const double mean_p  = std::tgamma(0.5 * (p_sharp + 1.0)) / (std::sqrt(kPi) * std::tgamma(0.5 * p_sharp + 1.0));
+
+    double margin_px = 1.0;
+    if (edge_law_on)
+        margin_px += table.d_out * g.kappa;
+    // The image of the reference disk of radius r_max: A = M (2 / c_ref).
+    const double a_scale = 2.0 / std::abs(g.c_ref);
+    const double ex = r_max * a_scale * std::hypot(g.m[0][0], g.m[0][1]) + margin_px;
+    const double ey = r_max * a_scale * std::hypot(g.m[1][0], g.m[1][1]) + margin_px;
+    int w = 2 * int(std::ceil(ex)) + 1, h = 2 * int(std::ceil(ey)) + 1;
+    if (req.size_px > 0)
+        w = h = req.size_px | 1;
+    if (w > 8191 || h > 8191) {
+        err = format("the PSF would be {} x {} px; at most 8191 across", w, h);
+        return false;
+    }
+    out.width  = w;
+    out.height = h;
+    out.rgb.assign(size_t(w) * h * 3, 0.0f);
+    const int cx = w / 2, cy = h / 2;
+
+    // RGB intensity at a point of the image (x right, y up, px from the centre).
+    auto intensity = [&](double x, double y, double sum[3]) {
+        const double qx = g.m_inv[0][0] * x + g.m_inv[0][1] * y;
+        const double qy = g.m_inv[1][0] * x + g.m_inv[1][1] * y;
+        const double xr = 0.5 * g.c_ref * qx, yr = 0.5 * g.c_ref * qy;
+        const double R  = std::hypot(xr, yr);
+        const double phi = std::atan2(yr, xr);
+        for (int branch = 1; branch >= -1; branch -= 2) {
+            const double psi = branch > 0 ? phi : phi + kPi;
+            double lo, hi;
+            if (!pupil_span(lens, g, psi, lo, hi))
+                continue;
+            double a[3] = { 0.0, 0.0, 0.0 }, b[3] = { 0.0, 0.0, 0.0 };
+            double Rs = branch * R;
+            double fringe[3] = { 1.0, 1.0, 1.0 };
+            if (edge_law_on) {
+                const RgbTable::Rim rim = table.rim_at(hi);
+                if (rim.side == branch && rim.gain > 0.0) {
+                    const double d = (rim.radius - R) * lens.aperture.edge_normal_cos(psi);
+                    if (d < -table.d_out && rim.gain >= 1.0)
+                        continue;
+                    if (d < table.d_in) {
+                        table.fringe_at(rim, d, fringe);
+                        if (R > rim.plateau)
+                            Rs = branch * rim.plateau;
+                    }
+                }
+                if (rim.gain < 1.0 && Rs != branch * R) {
+                    // Part way to a caustic: the geometric rim blended with the fringed one.
+                    double ga[3], gb[3];
+                    table.cumulative(branch * R, hi, ga);
+                    table.cumulative(branch * R, lo, gb);
+                    table.cumulative(Rs, hi, a);
+                    table.cumulative(Rs, lo, b);
+                    for (int c = 0; c < 3; ++c) {
+                        a[c] = rim.gain * (a[c] - b[c]) * fringe[c] + (1.0 - rim.gain) * (ga[c] - gb[c]);
+                        b[c] = 0.0;
+                        fringe[c] = 1.0;
+                    }
+                    Rs = std::nan("");
+                }
+            }
+            if (!std::isnan(Rs)) {
+                table.cumulative(Rs, hi, a);
+                table.cumulative(Rs, lo, b);
+            }
+            double m[3] = { 1.0, 1.0, 1.0 };
+            if (modulated) {
+                const double s  = std::min(1.0, R / (0.5 * std::abs(g.c_ref)));
+                const double px = s * std::cos(psi), py = s * std::sin(psi);
+                const double ring = (std::pow(std::abs(std::cos(0.5 * kPi * lens.onion_cycles
+                                                                * std::hypot(px - g.onion_x, py - g.onion_y))),
+                                              p_sharp)
+                                     - mean_p)
+                                    / std::max(mean_p, 1.0 - mean_p);
+                const double noise = lens.surface_noise > 0.0 ? lens.surface_noise * pupil_noise(px, py) : 0.0;
+                for (int c = 0; c < 3; ++c)
+                    m[c] = std::max(0.0, (1.0 + onion[size_t(c)] * ring) * (1.0 + noise));
+            }
+            for (int c = 0; c < 3; ++c)
+                sum[c] += (a[c] - b[c]) * fringe[c] * m[c];
+        }
+    };
+
+    const int rows_per_chunk = 8;
+    const int nchunks        = (h + rows_per_chunk - 1) / rows_per_chunk;
+    std::vector<std::array<double, 3>> chunk_sum(size_t(nchunks), { 0.0, 0.0, 0.0 });
+    parallel_for_chunks(0, h, rows_per_chunk, nthreads, [&](int64_t y0, int64_t y1) {
+        std::array<double, 3> acc{ 0.0, 0.0, 0.0 };
+        const int ss = g.ss;
+        for (int64_t py = y0; py < y1; ++py)
+            for (int px = 0; px < w; ++px) {
+                const double x = px - cx, y = cy - double(py);
+                double v[3]    = { 0.0, 0.0, 0.0 };
+                for (int j = 0; j < ss; ++j)
+                    for (int i = 0; i < ss; ++i)
+                        intensity(x - 0.5 + (i + 0.5) / ss, y - 0.5 + (j + 0.5) / ss, v);
+                float* o = &out.rgb[(size_t(py) * w + px) * 3];
+                for (int c = 0; c < 3; ++c) {
+                    o[c] = float(v[c] / (ss * ss));
+                    acc[size_t(c)] += o[c];
+                }
+            }
+        chunk_sum[size_t(y0 / rows_per_chunk)] = acc;
+    });
+    std::array<double, 3> total{ 0.0, 0.0, 0.0 };
+    for (const auto& s : chunk_sum)
+        for (int c = 0; c < 3; ++c)
+            total[size_t(c)] += s[size_t(c)];
+    for (int c = 0; c < 3; ++c) {
+        if (!(total[size_t(c)] > 0.0)) {
+            // Nothing landed in the image (a size smaller than the PSF's offset, or a
+            // pupil cut away): the channel's energy goes to the centre pixel.
+            for (size_t i = 0; i < size_t(w) * h; ++i)
+                out.rgb[i * 3 + c] = 0.0f;
+            out.rgb[(size_t(cy) * w + cx) * 3 + c] = 1.0f;
+            continue;
+        }
+        const double inv = 1.0 / total[size_t(c)];
+        for (size_t i = 0; i < size_t(w) * h; ++i)
+            out.rgb[i * 3 + c] = float(out.rgb[i * 3 + c] * inv);
+    }
+    return true;
+}
+
+bool lens_psf_image(OIIO::ImageBuf& dst, const LensCharacter& lens, const PsfRequest& req, int nthreads)
+{
+    Psf psf;
+    std::string err;
+    if (!lens_psf(psf, lens, req, err, nthreads))
+        return dst.errorfmt("lens_psf: {}", err), false;
+    OIIO::ImageSpec spec(psf.width, psf.height, 3, OIIO::TypeDesc::FLOAT);
+    spec.x = spec.full_x = -(psf.width / 2);
+    spec.y = spec.full_y = -(psf.height / 2);
+    dst.reset(spec);
+    dst.set_pixels(dst.roi(), OIIO::TypeDesc::FLOAT, psf.rgb.data());
+    return true;
+}
+
+// ---------------------------------------------------------------------------------------
+// The cache
+
+namespace {
+std::tuple<int, int, int> bin_of(const PsfRequest& r)
+{
+    const double a = std::abs(r.coc_px);
+    const int c    = a < 1.0 ? int(std::lround(8.0 * r.coc_px))
+                             : (r.coc_px < 0 ? -1 : 1) * (100 + int(std::lround(8.0 * std::log2(a))));
+    return { c, int(std::lround(8.0 * r.field_x)), int(std::lround(8.0 * r.field_y)) };
+}
+
+PsfRequest centre_of(const std::tuple<int, int, int>& key)
+{
+    PsfRequest r;
+    const int c = std::get<0>(key);
+    r.coc_px    = std::abs(c) < 100 ? c / 8.0 : (c < 0 ? -1.0 : 1.0) * std::exp2((std::abs(c) - 100) / 8.0);
+    r.field_x   = std::get<1>(key) / 8.0;
+    r.field_y   = std::get<2>(key) / 8.0;
+    return r;
+}
+}  // namespace
+
+PsfCache::PsfCache(LensCharacter lens, int nthreads)
+    : m_lens(std::move(lens))
+    , m_nthreads(nthreads)
+{
+}
+
+std::shared_ptr<const Psf> PsfCache::get(const PsfRequest& req, std::string& err)
+{
+    const auto key = bin_of(req);
+    {
+        std::lock_guard<std::mutex> lock(m_mutex);
+        auto it = m_psfs.find(key);
+        if (it != m_psfs.end())
+            return it->second;
+    }
+    auto psf = std::make_shared<Psf>();
+    if (!lens_psf(*psf, m_lens, centre_of(key), err, m_nthreads))
+        return nullptr;
+    std::lock_guard<std::mutex> lock(m_mutex);
+    return m_psfs.emplace(key, std::move(psf)).first->second;
+}
+
+size_t PsfCache::size() const
+{
+    std::lock_guard<std::mutex> lock(m_mutex);
+    return m_psfs.size();
+}
+
+// ---------------------------------------------------------------------------------------
+// The contact sheet
+
+bool bokeh_sheet_image(OIIO::ImageBuf& dst, const LensCharacter& lens, double coc_max_px,
+                       int columns, int rows, int cell_px, int nthreads)
+{
+    if (columns < 1 || rows < 1 || columns > 64 || rows > 64 || cell_px < 8 || cell_px > 2048)
+        return dst.errorfmt("bokeh_sheet: 1..64 columns and rows, cells of 8..2048 px"), false;
+    if (!(std::isfinite(coc_max_px) && coc_max_px > 0.0 && coc_max_px < cell_px))
+        return dst.errorfmt("bokeh_sheet: the largest CoC {:g} must be above 0 and under the cell size {}",
+                            coc_max_px, cell_px),
+               false;
+    const int cell = cell_px | 1;
+    const int W = columns * cell, H = rows * cell;
+    std::vector<float> sheet(size_t(W) * H * 3, 0.0f);
+    // The frame corner of a 16:9 frame, in half-diagonals.
+    const double corner = std::atan2(9.0, 16.0);
+    for (int row = 0; row < rows; ++row)
+        for (int col = 0; col < columns; ++col) {
+            PsfRequest req;
+            req.coc_px  = columns == 1 ? coc_max_px : coc_max_px * (2.0 * col / (columns - 1) - 1.0);
+            const double fh = rows == 1 ? 0.0 : double(row) / (rows - 1);
+            req.field_x = fh * std::cos(corner);
+            req.field_y = fh * std::sin(corner);
+            req.size_px = cell;
+            Psf psf;
+            std::string err;
+            if (!lens_psf(psf, lens, req, err, nthreads))
+                return dst.errorfmt("bokeh_sheet: {}", err), false;
+            float peak = 1e-30f;
+            for (float v : psf.rgb)
+                peak = std::max(peak, v);
+            for (int y = 0; y < cell; ++y)
+                for (int x = 0; x < cell; ++x)
+                    for (int c = 0; c < 3; ++c)
+                        sheet[(size_t(row * cell + y) * W + col * cell + x) * 3 + c] = psf.at(x, y, c) / peak;
+        }
+    dst.reset(OIIO::ImageSpec(W, H, 3, OIIO::TypeDesc::FLOAT));
+    dst.set_pixels(dst.roi(), OIIO::TypeDesc::FLOAT, sheet.data());
+    return true;
+}
+
+}  // namespace bokeh

@@ -1,0 +1,140 @@
+// optics_commands.cpp — `--bokeh`: the PSF of a lens with character at one signed CoC and
+// field position (bokeh::lens_psf, core/lens_psf.cpp), or a contact sheet of them across
+// defocus and field (`:sheet=1`, bokeh::bokeh_sheet_image); `:map=1` the seed's beam map
+// (bokeh::beam_map_image). The PSF's data window is centred on (0, 0), so the result
+// serves as `--blur:kernel=image` or `--convolve`'s kernel.
+
+#include <aperture_options.h>
+#include <lens_options.h>
+
+#include <bokeh/lens.h>
+#include <bokeh/optics.h>
+#include <bokeh/plugin.h>
+
+#include <charconv>
+#include <cmath>
+
+#include <OpenImageIO/strutil.h>
+
+namespace {
+
+using bokeh::CommandContext;
+using bokeh::OptionSpec;
+using OIIO::Strutil::fmt::format;
+
+bool parse_double(std::string_view s, double& v)
+{
+    const char* end = s.data() + s.size();
+    auto r          = std::from_chars(s.data(), end, v);
+    return r.ec == std::errc() && r.ptr == end && std::isfinite(v);
+}
+
+bool aperture_from(CommandContext& c, bokeh::Aperture& out, std::string& err)
+{
+    const auto& v            = c.options;
+    const std::string& shape = v.get_string("kernel");
+    if (!bokeh::aperture_options_apply(v, shape, err))
+        return false;
+    if (shape == "image")
+        return bokeh::Aperture::from_picture(*c.inputs.back().buf, out, err);
+    if (shape == "star")
+        return bokeh::Aperture::star(v.get_int("blades"), v.get_float("inner"), v.get_float("rotation"), out, err);
+    bokeh::Kernel k;
+    k.shape        = shape == "disk" ? bokeh::KernelShape::Disk : bokeh::KernelShape::Polygon;
+    k.blades       = shape == "hex" ? 6 : v.get_int("blades");
+    k.rotation_deg = float(v.get_float("rotation"));
+    k.curvature    = float(v.get_float("curvature"));
+    k.hole         = float(v.get_float("hole"));
+    return bokeh::Aperture::from_kernel(k, out, err);
+}
+
+bool bokeh_command(CommandContext& c)
+{
+    const auto& v = c.options;
+    double coc_px;
+    if (!parse_double(c.args[0], coc_px))
+        return c.fail(format("'{}' is not a signed CoC in px (negative: in front of focus)", c.args[0]));
+    bokeh::LensCharacter lens;
+    std::string err;
+    if (!aperture_from(c, lens.aperture, err))
+        return c.fail(err);
+    lens.aspect = v.get_float("aspect");
+    lens.fstop  = v.get_float("fstop");
+    lens.focal_mm = v.get_float("focal");
+    double sensor_mm;
+    const std::string& sensor = v.get_string("sensor");
+    if (!bokeh::film_back_width(sensor, sensor_mm) && !parse_double(sensor, sensor_mm))
+        return c.fail(format("sensor '{}' is neither a width in mm nor a film back", sensor));
+    lens.pixel_pitch_mm = sensor_mm / v.get_int("width");
+    if (!bokeh::lens_character_from(v, lens, err))
+        return c.fail(err);
+
+    bokeh::StackImage out;
+    out.origin = format("--bokeh {}", c.args[0]);
+    out.buf    = std::make_shared<OIIO::ImageBuf>();
+    if (v.get_bool("map")) {
+        const double reach = std::max(1.0, std::abs(coc_px));
+        if (!bokeh::beam_map_image(*out.buf, lens, -reach, reach, v.get_int("size") > 0 ? v.get_int("size") : 512,
+                                   256, c.nthreads))
+            return c.fail(out.buf->geterror());
+    } else if (v.get_bool("sheet")) {
+        const int cell = v.get_int("size") > 0 ? v.get_int("size") : int(std::ceil(std::abs(coc_px) * 1.25)) + 8;
+        if (!bokeh::bokeh_sheet_image(*out.buf, lens, std::abs(coc_px), v.get_int("columns"), v.get_int("rows"),
+                                      cell, c.nthreads))
+            return c.fail(out.buf->geterror());
+    } else {
+        bokeh::PsfRequest req;
+        req.coc_px = coc_px;
+        const std::string& field = v.get_string("field");
+        std::vector<std::string> xy;
+        OIIO::Strutil::split(field, xy, ",");
+        if (xy.size() != 2 || !parse_double(xy[0], req.field_x) || !parse_double(xy[1], req.field_y))
+            return c.fail(format("field '{}' is not a position x,y in half-diagonals (0,0 centre, "
+                                 "0.87,0.49 a 16:9 frame's top-right corner)",
+                                 field));
+        req.size_px = v.get_int("size");
+        if (!bokeh::lens_psf_image(*out.buf, lens, req, c.nthreads))
+            return c.fail(out.buf->geterror());
+    }
+    c.message(format("bokeh: {} lens, {} aperture, CoC {:g} px: {} x {} px", bokeh::lens_preset_name(lens.preset),
+                     lens.aperture.describe(), coc_px, out.buf->spec().width, out.buf->spec().height));
+    c.outputs.push_back(std::move(out));
+    return true;
+}
+
+}  // namespace
+
+BOKEH_PLUGIN_EXPORT int bokeh_plugin_abi_version() { return BOKEH_PLUGIN_ABI_VERSION; }
+
+BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
+{
+    std::vector<OptionSpec> options = {
+        OptionSpec::Choice("kernel", { "disk", "hex", "polygon", "star", "image" },
+                           "aperture: disk, bladed polygon, star, or the image on the stack"),
+        OptionSpec::Int("blades", 6, 3, 64, "polygon: blades; star: points"),
+        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon, hex and star: degrees"),
+        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
+        OptionSpec::Float("hole", 0.0, 0.0, 0.95, "catadioptric hole (radius fraction)"),
+        OptionSpec::Float("inner", 0.5, 0.1, 1.0, "star: inner vertices' radius, fraction of the outer"),
+        OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)"),
+        OptionSpec::Float("fstop", 2.0, 0.5, 128.0, "f-number"),
+        OptionSpec::Float("focal", 50.0, 1.0, 5000.0, "focal length mm"),
+        OptionSpec::String("sensor", "36", "film back: width in mm or a preset (ff, super35, ...)"),
+        OptionSpec::Int("width", 1920, 16, 65536, "image width in px the CoC is measured on"),
+        OptionSpec::String("field", "0,0", "field position x,y in half-diagonals (x right, y up)"),
+        OptionSpec::Int("size", 0, 0, 8191, "image side px (0: the PSF's own extent)"),
+        OptionSpec::Bool("sheet", false, "a contact sheet: columns across defocus, rows across field"),
+        OptionSpec::Int("columns", 9, 1, 64, "sheet: defocus columns (front .. focus .. back)"),
+        OptionSpec::Int("rows", 4, 1, 64, "sheet: field rows (centre .. corner)"),
+        OptionSpec::Bool("map", false, "the seed's beam map: CoC across, ray height up"),
+    };
+    for (OptionSpec& s : bokeh::lens_option_specs())
+        options.push_back(std::move(s));
+    bokeh::Command c = bokeh::make_command(
+        "--bokeh", "COC", 0,
+        "Render a lens's bokeh: the PSF at a signed CoC (px; negative in front of focus) with "
+        "aberrations, spectrum, diffraction, onion rings and field effects, or a sheet of them",
+        bokeh_command, std::move(options));
+    c.inputs_for = [](const bokeh::OptionValues& v) { return v.get_string("kernel") == "image" ? 1 : 0; };
+    r.add(c);
+}
