@@ -401,3 +401,40 @@ TEST(PipelineFlags, CompressionAndTilesAsOiiotoolTakesThem)
     r = bokehtool(format("{} -o:tile=16,8 {}/x.png", scene, dir));
     expect_clean_failure(r, "cannot hold tiles", dir + "/x.png");
 }
+
+TEST(PipelineFlags, ParallelFramesGiveTheSameFilesAndReportFailures)
+{
+    const std::string dir = fresh_dir("flag_parallel");
+    make_frames(dir, 1, 5);
+    RunResult r = bokehtool(format("--frames 1-5 {0}/in.#.exr --defocus:focus=4 -o {0}/a.#.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("--parallel-frames --progress --frames 1-5 {0}/in.#.exr --defocus:focus=4 "
+                         "-o {0}/b.#.exr",
+                         dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    for (int f = 1; f <= 5; ++f) {
+        const std::string a = file_bytes(format("{}/a.{:04d}.exr", dir, f));
+        EXPECT_FALSE(a.empty()) << f;
+        EXPECT_EQ(a, file_bytes(format("{}/b.{:04d}.exr", dir, f))) << "frame " << f << " byte-identical";
+        EXPECT_NE(r.out.find(format("frame {} ({} of 5) done", f, f)), std::string::npos) << r.out;
+    }
+    // A bad input frame (read ahead, then read again to report it) and an output that
+    // cannot be written (written behind): each named, the others written.
+    {
+        std::ofstream bad(dir + "/in.0003.exr", std::ios::binary | std::ios::trunc);
+        bad << "truncated";
+    }
+    r = bokehtool(format("--parallel-frames --skip-bad-frames --frames 1-5 {0}/in.#.exr "
+                         "--defocus:focus=4 -o {0}/c.#.exr",
+                         dir));
+    EXPECT_EQ(r.status, 1);
+    EXPECT_NE(r.err.find("in.0003.exr: cannot read"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("(frame 3, 3 of 5; skipped, the run goes on)"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("1 of 5 frames failed: 3\n"), std::string::npos) << r.err;
+    for (int f : { 1, 2, 4, 5 })
+        EXPECT_EQ(file_bytes(format("{}/c.{:04d}.exr", dir, f)), file_bytes(format("{}/a.{:04d}.exr", dir, f))) << f;
+    EXPECT_FALSE(exists(dir + "/c.0003.exr"));
+    r = bokehtool(format("--parallel-frames --frames 1-2 {0}/in.#.exr -o {0}/nodir/e.#.exr", dir));
+    expect_clean_failure(r, "directory '" + dir + "/nodir' does not exist (frame 1, 1 of 2; the run stopped here)",
+                         dir + "/nodir/e.0001.exr");
+}

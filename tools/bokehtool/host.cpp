@@ -198,6 +198,12 @@ void Host::register_host_commands()
                                       return true;  // used where the patterns are expanded
                                   }),
                      true);
+    add_host_command(host_command("--parallel-frames", "", 0, 0,
+                                  "Overlap frames of a sequence: the next frame's inputs are read "
+                                  "and the last frame's outputs written while this frame is "
+                                  "computed (same results; about one frame more in memory)",
+                                  [this](CommandContext&) { return m_parallel_frames = true, true; }),
+                     true);
     add_host_command(host_command("--runstats", "", 0, 0,
                                   "At the end: frames done, skipped and failed, wall and CPU "
                                   "time, peak memory",
@@ -611,8 +617,10 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
                 continue;
             auto linear = std::make_shared<OIIO::ImageBuf>(*in.buf);
             std::string err;
+            std::unique_lock<std::mutex> lock(m_colors_mutex);  // a write may convert meanwhile
             if (!m_colors.convert(*linear, in.colorspace, m_colors.scene_linear(), m_threads, err))
                 return fail(cmd.name, err);
+            lock.unlock();
             in.buf        = linear;
             in.colorspace = m_colors.scene_linear();
         }
@@ -701,10 +709,26 @@ bool Host::read_input(const std::string& path)
         return substitute_missing(path);
     auto buf = std::make_shared<OIIO::ImageBuf>();
     std::string err;
-    StderrCapture capture;
     bokeh::ReadInfo info;
-    const bool read = bokeh::read_image(*buf, path, m_read_options, &info, err);
-    const std::string said = OIIO::Strutil::strip(capture.finish());
+    bool read = false;
+    std::string said;
+    auto ahead = m_read_ahead.find(path);
+    if (ahead != m_read_ahead.end()) {
+        // Read while the previous frame was computed (--parallel-frames). A failure is
+        // read again below, so that it is reported as any read is.
+        Prefetched p = ahead->second.get();
+        m_read_ahead.erase(ahead);
+        if (p.ok) {
+            buf  = std::move(p.buf);
+            info = std::move(p.info);
+            read = true;
+        }
+    }
+    if (!read) {
+        StderrCapture capture;
+        read = bokeh::read_image(*buf, path, m_read_options, &info, err);
+        said = OIIO::Strutil::strip(capture.finish());
+    }
     if (!read)
         return fail("-i", err);
     if (!said.empty())
@@ -753,6 +777,12 @@ void Host::set_current(const std::string& command)
 bool Host::write_one(const PendingWrite& w)
 {
     set_current("-o");
+    std::string err;
+    return write_checked(w, err) || fail("-o", err);
+}
+
+bool Host::write_checked(const PendingWrite& w, std::string& err)
+{
     const StackImage& img = w.image;
     std::vector<OIIO::TypeDesc> formats = bokeh::formats_for(img.buf->spec(), img.file_types);
     for (int c = 0; c < img.buf->nchannels(); ++c) {
@@ -779,9 +809,12 @@ bool Host::write_one(const PendingWrite& w)
     OIIO::ImageBuf converted;
     if (!img.buf->deep() && img.colorspace != target) {
         converted = *img.buf;
-        std::string err;
-        if (!m_colors.convert(converted, img.colorspace, target, m_threads, err))
-            return fail("-o", format("{}: {}", w.path, err));
+        std::string why;
+        std::lock_guard<std::mutex> lock(m_colors_mutex);
+        if (!m_colors.convert(converted, img.colorspace, target, m_threads, why)) {
+            err = format("{}: {}", w.path, why);
+            return false;
+        }
         converted.specmod().attribute("oiio:ColorSpace", target);
         pixels = &converted;
     }
@@ -792,9 +825,8 @@ bool Host::write_one(const PendingWrite& w)
         message(format("-n: would write {}", w.path));
         return true;
     }
-    std::string err;
     if (!bokeh::write_image(*pixels, w.path, opts, err))
-        return fail("-o", err);
+        return false;
     if (m_verbosity > 1)
         message(format("  wrote {}", w.path));
     return true;
@@ -899,6 +931,31 @@ void Host::print_runstats(double seconds) const
                         bokeh::memory_size_text(int64_t(usage.ru_maxrss) * 1024));
 }
 
+void Host::read_ahead(const std::vector<std::string>& line)
+{
+    m_line_inputs.clear();
+    m_line_outputs.clear();
+    m_depth = 0;
+    if (!parse(line, true))
+        return;
+    for (const std::string& path : m_line_inputs) {
+        if (m_read_ahead.count(path) || !OIIO::Filesystem::exists(path))
+            continue;
+        const bokeh::ReadOptions options = m_read_options;
+        m_read_ahead[path] = std::async(std::launch::async, [path, options] {
+                                 Prefetched p;
+                                 p.buf = std::make_shared<OIIO::ImageBuf>();
+                                 std::string err;
+                                 try {
+                                     p.ok = bokeh::read_image(*p.buf, path, options, &p.info, err);
+                                 } catch (...) {
+                                     p.ok = false;  // read again, and reported, by read_input
+                                 }
+                                 return p;
+                             }).share();
+    }
+}
+
 int Host::run_frames(const std::vector<std::string>& args)
 {
     OIIO::Timer run_timer;
@@ -919,6 +976,46 @@ int Host::run_frames(const std::vector<std::string>& args)
                                                                         : "the memory budget "
                                                                           "(--maxmemory)";
     Watchdog watchdog(m_timeout_seconds);
+    const bool overlap = m_parallel_frames && sequence && frames.size() > 1;
+
+    // A frame's outputs written while the next one is computed (--parallel-frames).
+    struct Written {
+        bool ok = true;
+        std::string err, where;
+        int frame   = 0;
+        size_t index = 0;
+        double seconds = 0;
+    };
+    std::future<Written> writing;
+    auto frame_done = [&](int frame, size_t index, double seconds) {
+        ++m_frames_done;
+        if (m_progress && m_verbosity > 0)
+            std::cout << format("frame {} ({} of {}) done in {:.2f} s\n", frame, index + 1,
+                                frames.size(), seconds);
+    };
+    // Wait for the write behind; false when it failed (reported here, naming its frame).
+    auto collect = [&]() {
+        if (!writing.valid())
+            return true;
+        Written w = writing.get();
+        if (w.ok) {
+            frame_done(w.frame, w.index, w.seconds);
+            return true;
+        }
+        const std::string where = m_where;
+        m_where                 = w.where;
+        m_failed                = false;
+        fail("-o", w.err);
+        m_where = where;
+        m_frames_failed.push_back(w.frame);
+        return false;
+    };
+    auto stop = [&]() {
+        collect();
+        if (m_runstats)
+            print_runstats(run_timer());
+        return 1;
+    };
 
     for (size_t i = 0; i < frames.size(); ++i) {
         OIIO::Timer timer;
@@ -938,20 +1035,52 @@ int Host::run_frames(const std::vector<std::string>& args)
                 std::cout << format("-u: {} skipped, up to date ({})\n", frame_name, why);
             continue;
         }
-        m_failed = false;
-        if (!parse(line, false) || !write_pending()) {
+        if (overlap && i + 1 < frames.size()) {
+            read_ahead(args_for_frame(plan, frames[i + 1]));
+            m_failed = false;
+        }
+        if (!parse(line, false)) {
             m_frames_failed.push_back(frames[i]);
             if (m_skip_bad_frames && sequence)
                 continue;
-            if (m_runstats)
-                print_runstats(run_timer());
-            return 1;
+            return stop();
         }
-        ++m_frames_done;
-        if (m_progress && m_verbosity > 0)
-            std::cout << format("frame {} ({} of {}) done in {:.2f} s\n", frames[i], i + 1,
-                                frames.size(), timer());
+        if (!overlap) {
+            if (!write_pending()) {
+                m_frames_failed.push_back(frames[i]);
+                if (m_skip_bad_frames && sequence)
+                    continue;
+                return stop();
+            }
+            frame_done(frames[i], i, timer());
+            continue;
+        }
+        // The previous frame's outputs are on disk before this frame's are started: at most
+        // one frame's outputs in memory besides the frame being computed.
+        if (!collect() && !m_skip_bad_frames)
+            return stop();
+        set_current("-o");
+        writing = std::async(std::launch::async,
+                             [this, writes = std::move(m_writes), frame = frames[i], i,
+                              where = m_where, timer]() mutable {
+                                 Written w;
+                                 w.frame = frame, w.index = i, w.where = where;
+                                 try {
+                                     for (const PendingWrite& pw : writes)
+                                         if (!(w.ok = write_checked(pw, w.err)))
+                                             break;
+                                 } catch (const std::bad_alloc&) {
+                                     w.ok = false, w.err = "out of memory (std::bad_alloc)";
+                                 } catch (const std::exception& e) {
+                                     w.ok = false, w.err = format("failed with an exception: {}", e.what());
+                                 }
+                                 w.seconds = timer();
+                                 return w;
+                             });
+        m_writes.clear();
     }
+    if (!collect() && !m_skip_bad_frames)
+        return stop();
     if (m_runstats)
         print_runstats(run_timer());
     if (!m_frames_failed.empty()) {

@@ -8,7 +8,10 @@
 // command line writes nothing.
 #pragma once
 
+#include <future>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -59,6 +62,8 @@ private:
     bool read_input(const std::string& path);
     bool write_pending();
     bool write_one(const PendingWrite& w);
+    /// write_one without reporting: false + `err` (safe off the main thread).
+    bool write_checked(const PendingWrite& w, std::string& err);
     int run_frames(const std::vector<std::string>& args);
     /// -u: true when every output of the frame line `line` exists and is newer than each
     /// of its inputs (`why` says which output decided).
@@ -82,6 +87,7 @@ private:
     std::string m_colorconfig;
     bokeh::ReadOptions m_read_options;
     double m_timeout_seconds = 0;  // 0 = no limit
+    bool m_parallel_frames = false;
     bool m_dry_run = false, m_update = false, m_skip_bad_frames = false, m_runstats = false;
     MissingFile m_missing_file = MissingFile::Error;
     OIIO::ImageSpec m_last_read_spec;  // --missingfile substitutes an image of this size
@@ -95,6 +101,16 @@ private:
     int m_depth = 0;
     bool m_failed = false;
     std::vector<std::string> m_line_inputs, m_line_outputs;  // files of the line checked last
+
+    // --parallel-frames: the next frame's inputs read ahead, by file name.
+    struct Prefetched {
+        bool ok = false;
+        std::shared_ptr<OIIO::ImageBuf> buf;
+        bokeh::ReadInfo info;
+    };
+    std::map<std::string, std::shared_future<Prefetched>> m_read_ahead;
+    std::mutex m_colors_mutex;  // colour conversions of the main thread and of a write behind
+    void read_ahead(const std::vector<std::string>& line);
     std::string m_where;    // appended to errors: which frame of a sequence
     std::string m_current;  // the command running, named by errors that are not its own
 };
