@@ -41,7 +41,7 @@ for f in $(seq -f %04g 1 "$frames"); do
   cmp -s "seq/out.$f.exr" "par/out.$f.exr" || { echo "frame $f differs with --parallel-frames"; exit 1; }
 done
 median() { tr ' ' '\n' | grep . | sort -g | awk '{a[NR]=$1} END {print (NR%2 ? a[(NR+1)/2] : (a[NR/2]+a[NR/2+1])/2)}'; }
-o=$(echo "${times[oiiotool]}" | median)
-d=$(echo "${times[defocus]}" | median)
-p=$(echo "${times[parallel]}" | median)
+o=$(printf %.2f "$(echo "${times[oiiotool]}" | median)")
+d=$(printf %.2f "$(echo "${times[defocus]}" | median)")
+p=$(printf %.2f "$(echo "${times[parallel]}" | median)")
 echo "medians of $reps: oiiotool copy $o s; --defocus $d s ($(echo "scale=2; $d / $o" | bc)x); --defocus --parallel-frames $p s ($(echo "scale=2; $p / $o" | bc)x)"
