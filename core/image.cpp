@@ -56,6 +56,26 @@ ChannelMap find_channels(const OIIO::ImageSpec& spec)
     return m;
 }
 
+int channel_index_named(const OIIO::ImageSpec& spec, const std::string& name, std::string& err)
+{
+    const int found = spec.channelindex(name);
+    if (found >= 0)
+        return found;
+    const size_t dot          = name.rfind('.');
+    const std::string layer   = dot == std::string::npos ? std::string() : name.substr(0, dot + 1);
+    std::vector<std::string> in_layer;
+    for (int c = 0; c < spec.nchannels; ++c)
+        if (!layer.empty() && OIIO::Strutil::starts_with(spec.channel_name(c), layer))
+            in_layer.push_back(spec.channel_name(c));
+    if (!in_layer.empty())
+        err = format("no channel '{}': layer (or part) '{}' holds {}", name,
+                     layer.substr(0, layer.size() - 1), OIIO::Strutil::join(in_layer, ", "));
+    else
+        err = format("no channel '{}' (the image has {})", name,
+                     OIIO::Strutil::join(spec.channelnames, ", "));
+    return -1;
+}
+
 bool is_premultiplied(const OIIO::ImageSpec& spec)
 {
     return spec.get_int_attribute("oiio:UnassociatedAlpha", 0) == 0;

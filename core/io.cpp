@@ -3,9 +3,11 @@
 // Reads first check what the file declares against a memory budget (io_budget.cpp), then
 // force the whole file into memory so that a truncated or corrupt file fails at read
 // time with the file's name, not later in a filter; exceptions from the readers become
-// errors. Writes use ImageOutput on a
-// temporary file in the target's directory (same filesystem, so the final rename is
-// atomic) and keep the spec: channel names, data/display windows, tiling, metadata.
+// errors. A flat multipart EXR (a layer per part, as Nuke writes) is read part by part and
+// merged into one image, names and windows by the rules in io.h. Writes use ImageOutput on
+// a temporary file in the target's directory (same filesystem, so the final rename is
+// atomic) and keep the spec: channel names, data/display windows, tiling, metadata; or
+// write a part per layer, a compression or a tiling asked for (WriteOptions).
 
 #include <bokeh/io.h>
 
@@ -22,6 +24,7 @@
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/imagecache.h>
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
@@ -38,8 +41,121 @@ static std::string first_line(std::string s)
     return nl == std::string::npos ? s : s.substr(0, nl);
 }
 
+std::string channel_layer(const std::string& channel)
+{
+    const size_t dot = channel.rfind('.');
+    return dot == std::string::npos ? std::string() : channel.substr(0, dot);
+}
+
+std::string merged_channel_name(const std::string& channel, int part, const std::string& part_name,
+                                const std::string& view, const std::string& first_view)
+{
+    if (part == 0)
+        return channel;
+    if (!view.empty() && view != first_view)
+        return view + "." + channel;
+    if (channel.find('.') != std::string::npos)
+        return channel;
+    return (part_name.empty() ? format("part{}", part) : part_name) + "." + channel;
+}
+
+// The name OIIO gives a part ("" when the file names none).
+static std::string part_name_of(const OIIO::ImageSpec& spec)
+{
+    return spec.get_string_attribute("oiio:subimagename");
+}
+
+// Every part of a flat multipart file merged into one float image (io.h, read_image).
+// Each part is decoded on its own and pasted into the union of the data windows, which
+// starts zeroed: OpenEXR leaves pixels outside a data window undefined, Nuke and OIIO's
+// tools take them as 0.
+static bool read_merged_parts(OIIO::ImageBuf& dst, const std::string& path, int nparts,
+                              ReadInfo* info, std::string& err)
+{
+    std::vector<OIIO::ImageBuf> parts(static_cast<size_t>(nparts));
+    for (int p = 0; p < nparts; ++p) {
+        OIIO::ImageBuf& part = parts[size_t(p)];
+        part.reset(path, p, 0);
+        if (!part.init_spec(path, p, 0)) {
+            err = format("{}: cannot read part {}: {}", path, p, first_line(part.geterror()));
+            return false;
+        }
+        if (part.spec().deep) {
+            err = format("{}: part {} ('{}') is deep and part 0 is flat; a file mixing deep "
+                         "and flat parts is not read",
+                         path, p, part_name_of(part.spec()));
+            return false;
+        }
+        if (!part.read(p, 0, true, OIIO::TypeFloat) || part.has_error()) {
+            err = format("{}: cannot read part {} ('{}') (corrupt or truncated?): {}", path, p,
+                         part_name_of(part.spec()), first_line(part.geterror()));
+            return false;
+        }
+    }
+    const OIIO::ImageSpec& first = parts[0].spec();
+    const std::string first_view = first.get_string_attribute("view");
+    OIIO::ImageSpec spec         = first;
+    spec.channelnames.clear();
+    spec.channelformats.clear();
+    spec.set_format(OIIO::TypeFloat);
+    spec.alpha_channel = spec.z_channel = -1;
+    ChannelTypes types;
+    OIIO::ROI window = parts[0].roi();
+    for (int p = 0; p < nparts; ++p) {
+        const OIIO::ImageSpec& ps = parts[size_t(p)].spec();
+        const std::string pname   = part_name_of(ps);
+        window                    = OIIO::roi_union(window, parts[size_t(p)].roi());
+        for (int c = 0; c < ps.nchannels; ++c) {
+            const std::string own = ps.channel_name(c);
+            std::string name = merged_channel_name(own, p, pname, ps.get_string_attribute("view"),
+                                                   first_view);
+            // Taken by an earlier part (two views of "depth.Z"): the part's name in front.
+            if (types.count(name) && p > 0)
+                name = (pname.empty() ? format("part{}", p) : pname) + "." + own;
+            if (types.count(name)) {
+                err = format("{}: channel '{}' is held by two parts (part {} '{}' and an "
+                             "earlier one)",
+                             path, name, p, pname);
+                return false;
+            }
+            types[name] = parts[size_t(p)].nativespec().channelformat(c);
+            spec.channelnames.push_back(name);
+        }
+    }
+    spec.nchannels = int(spec.channelnames.size());
+    spec.x = window.xbegin, spec.y = window.ybegin;
+    spec.width = window.width(), spec.height = window.height();
+    spec.alpha_channel = spec.channelindex("A");
+    spec.z_channel     = spec.channelindex("Z");
+    for (const char* per_part : { "oiio:subimagename", "oiio:subimages", "name", "view" })
+        spec.erase_attribute(per_part);
+
+    OIIO::ImageBuf merged(spec, OIIO::InitializePixels::Yes);
+    int channel = 0;
+    for (int p = 0; p < nparts; ++p) {
+        const OIIO::ImageBuf& part = parts[size_t(p)];
+        // set_pixels into the part's own window and channels (OIIO 2.4's IBA::paste moves a
+        // source with an offset data window by that offset again).
+        OIIO::ROI where = part.roi();
+        where.chbegin   = channel;
+        where.chend     = channel + part.nchannels();
+        if (!part.localpixels() || !merged.set_pixels(where, OIIO::TypeFloat, part.localpixels())) {
+            err = format("{}: cannot merge part {}: {}", path, p, first_line(merged.geterror()));
+            return false;
+        }
+        channel += part.spec().nchannels;
+        if (info)
+            info->part_names.push_back(part_name_of(part.spec()));
+    }
+    if (info)
+        info->file_types = std::move(types);
+    dst = std::move(merged);
+    return true;
+}
+
 // The part of read_image that can throw: OIIO and OpenEXR allocate and decode here.
-static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, std::string& err)
+static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, ReadInfo* info,
+                         std::string& err)
 {
     auto probe = OIIO::ImageInput::open(path);
     if (!probe) {
@@ -47,6 +163,9 @@ static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, std::stri
         return false;
     }
     const bool deep = probe->spec().deep;
+    int nparts      = 1;
+    while (!deep && probe->seek_subimage(nparts, 0))
+        ++nparts;
     probe.reset();
 
     // ImageBuf keeps what it learned of a file (spec, an open reader) in OIIO's shared
@@ -55,6 +174,8 @@ static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, std::stri
     // OIIO, found by the read fuzzer). Forget it first.
     OIIO::ImageCache* cache = OIIO::ImageCache::create(true);
     cache->invalidate(OIIO::ustring(path), true);
+    if (nparts > 1)
+        return read_merged_parts(dst, path, nparts, info, err);
     OIIO::ImageBuf buf(path);
     const bool ok = deep ? buf.read(0, 0, true) : buf.read(0, 0, true, OIIO::TypeFloat);
     if (!ok || buf.has_error()) {
@@ -62,13 +183,19 @@ static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, std::stri
                      first_line(buf.geterror()));
         return false;
     }
+    if (info) {
+        info->file_types = channel_types_of(buf.nativespec());
+        info->part_names = { part_name_of(buf.spec()) };
+    }
     dst = std::move(buf);
     return true;
 }
 
 bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions& opts,
-                std::string& err)
+                ReadInfo* info, std::string& err)
 {
+    if (info)
+        *info = ReadInfo();
     if (path.empty()) {
         err = "empty file name";
         return false;
@@ -94,7 +221,7 @@ bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions&
                          memory_size_text(budget));
             return false;
         }
-        return read_checked(dst, path, err);
+        return read_checked(dst, path, info, err);
     } catch (const std::bad_alloc&) {
         err = format("{}: out of memory while reading", path);
     } catch (const std::exception& e) {
@@ -106,9 +233,15 @@ bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions&
     return false;
 }
 
+bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions& opts,
+                std::string& err)
+{
+    return read_image(dst, path, opts, nullptr, err);
+}
+
 bool read_image(OIIO::ImageBuf& dst, const std::string& path, std::string& err)
 {
-    return read_image(dst, path, ReadOptions(), err);
+    return read_image(dst, path, ReadOptions(), nullptr, err);
 }
 
 ChannelTypes channel_types_of(const OIIO::ImageSpec& native)
@@ -249,6 +382,61 @@ static bool write_pixels(OIIO::ImageOutput& out, const OIIO::ImageBuf& img)
            && out.write_image(OIIO::TypeFloat, pixels.data());
 }
 
+// OpenEXR's compression names (OIIO's spelling), each optionally ":quality".
+static bool exr_compression_known(const std::string& value)
+{
+    static const char* names[] = { "none", "rle", "zip", "zips", "piz", "pxr24",
+                                   "b44", "b44a", "dwaa", "dwab" };
+    const std::string name = value.substr(0, value.find(':'));
+    if (std::none_of(std::begin(names), std::end(names), [&](const char* n) { return name == n; }))
+        return false;
+    if (name.size() == value.size())
+        return true;
+    OIIO::string_view q(value);
+    q.remove_prefix(name.size() + 1);
+    int quality = 0;
+    return OIIO::Strutil::parse_int(q, quality) && q.empty() && quality > 0;
+}
+
+// The parts of PartLayout::Layers: the channel indices of each, channels without a layer
+// first (io.h).
+struct LayerPart {
+    std::string name;
+    std::vector<int> channels;
+};
+static std::vector<LayerPart> layer_parts(const OIIO::ImageSpec& spec)
+{
+    std::vector<LayerPart> parts;
+    for (int c = 0; c < spec.nchannels; ++c) {
+        const std::string layer = channel_layer(spec.channel_name(c));
+        auto it = std::find_if(parts.begin(), parts.end(), [&](const LayerPart& p) {
+            return p.name == (layer.empty() ? "rgba" : layer);
+        });
+        if (it == parts.end()) {
+            parts.push_back({ layer.empty() ? "rgba" : layer, {} });
+            if (layer.empty())
+                std::rotate(parts.begin(), parts.end() - 1, parts.end());
+            it = layer.empty() ? parts.begin() : parts.end() - 1;
+        }
+        it->channels.push_back(c);
+    }
+    return parts;
+}
+
+// Write one part of a file opened with all its parts: `img`'s channels `channels`, `spec`
+// being the part's (part 0 is current after the open; later ones are appended).
+static bool write_part(OIIO::ImageOutput& out, const std::string& tmp, const OIIO::ImageBuf& img,
+                       const std::vector<int>& channels, const OIIO::ImageSpec& spec, bool append)
+{
+    if (append && !out.open(tmp, spec, OIIO::ImageOutput::AppendSubimage))
+        return false;
+    if (int(channels.size()) == img.nchannels())
+        return write_pixels(out, img);
+    const OIIO::ImageBuf subset = OIIO::ImageBufAlgo::channels(img, int(channels.size()),
+                                                               channels);
+    return !subset.has_error() && write_pixels(out, subset);
+}
+
 bool write_image(const OIIO::ImageBuf& img, const std::string& path, const WriteOptions& opts,
                  std::string& err)
 {
@@ -279,6 +467,21 @@ bool write_image(const OIIO::ImageBuf& img, const std::string& path, const Write
         err = format("{}: the {} format cannot hold deep images", path, out->format_name());
         return false;
     }
+    const bool exr = std::string(out->format_name()) == "openexr";
+    if (!opts.compression.empty() && exr && !exr_compression_known(opts.compression)) {
+        err = format("{}: '{}' is not an OpenEXR compression (none, rle, zip, zips, piz, pxr24, "
+                     "b44, b44a, dwaa, dwab; dwaa:45 gives a quality)",
+                     path, opts.compression);
+        return false;
+    }
+    if ((opts.tile_width > 0 || opts.tile_height > 0)
+        && (opts.tile_width <= 0 || opts.tile_height <= 0 || !out->supports("tiles"))) {
+        err = opts.tile_width <= 0 || opts.tile_height <= 0
+                  ? format("{}: tile size {} x {} (both sides > 0)", path, opts.tile_width,
+                           opts.tile_height)
+                  : format("{}: the {} format cannot hold tiles", path, out->format_name());
+        return false;
+    }
 
     OIIO::ImageSpec spec = img.spec();
     std::vector<OIIO::TypeDesc> formats = opts.channel_formats;
@@ -293,18 +496,64 @@ bool write_image(const OIIO::ImageBuf& img, const std::string& path, const Write
                      spec.nchannels);
         return false;
     }
-    spec.format = formats[0];
-    spec.channelformats.clear();
-    for (const OIIO::TypeDesc& t : formats)
-        if (t != formats[0])
-            spec.channelformats = formats;
+    if (!opts.compression.empty())
+        spec.attribute("compression", opts.compression);
+    if (opts.tile_width > 0) {
+        spec.tile_width  = opts.tile_width;
+        spec.tile_height = opts.tile_height;
+        spec.tile_depth  = 1;
+    }
+
+    // The parts, each with its channels, names and types.
+    std::vector<LayerPart> parts;
+    if (opts.parts == PartLayout::Layers && !img.deep())
+        parts = layer_parts(spec);
+    // Other formats hold several images (TIFF pages), but no reader takes them as layers.
+    if (opts.parts == PartLayout::Layers && !exr) {
+        err = format("{}: a part per layer is written to OpenEXR files, not {}", path,
+                     out->format_name());
+        return false;
+    }
+    if (parts.size() <= 1) {
+        parts.assign(1, LayerPart{ "", {} });
+        for (int c = 0; c < spec.nchannels; ++c)
+            parts[0].channels.push_back(c);
+    }
+    std::vector<OIIO::ImageSpec> specs;
+    for (const LayerPart& part : parts) {
+        OIIO::ImageSpec ps = spec;
+        if (parts.size() > 1) {
+            ps.nchannels = int(part.channels.size());
+            ps.channelnames.clear();
+            for (int c : part.channels)
+                ps.channelnames.push_back(spec.channel_name(c));
+            ps.alpha_channel = ps.channelindex("A");
+            ps.z_channel     = ps.channelindex("Z");
+            ps.attribute("oiio:subimagename", part.name);
+        }
+        std::vector<OIIO::TypeDesc> pf;
+        for (int c : part.channels)
+            pf.push_back(formats[size_t(c)]);
+        ps.format = pf[0];
+        ps.channelformats.clear();
+        for (const OIIO::TypeDesc& t : pf)
+            if (t != pf[0])
+                ps.channelformats = pf;
+        specs.push_back(std::move(ps));
+    }
 
     remove_stale_partials(path);
     const std::string tmp = partial_write_name(path);
     const int slot        = register_partial(tmp);
     bool ok               = false;
     try {
-        ok = out->open(tmp, spec) && write_pixels(*out, img);
+        if (specs.size() == 1) {
+            ok = out->open(tmp, specs[0]) && write_pixels(*out, img);
+        } else {
+            ok = out->open(tmp, int(specs.size()), specs.data());
+            for (size_t p = 0; ok && p < specs.size(); ++p)
+                ok = write_part(*out, tmp, img, parts[p].channels, specs[p], p > 0);
+        }
         ok = out->close() && ok;
         if (!ok)
             err = format("{}: cannot write: {}", path, first_line(out->geterror()));

@@ -9,7 +9,8 @@
 // summed, stopping as soon as the sum passes the budget; the sample data are not read.
 // Other formats: the header as OIIO's ImageInput::open reports it.
 //
-// The estimate is of what OIIO 2.4 allocates to read subimage 0 the way read_image does:
+// The estimate is of what OIIO 2.4 allocates to read the file the way read_image does
+// (subimage 0; every part of a flat multipart EXR, plus the merged image):
 //  * flat: pixels x channels x 4 bytes (the image is read as float), plus 8 bytes per
 //    chunk of every part (OpenEXR's chunk offset tables, read when the file is opened),
 //    plus three rows of chunks in the file's own types (line and conversion buffers);
@@ -128,7 +129,9 @@ public:
                 return core_failed(format("damaged OpenEXR header (part {})", p));
             m_cost.bytes = add_product(m_cost.bytes, chunks, 8);
         }
-        return part0();
+        if (!part0())
+            return false;
+        return parts == 1 || m_deep || other_parts(parts);
     }
 
 private:
@@ -158,6 +161,7 @@ private:
         }
         m_pixels            = add_product(0, width, height);  // saturating: sides up to 2^32
         const bool deep     = storage == EXR_STORAGE_DEEP_SCANLINE || storage == EXR_STORAGE_DEEP_TILED;
+        m_deep              = deep;
         int64_t sample_size = 0;
         for (int c = 0; c < nch; ++c)
             sample_size += pixel_type_bytes(chans->entries[c].pixel_type);
@@ -197,6 +201,43 @@ private:
         m_cost.deep_samples = samples;
         m_cost.what += complete ? format(", {} samples", samples)
                                 : format(", more than {} samples", samples);
+        return true;
+    }
+
+    // A flat multipart file is read part by part, then merged (io.cpp): every part's
+    // float pixels, plus the merged image over the union of the data windows.
+    bool other_parts(int parts)
+    {
+        exr_attr_box2i_t all;
+        if (exr_get_data_window(m_ctxt, 0, &all) != EXR_ERR_SUCCESS)
+            return core_failed("damaged OpenEXR header");
+        int64_t channels = 0;
+        for (int p = 0; p < parts; ++p) {
+            exr_attr_box2i_t dw;
+            const exr_attr_chlist_t* chans = nullptr;
+            if (exr_get_data_window(m_ctxt, p, &dw) != EXR_ERR_SUCCESS
+                || exr_get_channels(m_ctxt, p, &chans) != EXR_ERR_SUCCESS || !chans)
+                return core_failed(format("damaged OpenEXR header (part {})", p));
+            const int64_t width  = int64_t(dw.max.x) - dw.min.x + 1;
+            const int64_t height = int64_t(dw.max.y) - dw.min.y + 1;
+            if (width <= 0 || height <= 0) {
+                m_err = format("{}: damaged OpenEXR header: part {}'s data window {},{} to "
+                               "{},{} is empty",
+                               m_path, p, dw.min.x, dw.min.y, dw.max.x, dw.max.y);
+                return false;
+            }
+            if (p > 0)
+                m_cost.bytes = add_product(m_cost.bytes, add_product(0, width, height),
+                                           int64_t(chans->num_channels) * 4);
+            channels += chans->num_channels;
+            all.min.x = std::min(all.min.x, dw.min.x), all.min.y = std::min(all.min.y, dw.min.y);
+            all.max.x = std::max(all.max.x, dw.max.x), all.max.y = std::max(all.max.y, dw.max.y);
+        }
+        const int64_t pixels = add_product(0, int64_t(all.max.x) - all.min.x + 1,
+                                           int64_t(all.max.y) - all.min.y + 1);
+        m_cost.bytes = add_product(m_cost.bytes, pixels, channels * 4);
+        m_cost.what  = format("{} x {}, {} channels in {} parts", int64_t(all.max.x) - all.min.x + 1,
+                              int64_t(all.max.y) - all.min.y + 1, channels, parts);
         return true;
     }
 
@@ -292,6 +333,7 @@ private:
     CoreMessages m_messages;
     exr_context_t m_ctxt = nullptr;
     int64_t m_pixels     = 0;
+    bool m_deep          = false;
 };
 
 }  // namespace

@@ -181,6 +181,7 @@ bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifi
     }
     if (modifiers.empty())
         return true;
+    const OptionSpec* last_string = nullptr;  // the option the previous item set, if a String
     for (const std::string& item : OIIO::Strutil::splits(modifiers, ":")) {
         if (item.empty())
             continue;
@@ -188,6 +189,13 @@ bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifi
         const std::string name = item.substr(0, eq);
         auto spec = std::find_if(specs.begin(), specs.end(),
                                  [&](const OptionSpec& s) { return s.name == name; });
+        // A piece without '=' naming no option continues a String value that holds a colon,
+        // as oiiotool takes `-o:compression=dwaa:45`.
+        if (spec == specs.end() && eq == std::string::npos && last_string) {
+            out.values[last_string->name] += ":" + item;
+            continue;
+        }
+        last_string = nullptr;
         if (spec == specs.end()) {
             std::vector<std::string> known;
             for (const OptionSpec& s : specs)
@@ -212,6 +220,8 @@ bool parse_options(const std::vector<OptionSpec>& specs, std::string_view modifi
                 return false;
         } else if (!set_option(*spec, std::string_view(item).substr(eq + 1), out, err)) {
             return false;
+        } else if (spec->type == OptionSpec::Type::String) {
+            last_string = &*spec;
         }
     }
     return true;

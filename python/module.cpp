@@ -250,6 +250,8 @@ PYBIND11_MODULE(openbokeh, m)
             bokeh::OptionValues values = options_from_kwargs("defocus", cmd, kw);
             bokeh::DefocusOptions opts;
             std::string err;
+            if (!bokeh::with_named_depth(values, in[0].buf, in[0].buf, err))
+                throw py::value_error(error_text("defocus", err));
             if (!bokeh::defocus_options_from(values, in[0].buf->spec(), opts, err))
                 throw py::value_error(error_text("defocus", err));
             if (values.get_string("output") != "image") {
@@ -448,8 +450,10 @@ PYBIND11_MODULE(openbokeh, m)
             return image_to_imagebuf(buf, true);
         },
         py::arg("path"),
-        "read_image(path) -> ImageBuf: subimage 0 of a file, whole and checked now: flat images as "
-        "float (the file's types kept in nativespec for writing back), deep ones as stored. "
+        "read_image(path) -> ImageBuf: a file, whole and checked now: flat images as float (the "
+        "file's types kept in nativespec for writing back), every part of a flat multipart EXR "
+        "merged into one image (depth.Z from part depth; as bokehtool reads it), deep ones as "
+        "stored (part 0). "
         "RuntimeError with the reason (missing, a directory, truncated, ...).");
     m.def(
         "write_image",

@@ -280,3 +280,58 @@ TEST(Read, AFileRewrittenInPlaceIsReadAfresh)
     EXPECT_EQ(second.spec().height, 40);
     EXPECT_EQ(second.nchannels(), 4);
 }
+
+TEST(Multipart, ChannelNamesOfMergedParts)
+{
+    EXPECT_EQ(merged_channel_name("R", 0, "rgba", "", ""), "R");
+    EXPECT_EQ(merged_channel_name("Z", 1, "depth", "", ""), "depth.Z");
+    EXPECT_EQ(merged_channel_name("depth.Z", 1, "depth", "", ""), "depth.Z");
+    EXPECT_EQ(merged_channel_name("Z", 2, "", "", ""), "part2.Z");
+    EXPECT_EQ(merged_channel_name("R", 1, "rgba_left", "left", "right"), "left.R");
+    EXPECT_EQ(merged_channel_name("Z", 1, "depth", "right", "right"), "depth.Z");
+    EXPECT_EQ(channel_layer("forward.left.u"), "forward.left");
+    EXPECT_EQ(channel_layer("R"), "");
+}
+
+TEST(Multipart, WriteReadRoundTripAndBudget)
+{
+    const std::string dir = fresh_dir("io_multipart");
+    // R, G, B, A (half), depth.Z (float), mask.a (half): three parts per layer.
+    OIIO::ImageSpec spec(24, 16, 6, OIIO::TypeFloat);
+    spec.channelnames = { "R", "G", "B", "A", "depth.Z", "mask.a" };
+    spec.alpha_channel = 3;
+    spec.x = 5, spec.y = 2, spec.full_width = 40, spec.full_height = 30;
+    OIIO::ImageBuf img(spec);
+    for (int y = spec.y; y < spec.y + spec.height; ++y)
+        for (int x = spec.x; x < spec.x + spec.width; ++x) {
+            const float px[6] = { 0.25f * float(x), 0.5f, float(y), 1.0f, 3.0f + float(x), 0.125f };
+            img.setpixel(x, y, px);
+        }
+    WriteOptions w;
+    w.parts           = PartLayout::Layers;
+    w.channel_formats = { OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf, OIIO::TypeHalf,
+                          OIIO::TypeFloat, OIIO::TypeHalf };
+    std::string err;
+    ASSERT_TRUE(write_image(img, dir + "/p.exr", w, err)) << err;
+    OIIO::ImageBuf back;
+    ReadInfo info;
+    ASSERT_TRUE(read_image(back, dir + "/p.exr", ReadOptions(), &info, err)) << err;
+    EXPECT_EQ(info.part_names, (std::vector<std::string>{ "rgba", "depth", "mask" }));
+    EXPECT_EQ(back.spec().channelnames, spec.channelnames);
+    EXPECT_EQ(back.roi(), img.roi());
+    EXPECT_EQ(back.spec().full_width, 40);
+    EXPECT_EQ(back.spec().alpha_channel, 3);
+    EXPECT_EQ(info.file_types.at("depth.Z"), OIIO::TypeFloat);
+    EXPECT_EQ(info.file_types.at("mask.a"), OIIO::TypeHalf);
+    // All values are exact in half.
+    EXPECT_EQ(max_difference(back, img), 0.0);
+    // The budget counts every part and the merged image: over 24 x 16 x 6 floats twice.
+    ReadCost cost;
+    ASSERT_TRUE(read_cost(dir + "/p.exr", int64_t(1) << 30, cost, err)) << err;
+    EXPECT_GE(cost.bytes, 2 * 24 * 16 * 6 * 4);
+    EXPECT_NE(cost.what.find("6 channels in 3 parts"), std::string::npos) << cost.what;
+    ReadOptions tight;
+    tight.memory_budget_bytes = 24 * 16 * 6 * 4;
+    EXPECT_FALSE(read_image(back, dir + "/p.exr", tight, err));
+    EXPECT_NE(err.find("more than the memory budget"), std::string::npos) << err;
+}

@@ -11,6 +11,7 @@ packages=(
   python3-matplotlib
   pybind11-dev python3-dev python3-numpy python3-openimageio python3-pytest
   libgegl-dev
+  slurm-wlm munge
 )
 
 missing=()

@@ -23,6 +23,12 @@ struct ChannelMap {
 /// and z_channel are used first when set.
 ChannelMap find_channels(const OIIO::ImageSpec& spec);
 
+/// The index of the channel named `name` in `spec`; -1 + `err` when there is none, naming
+/// what there is: the channels of `name`'s layer when the image has that layer (a part of
+/// a multipart file merged by read_image is a layer: "depth.Z" is part "depth"'s "Z"),
+/// else all channels.
+int channel_index_named(const OIIO::ImageSpec& spec, const std::string& name, std::string& err);
+
 /// True when the colour channels are stored multiplied by alpha, the OpenEXR convention
 /// and what OIIO gives on read unless "oiio:UnassociatedAlpha" says otherwise.
 bool is_premultiplied(const OIIO::ImageSpec& spec);

@@ -41,20 +41,69 @@ struct ReadCost {
 };
 bool read_cost(const std::string& path, int64_t budget_bytes, ReadCost& cost, std::string& err);
 
-/// Read all channels of subimage 0 of `path` into `dst`: flat images as float (the file's
-/// own types are kept in `dst.nativespec()` for writing back), deep images as stored.
-/// The declared size is checked against the memory budget first, then the whole file is
-/// decoded now, so truncation is found here. Exceptions from the readers (bad_alloc
-/// included) become errors. False + `err` on failure.
+/// Pixel types by channel name, as a file stored them (from a native spec).
+using ChannelTypes = std::map<std::string, OIIO::TypeDesc>;
+
+/// What a read learned besides the pixels.
+struct ReadInfo {
+    /// Each channel's type in the file, by its name in the image read.
+    ChannelTypes file_types;
+    /// The parts merged into the image, in file order ("" for an unnamed part); one
+    /// entry for a single-part file.
+    std::vector<std::string> part_names;
+};
+
+/// Read `path` into `dst`: flat images as float, deep images as stored. The declared size
+/// is checked against the memory budget first, then the whole file is decoded now, so
+/// truncation is found here. Exceptions from the readers (bad_alloc included) become
+/// errors. False + `err` on failure.
+///
+/// A flat multipart file (OpenEXR 2, as Nuke writes layers) is read whole, every part
+/// merged into one image (merged_channel_name gives the names); its data window is the
+/// union of the parts' data windows, and a part's channels are 0 outside its own data
+/// window (a depth of 0 is "no depth" for the lens); the display window and metadata are
+/// part 0's. A deep file: part 0 only. A flat file with a deep part is refused.
+/// The file's own types are kept in `dst.nativespec()` for a single part and in
+/// `info->file_types` always.
+bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions& opts,
+                ReadInfo* info, std::string& err);
 bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions& opts,
                 std::string& err);
 bool read_image(OIIO::ImageBuf& dst, const std::string& path, std::string& err);
+
+/// The name channel `channel` of part `part` (0-based) takes in a merged multipart image:
+/// part 0's channels keep their names; in a later part, a channel of another view than
+/// part 0's (the part's "view" attribute) is prefixed by its view ("left.R", the single-part
+/// multi-view convention), else a channel without a layer prefix is prefixed by the part's
+/// name ("Z" of part "depth" -> "depth.Z"), else it keeps its name ("depth.Z" stays).
+/// `part_name` empty: "part<N>".
+std::string merged_channel_name(const std::string& channel, int part, const std::string& part_name,
+                                const std::string& view, const std::string& first_view);
+
+/// The layer of a channel name: what comes before its last '.' ("" for "R").
+std::string channel_layer(const std::string& channel);
+
+/// How write_image lays the channels out in the file.
+enum class PartLayout {
+    Single,  ///< one part (every format)
+    /// A part per layer, as Nuke writes multipart EXR: the channels without a layer
+    /// (R, G, B, A, Z, ...) in the first part, named "rgba"; then a part per layer,
+    /// named by the layer, holding its channels under their full names ("depth.Z"), in
+    /// the order of the layers' first channels. Same windows and metadata in every part.
+    Layers,
+};
 
 struct WriteOptions {
     /// Pixel type per channel for the file; empty = the types `img` was read with
     /// (its nativespec), so half stays half.
     std::vector<OIIO::TypeDesc> channel_formats;
     bool no_clobber = false;  ///< fail rather than replace an existing file
+    PartLayout parts = PartLayout::Single;
+    /// The file's compression, as OIIO names it ("zip", "piz", "dwaa:45", "none"; OpenEXR's
+    /// names are checked); empty = the image's own, else the format's default.
+    std::string compression;
+    /// Tile size in pixels; 0 = as the image was read (scanlines unless it was tiled).
+    int tile_width = 0, tile_height = 0;
 };
 
 /// Write `img` to `path` through a temporary file in the same directory, renamed into
@@ -74,7 +123,6 @@ std::string partial_write_name(const std::string& path);
 void remove_partial_writes() noexcept;
 
 /// Pixel types by channel name, as a file stored them (from a native spec).
-using ChannelTypes = std::map<std::string, OIIO::TypeDesc>;
 ChannelTypes channel_types_of(const OIIO::ImageSpec& native);
 
 /// The per-channel types to write `spec` with: each channel's type from `types` by name;

@@ -21,9 +21,11 @@ using OIIO::Strutil::fmt::format;
 
 bool defocus_command(CommandContext& c)
 {
-    const bokeh::StackImage& in = c.inputs[0];
+    bokeh::StackImage in = c.inputs[0];
     bokeh::DefocusOptions o;
     std::string err;
+    if (!bokeh::with_named_depth(c.options, c.inputs[0].buf, in.buf, err))
+        return c.fail(err);
     if (!bokeh::defocus_options_from(c.options, in.buf->spec(), o, err))
         return c.fail(err);
     bokeh::StackImage out = in;
@@ -127,6 +129,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Choice("math", { "depth", "far0", "far1", "direct" },
                            "depth channel holds: distance; 1/distance (far = 0); 1 - 1/distance "
                            "(far = 1); the signed CoC in px"),
+        OptionSpec::String("zchannel", "",
+                           "the depth channel by name (depth.Z: channel Z of a multipart file's "
+                           "part depth); default: Z, else the one layer's *.Z"),
         OptionSpec::Bool("negate", false, "the depth channel is negated (ZDefocus -depth, ...)"),
         OptionSpec::Float("scale", 1.0, -1e4, 1e4, "math=direct: CoC px per unit"),
         OptionSpec::Float("range", 0.0, 0.0, 1e9, "in-focus range around the focus, depth units"),

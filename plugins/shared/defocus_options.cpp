@@ -51,6 +51,28 @@ const std::string& defocus_method_named(const OptionValues& v)
     return v.given("quality") ? v.get_string("quality") : v.get_string("method");
 }
 
+bool with_named_depth(const OptionValues& v, const std::shared_ptr<OIIO::ImageBuf>& in,
+                      std::shared_ptr<OIIO::ImageBuf>& out, std::string& err)
+{
+    out                     = in;
+    const std::string& name = v.get_string("zchannel");
+    if (name.empty())
+        return true;
+    if (in->deep()) {
+        err = "zchannel= names the depth of a flat image; a deep image's is its Z";
+        return false;
+    }
+    std::string why;
+    const int z = channel_index_named(in->spec(), name, why);
+    if (z < 0) {
+        err = "zchannel=" + name + ": " + why;
+        return false;
+    }
+    out                        = std::make_shared<OIIO::ImageBuf>(*in);
+    out->specmod().z_channel   = z;
+    return true;
+}
+
 bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
                           std::string& err)
 {

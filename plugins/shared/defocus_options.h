@@ -7,6 +7,7 @@
 #include <bokeh/defocus.h>
 #include <bokeh/plugin.h>
 
+#include <memory>
 #include <string>
 
 #include <OpenImageIO/imagebuf.h>
@@ -19,6 +20,11 @@ namespace bokeh {
 /// option and why.
 bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
                           std::string& err);
+
+/// `in`, or, when `v` names a depth channel (zchannel=), a copy of it whose spec makes
+/// that channel its depth (z_channel). False + `err` when the image has no such channel.
+bool with_named_depth(const OptionValues& v, const std::shared_ptr<OIIO::ImageBuf>& in,
+                      std::shared_ptr<OIIO::ImageBuf>& out, std::string& err);
 
 /// The method `v` names: `quality=` and `method=` are one option under two spellings
 /// (defocus_options_from refuses them when they disagree).

@@ -9,11 +9,15 @@
 #include <cstdlib>
 #include <cmath>
 #include <exception>
+#include <filesystem>
 #include <iostream>
 #include <new>
 #include <string_view>
 
+#include <sys/resource.h>
+
 #include <OpenImageIO/argparse.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
@@ -61,6 +65,21 @@ static bool parse_memory_size(const std::string& text, int64_t& bytes)
         return false;
     bytes = int64_t(b);
     return true;
+}
+
+// "64,32" or "64x32" (oiiotool's form); "" = no tiles asked for.
+static bool parse_tile_size(const std::string& text, int& width, int& height)
+{
+    width = height = 0;
+    if (text.empty())
+        return true;
+    const std::vector<std::string> sides = OIIO::Strutil::splits(
+        text, text.find(',') != std::string::npos ? "," : "x");
+    if (sides.size() != 2)
+        return false;
+    OIIO::string_view w(sides[0]), h(sides[1]);
+    return OIIO::Strutil::parse_int(w, width) && w.empty() && OIIO::Strutil::parse_int(h, height)
+           && h.empty() && width > 0 && height > 0 && width <= 65536 && height <= 65536;
 }
 
 Host::Host()
@@ -149,6 +168,66 @@ void Host::register_host_commands()
                                       return true;
                                   }),
                      true);
+    add_host_command(host_command("-n", "", 0, 0,
+                                  "Dry run: read and compute every frame, write nothing; print "
+                                  "the files that would be written",
+                                  [this](CommandContext&) { return m_dry_run = true, true; }),
+                     true);
+    add_host_command(host_command("-u", "", 0, 0,
+                                  "Update: skip a frame whose outputs all exist and are newer "
+                                  "than all its inputs (a resubmitted farm job redoes only "
+                                  "what is missing or stale)",
+                                  [this](CommandContext&) { return m_update = true, true; }),
+                     true);
+    add_host_command(host_command("--skip-bad-frames", "", 0, 0,
+                                  "A frame that fails is reported by number and the run goes "
+                                  "on; the exit status is still 1, with a last line naming the "
+                                  "failed frames",
+                                  [this](CommandContext&) { return m_skip_bad_frames = true, true; }),
+                     true);
+    add_host_command(host_command("--framepadding", "N", 0, 0,
+                                  "Digits of a frame number in a '#' pattern (default 4; "
+                                  "printf-style %0Nd patterns give their own)",
+                                  [](CommandContext& c) {
+                                      OIIO::string_view s(c.args[0]);
+                                      int n = 0;
+                                      if (!OIIO::Strutil::parse_int(s, n) || !s.empty() || n < 1
+                                          || n > 9)
+                                          return c.fail(format("'{}' is not a digit count (1..9)",
+                                                               c.args[0]));
+                                      return true;  // used where the patterns are expanded
+                                  }),
+                     true);
+    add_host_command(host_command("--parallel-frames", "", 0, 0,
+                                  "Overlap frames of a sequence: the next frame's inputs are read "
+                                  "and the last frame's outputs written while this frame is "
+                                  "computed (same results; about one frame more in memory)",
+                                  [this](CommandContext&) { return m_parallel_frames = true, true; }),
+                     true);
+    add_host_command(host_command("--runstats", "", 0, 0,
+                                  "At the end: frames done, skipped and failed, wall and CPU "
+                                  "time, peak memory",
+                                  [this](CommandContext&) { return m_runstats = true, true; }),
+                     true);
+    add_host_command(host_command("--missingfile", "POLICY", 0, 0,
+                                  "A missing input file: error (default); black or checker: a "
+                                  "warning, and an image of that kind in its place, the size of "
+                                  "the last image read (else 1920x1080 RGBA), as oiiotool does",
+                                  [this](CommandContext& c) {
+                                      const std::string& a = c.args[0];
+                                      if (a == "error")
+                                          m_missing_file = MissingFile::Error;
+                                      else if (a == "black")
+                                          m_missing_file = MissingFile::Black;
+                                      else if (a == "checker")
+                                          m_missing_file = MissingFile::Checker;
+                                      else
+                                          return c.fail(format("'{}' is not a policy (error, "
+                                                               "black, checker)",
+                                                               a));
+                                      return true;
+                                  }),
+                     true);
     add_host_command(host_command("-v", "", 0, 0, "Verbose: timings and details",
                                   [this](CommandContext&) { return m_verbosity = 2, true; }),
                      true);
@@ -193,15 +272,33 @@ void Host::register_host_commands()
                                   "Read an image (a bare file name does the same)",
                                   [this](CommandContext& c) { return read_input(c.args[0]); }),
                      false);
-    add_host_command(
-        host_command("-o", "FILE", 1, 1,
-                     "Write the top image (after the whole command line has succeeded)",
-                     [this](CommandContext& c) {
-                         m_writes.push_back({ c.inputs[0], c.args[0], m_datatypes });
-                         c.outputs.push_back(c.inputs[0]);
-                         return true;
-                     }),
-        false);
+    Command out = host_command(
+        "-o", "FILE", 1, 1,
+        "Write the top image (after the whole command line has succeeded)",
+        [this](CommandContext& c) {
+            PendingWrite w{ c.inputs[0], c.args[0], m_datatypes, {} };
+            w.options.parts       = c.options.get_string("parts") == "layers"
+                                        ? bokeh::PartLayout::Layers
+                                        : bokeh::PartLayout::Single;
+            w.options.compression = c.options.get_string("compression");
+            if (!parse_tile_size(c.options.get_string("tile"), w.options.tile_width,
+                                 w.options.tile_height))
+                return c.fail(format("tile={} is not a tile size (W,H or WxH, both > 0)",
+                                     c.options.get_string("tile")));
+            m_writes.push_back(std::move(w));
+            c.outputs.push_back(c.inputs[0]);
+            return true;
+        });
+    out.options = {
+        OptionSpec::Choice("parts", { "single", "layers" },
+                           "single: one part; layers: a part per layer, as Nuke writes "
+                           "multipart EXR (R,G,B,A,... in part rgba, depth.Z in part depth)"),
+        OptionSpec::String("compression", "",
+                           "compression as oiiotool names it: zip, zips, piz, dwaa:45, none, ... "
+                           "(default: the input's, else the format's)"),
+        OptionSpec::String("tile", "", "tiles of W,H (or WxH) pixels (default: as read)"),
+    };
+    add_host_command(std::move(out), false);
     add_host_command(
         host_command("-d", "TYPE", 0, 0,
                      "Pixel type of later outputs: uint8, uint16, half, float; or CHANNEL=TYPE",
@@ -439,6 +536,7 @@ void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool
     if (is_file) {
         if (checking) {
             ++m_depth;
+            m_line_inputs.push_back(head);
         } else {
             set_current("-i");
             read_input(head);
@@ -458,6 +556,10 @@ void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool
     if (checking) {
         if (!check_command(*cmd, modifiers, args, opts))
             return;
+        if (name == "-i")
+            m_line_inputs.push_back(args[0]);
+        else if (name == "-o")
+            m_line_outputs.push_back(args[0]);
         if (m_global[name]) {
             CommandContext ctx;
             ctx.args    = args;
@@ -515,8 +617,10 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
                 continue;
             auto linear = std::make_shared<OIIO::ImageBuf>(*in.buf);
             std::string err;
+            std::unique_lock<std::mutex> lock(m_colors_mutex);  // a write may convert meanwhile
             if (!m_colors.convert(*linear, in.colorspace, m_colors.scene_linear(), m_threads, err))
                 return fail(cmd.name, err);
+            lock.unlock();
             in.buf        = linear;
             in.colorspace = m_colors.scene_linear();
         }
@@ -561,13 +665,70 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     return true;
 }
 
+// --missingfile black|checker: in place of a file that does not exist, an image the size
+// and channels of the last one read (else 1920x1080 RGBA half, oiiotool's choice): zero, or
+// oiiotool's checker (64-pixel squares, black at the origin, alpha 1).
+bool Host::substitute_missing(const std::string& path)
+{
+    OIIO::ImageSpec spec = m_last_read_spec;
+    if (spec.nchannels == 0) {
+        spec = OIIO::ImageSpec(1920, 1080, 4, OIIO::TypeHalf);
+        spec.alpha_channel = 3;
+    }
+    spec.deep = false;
+    OIIO::ImageSpec work = spec;
+    work.set_format(OIIO::TypeFloat);
+    work.channelformats.clear();
+    auto buf = std::make_shared<OIIO::ImageBuf>(work, OIIO::InitializePixels::Yes);
+    const bool checker = m_missing_file == MissingFile::Checker;
+    if (checker) {
+        std::vector<float> dark(size_t(work.nchannels), 0.0f), light(size_t(work.nchannels), 1.0f);
+        if (work.alpha_channel >= 0)
+            dark[size_t(work.alpha_channel)] = 1.0f;
+        if (work.z_channel >= 0)
+            dark[size_t(work.z_channel)] = light[size_t(work.z_channel)] = 0.0f;  // no depth
+        OIIO::ImageBufAlgo::checker(*buf, 64, 64, 1, dark, light, 0, 0, 0);
+    }
+    warn(format("{}: no such file; {} image of {} x {}, {} channels in its place "
+                "(--missingfile {}){}",
+                path, checker ? "a checker" : "a black", work.width, work.height, work.nchannels,
+                checker ? "checker" : "black", m_where));
+    StackImage img;
+    img.colorspace = m_colors.scene_linear();
+    img.file_types = bokeh::channel_types_of(spec);
+    img.origin     = path;
+    img.buf        = std::move(buf);
+    m_stack.push_back(std::move(img));
+    return true;
+}
+
 bool Host::read_input(const std::string& path)
 {
+    if (m_missing_file != MissingFile::Error && !path.empty()
+        && !OIIO::Filesystem::exists(path))
+        return substitute_missing(path);
     auto buf = std::make_shared<OIIO::ImageBuf>();
     std::string err;
-    StderrCapture capture;
-    const bool read = bokeh::read_image(*buf, path, m_read_options, err);
-    const std::string said = OIIO::Strutil::strip(capture.finish());
+    bokeh::ReadInfo info;
+    bool read = false;
+    std::string said;
+    auto ahead = m_read_ahead.find(path);
+    if (ahead != m_read_ahead.end()) {
+        // Read while the previous frame was computed (--parallel-frames). A failure is
+        // read again below, so that it is reported as any read is.
+        Prefetched p = ahead->second.get();
+        m_read_ahead.erase(ahead);
+        if (p.ok) {
+            buf  = std::move(p.buf);
+            info = std::move(p.info);
+            read = true;
+        }
+    }
+    if (!read) {
+        StderrCapture capture;
+        read = bokeh::read_image(*buf, path, m_read_options, &info, err);
+        said = OIIO::Strutil::strip(capture.finish());
+    }
     if (!read)
         return fail("-i", err);
     if (!said.empty())
@@ -581,11 +742,17 @@ bool Host::read_input(const std::string& path)
         warn(format("{}: replaced {} non-finite colour value(s) by 0 and {} NaN/-inf depth "
                     "value(s) by +inf (no depth)",
                     path, count.colour, count.depth));
-    if (m_info)
+    if (m_info) {
         std::cout << bokeh::describe_image(*buf, path, m_verbosity > 1);
+        if (info.part_names.size() > 1)
+            std::cout << format("    {} parts merged: {}\n", info.part_names.size(),
+                                OIIO::Strutil::join(info.part_names, ", "));
+    }
+    if (!buf->deep())
+        m_last_read_spec = buf->spec();
     StackImage img;
     img.colorspace = m_colors.space_of_file(buf->nativespec());
-    img.file_types = bokeh::channel_types_of(buf->nativespec());
+    img.file_types = info.file_types;
     img.origin     = path;
     img.buf        = std::move(buf);
     m_stack.push_back(std::move(img));
@@ -610,6 +777,12 @@ void Host::set_current(const std::string& command)
 bool Host::write_one(const PendingWrite& w)
 {
     set_current("-o");
+    std::string err;
+    return write_checked(w, err) || fail("-o", err);
+}
+
+bool Host::write_checked(const PendingWrite& w, std::string& err)
+{
     const StackImage& img = w.image;
     std::vector<OIIO::TypeDesc> formats = bokeh::formats_for(img.buf->spec(), img.file_types);
     for (int c = 0; c < img.buf->nchannels(); ++c) {
@@ -636,18 +809,24 @@ bool Host::write_one(const PendingWrite& w)
     OIIO::ImageBuf converted;
     if (!img.buf->deep() && img.colorspace != target) {
         converted = *img.buf;
-        std::string err;
-        if (!m_colors.convert(converted, img.colorspace, target, m_threads, err))
-            return fail("-o", format("{}: {}", w.path, err));
+        std::string why;
+        std::lock_guard<std::mutex> lock(m_colors_mutex);
+        if (!m_colors.convert(converted, img.colorspace, target, m_threads, why)) {
+            err = format("{}: {}", w.path, why);
+            return false;
+        }
         converted.specmod().attribute("oiio:ColorSpace", target);
         pixels = &converted;
     }
-    bokeh::WriteOptions opts;
-    opts.channel_formats = formats;
-    opts.no_clobber      = m_no_clobber;
-    std::string err;
+    bokeh::WriteOptions opts = w.options;
+    opts.channel_formats     = formats;
+    opts.no_clobber          = m_no_clobber;
+    if (m_dry_run) {
+        message(format("-n: would write {}", w.path));
+        return true;
+    }
     if (!bokeh::write_image(*pixels, w.path, opts, err))
-        return fail("-o", err);
+        return false;
     if (m_verbosity > 1)
         message(format("  wrote {}", w.path));
     return true;
@@ -711,8 +890,75 @@ int Host::main(const std::vector<std::string>& args)
     return 1;
 }
 
+bool Host::frame_up_to_date(const std::vector<std::string>& line, std::string& why)
+{
+    m_line_inputs.clear();
+    m_line_outputs.clear();
+    m_depth = 0;
+    if (!parse(line, true) || m_line_outputs.empty())
+        return false;
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::file_time_type newest_input = fs::file_time_type::min();
+    for (const std::string& in : m_line_inputs) {
+        const auto t = fs::last_write_time(in, ec);
+        if (ec)
+            return false;  // a missing input: let the run say so
+        newest_input = std::max(newest_input, t);
+    }
+    for (const std::string& out : m_line_outputs) {
+        const auto t = fs::last_write_time(out, ec);
+        if (ec || !(t > newest_input))
+            return false;
+    }
+    why = m_line_inputs.empty()
+              ? format("{} exist(s)", OIIO::Strutil::join(m_line_outputs, ", "))
+              : format("{} newer than {}", OIIO::Strutil::join(m_line_outputs, ", "),
+                       OIIO::Strutil::join(m_line_inputs, ", "));
+    return true;
+}
+
+void Host::print_runstats(double seconds) const
+{
+    struct rusage usage = {};
+    getrusage(RUSAGE_SELF, &usage);
+    const double cpu = double(usage.ru_utime.tv_sec) + 1e-6 * double(usage.ru_utime.tv_usec)
+                       + double(usage.ru_stime.tv_sec) + 1e-6 * double(usage.ru_stime.tv_usec);
+    // Linux reports ru_maxrss in KiB.
+    std::cout << format("runstats: {} frame(s) done, {} skipped (-u), {} failed; {:.2f} s wall, "
+                        "{:.2f} s CPU; peak memory {}\n",
+                        m_frames_done, m_frames_skipped, m_frames_failed.size(), seconds, cpu,
+                        bokeh::memory_size_text(int64_t(usage.ru_maxrss) * 1024));
+}
+
+void Host::read_ahead(const std::vector<std::string>& line)
+{
+    m_line_inputs.clear();
+    m_line_outputs.clear();
+    m_depth = 0;
+    if (!parse(line, true))
+        return;
+    for (const std::string& path : m_line_inputs) {
+        if (m_read_ahead.count(path) || !OIIO::Filesystem::exists(path))
+            continue;
+        const bokeh::ReadOptions options = m_read_options;
+        m_read_ahead[path] = std::async(std::launch::async, [path, options] {
+                                 Prefetched p;
+                                 p.buf = std::make_shared<OIIO::ImageBuf>();
+                                 std::string err;
+                                 try {
+                                     p.ok = bokeh::read_image(*p.buf, path, options, &p.info, err);
+                                 } catch (...) {
+                                     p.ok = false;  // read again, and reported, by read_input
+                                 }
+                                 return p;
+                             }).share();
+    }
+}
+
 int Host::run_frames(const std::vector<std::string>& args)
 {
+    OIIO::Timer run_timer;
     FramePlan plan;
     std::string err;
     if (!plan_frames(args, plan, err))
@@ -730,21 +976,120 @@ int Host::run_frames(const std::vector<std::string>& args)
                                                                         : "the memory budget "
                                                                           "(--maxmemory)";
     Watchdog watchdog(m_timeout_seconds);
+    const bool overlap = m_parallel_frames && sequence && frames.size() > 1;
+
+    // A frame's outputs written while the next one is computed (--parallel-frames).
+    struct Written {
+        bool ok = true;
+        std::string err, where;
+        int frame   = 0;
+        size_t index = 0;
+        double seconds = 0;
+    };
+    std::future<Written> writing;
+    auto frame_done = [&](int frame, size_t index, double seconds) {
+        ++m_frames_done;
+        if (m_progress && m_verbosity > 0)
+            std::cout << format("frame {} ({} of {}) done in {:.2f} s\n", frame, index + 1,
+                                frames.size(), seconds);
+    };
+    // Wait for the write behind; false when it failed (reported here, naming its frame).
+    auto collect = [&]() {
+        if (!writing.valid())
+            return true;
+        Written w = writing.get();
+        if (w.ok) {
+            frame_done(w.frame, w.index, w.seconds);
+            return true;
+        }
+        const std::string where = m_where;
+        m_where                 = w.where;
+        m_failed                = false;
+        fail("-o", w.err);
+        m_where = where;
+        m_frames_failed.push_back(w.frame);
+        return false;
+    };
+    auto stop = [&]() {
+        collect();
+        if (m_runstats)
+            print_runstats(run_timer());
+        return 1;
+    };
 
     for (size_t i = 0; i < frames.size(); ++i) {
         OIIO::Timer timer;
         m_stack.clear();
         m_writes.clear();
         m_datatypes.clear();
+        m_failed = false;
         const std::vector<std::string> line = sequence ? args_for_frame(plan, frames[i]) : plan.args;
+        const std::string frame_name = sequence ? format("frame {}", frames[i]) : std::string("the image");
         if (sequence)
-            m_where = format(" (frame {}, {} of {}; the run stopped here)", frames[i], i + 1,
-                             frames.size());
-        if (!parse(line, false) || !write_pending())
-            return 1;
-        if (m_progress && m_verbosity > 0)
-            std::cout << format("frame {} ({} of {}) done in {:.2f} s\n", frames[i], i + 1,
-                                frames.size(), timer());
+            m_where = format(" (frame {}, {} of {}; {})", frames[i], i + 1, frames.size(),
+                             m_skip_bad_frames ? "skipped, the run goes on" : "the run stopped here");
+        std::string why;
+        if (m_update && frame_up_to_date(line, why)) {
+            ++m_frames_skipped;
+            if (m_verbosity > 0)
+                std::cout << format("-u: {} skipped, up to date ({})\n", frame_name, why);
+            continue;
+        }
+        if (overlap && i + 1 < frames.size()) {
+            read_ahead(args_for_frame(plan, frames[i + 1]));
+            m_failed = false;
+        }
+        if (!parse(line, false)) {
+            m_frames_failed.push_back(frames[i]);
+            if (m_skip_bad_frames && sequence)
+                continue;
+            return stop();
+        }
+        if (!overlap) {
+            if (!write_pending()) {
+                m_frames_failed.push_back(frames[i]);
+                if (m_skip_bad_frames && sequence)
+                    continue;
+                return stop();
+            }
+            frame_done(frames[i], i, timer());
+            continue;
+        }
+        // The previous frame's outputs are on disk before this frame's are started: at most
+        // one frame's outputs in memory besides the frame being computed.
+        if (!collect() && !m_skip_bad_frames)
+            return stop();
+        set_current("-o");
+        writing = std::async(std::launch::async,
+                             [this, writes = std::move(m_writes), frame = frames[i], i,
+                              where = m_where, timer]() mutable {
+                                 Written w;
+                                 w.frame = frame, w.index = i, w.where = where;
+                                 try {
+                                     for (const PendingWrite& pw : writes)
+                                         if (!(w.ok = write_checked(pw, w.err)))
+                                             break;
+                                 } catch (const std::bad_alloc&) {
+                                     w.ok = false, w.err = "out of memory (std::bad_alloc)";
+                                 } catch (const std::exception& e) {
+                                     w.ok = false, w.err = format("failed with an exception: {}", e.what());
+                                 }
+                                 w.seconds = timer();
+                                 return w;
+                             });
+        m_writes.clear();
+    }
+    if (!collect() && !m_skip_bad_frames)
+        return stop();
+    if (m_runstats)
+        print_runstats(run_timer());
+    if (!m_frames_failed.empty()) {
+        std::vector<std::string> names;
+        for (int f : m_frames_failed)
+            names.push_back(std::to_string(f));
+        std::cerr << format("{} ERROR: --skip-bad-frames: {} of {} frames failed: {}\n", kProgram,
+                            m_frames_failed.size(), frames.size(), OIIO::Strutil::join(names, ", "));
+        return 1;
     }
     return 0;
 }

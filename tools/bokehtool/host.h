@@ -8,7 +8,10 @@
 // command line writes nothing.
 #pragma once
 
+#include <future>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -34,7 +37,9 @@ private:
         bokeh::StackImage image;
         std::string path;
         std::map<std::string, OIIO::TypeDesc> datatypes;  // -d in force at that -o
+        bokeh::WriteOptions options;                       // -o's parts=, compression=, tile=
     };
+    enum class MissingFile { Error, Black, Checker };
 
     void register_host_commands();
     void add_host_command(bokeh::Command cmd, bool global);
@@ -57,7 +62,14 @@ private:
     bool read_input(const std::string& path);
     bool write_pending();
     bool write_one(const PendingWrite& w);
+    /// write_one without reporting: false + `err` (safe off the main thread).
+    bool write_checked(const PendingWrite& w, std::string& err);
     int run_frames(const std::vector<std::string>& args);
+    /// -u: true when every output of the frame line `line` exists and is newer than each
+    /// of its inputs (`why` says which output decided).
+    bool frame_up_to_date(const std::vector<std::string>& line, std::string& why);
+    bool substitute_missing(const std::string& path);
+    void print_runstats(double seconds) const;
     void set_current(const std::string& command);
     bool fail(const std::string& command, const std::string& why);
     void warn(const std::string& what) const;
@@ -75,6 +87,12 @@ private:
     std::string m_colorconfig;
     bokeh::ReadOptions m_read_options;
     double m_timeout_seconds = 0;  // 0 = no limit
+    bool m_parallel_frames = false;
+    bool m_dry_run = false, m_update = false, m_skip_bad_frames = false, m_runstats = false;
+    MissingFile m_missing_file = MissingFile::Error;
+    OIIO::ImageSpec m_last_read_spec;  // --missingfile substitutes an image of this size
+    int m_frames_done = 0, m_frames_skipped = 0;
+    std::vector<int> m_frames_failed;
 
     // Per-frame state (pass 2), and the stack depth pass 1 simulates.
     std::vector<bokeh::StackImage> m_stack;
@@ -82,6 +100,17 @@ private:
     std::map<std::string, OIIO::TypeDesc> m_datatypes;
     int m_depth = 0;
     bool m_failed = false;
+    std::vector<std::string> m_line_inputs, m_line_outputs;  // files of the line checked last
+
+    // --parallel-frames: the next frame's inputs read ahead, by file name.
+    struct Prefetched {
+        bool ok = false;
+        std::shared_ptr<OIIO::ImageBuf> buf;
+        bokeh::ReadInfo info;
+    };
+    std::map<std::string, std::shared_future<Prefetched>> m_read_ahead;
+    std::mutex m_colors_mutex;  // colour conversions of the main thread and of a write behind
+    void read_ahead(const std::vector<std::string>& line);
     std::string m_where;    // appended to errors: which frame of a sequence
     std::string m_current;  // the command running, named by errors that are not its own
 };

@@ -38,13 +38,23 @@ bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::str
         plan.args.push_back(args[i]);
     }
 
+    // --framepadding N: the digits of a '#' (parse_pattern's framepadding; 0 = its default,
+    // 4). Checked, and refused when malformed, with the other global options.
+    int padding = 0;
+    for (size_t i = 0; i + 1 < plan.args.size(); ++i)
+        if (plan.args[i] == "--framepadding") {
+            OIIO::string_view n(plan.args[i + 1]);
+            if (!OIIO::Strutil::parse_int(n, padding) || !n.empty() || padding < 1 || padding > 9)
+                padding = 0;
+        }
+
     std::string range_in_pattern;
     for (size_t i = 0; i < plan.args.size(); ++i) {
         const std::string& a = plan.args[i];
         if (!looks_like_pattern(a))
             continue;
         std::string normalized, range;
-        if (!OIIO::Filesystem::parse_pattern(a.c_str(), 0, normalized, range)) {
+        if (!OIIO::Filesystem::parse_pattern(a.c_str(), padding, normalized, range)) {
             err = format("{}: malformed frame pattern", a);
             return false;
         }

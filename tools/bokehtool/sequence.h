@@ -4,7 +4,8 @@
 // `shot.1-10#.exr`) makes the whole command line run once per frame, with the frame
 // number substituted into every such argument. The frames come from `--frames SPEC`
 // (`1-10`, `1-10x2`, `3,5,8-9`), else from a range written in the pattern, else from
-// the files on disk that match the first pattern.
+// the files on disk that match the first pattern. `--framepadding N` sets the digits of
+// '#' (oiiotool's meaning).
 #pragma once
 
 #include <string>
