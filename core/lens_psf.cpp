@@ -186,10 +186,18 @@ void add_wavelength(RgbTable& t, const Landing& L, const std::array<double, 3>& 
 {
     const int K = t.K, nb = t.bins();
     std::fill(mass.begin(), mass.end(), 0.0);
+    std::fill(d.begin(), d.end(), 0.0);
     constexpr int kSub = 8;  // rays per snapshot step
     const double ds    = 1.0 / (double(K) * kSub);
+    // Only the bins a ray has reached so far (and their neighbours, for the tent) are
+    // visited: the cumulative table's rows grow with s, and rays land on one side of the
+    // axis unless the beam crosses it.
+    int touched_lo = nb, touched_hi = -1;
     auto snapshot = [&](int k) {
-        for (int b = 0; b < nb; ++b) {
+        if (touched_hi < 0)
+            return;
+        const int v_lo = std::max(0, touched_lo - 1), v_hi = std::min(nb - 1, touched_hi + 1);
+        for (int b = v_lo; b <= v_hi; ++b) {
             const double r0 = std::abs((b - t.half_bins) * kBinPx), r1 = std::abs((b - t.half_bins + 1) * kBinPx);
             d[size_t(b)] = mass[size_t(b)] / (0.5 * std::abs(r1 * r1 - r0 * r0));  // per unit angle
         }
@@ -197,7 +205,7 @@ void add_wavelength(RgbTable& t, const Landing& L, const std::array<double, 3>& 
         // bins), each side of the axis alone: a pixel-centre sample then weighs an edge
         // about as the pixel's area does (the flat kernels' anti-aliasing).
         float* row = &t.dens[size_t(k) * nb * 3];
-        for (int b = 0; b < nb; ++b) {
+        for (int b = v_lo; b <= v_hi; ++b) {
             const bool pos  = b >= t.half_bins;
             const int first = pos ? t.half_bins : 0, last = pos ? nb - 1 : t.half_bins - 1;
             const double v  = 0.25 * d[size_t(std::max(b - 1, first))] + 0.5 * d[size_t(b)]
@@ -217,6 +225,8 @@ void add_wavelength(RgbTable& t, const Landing& L, const std::array<double, 3>& 
         const double f_lo = lo / kBinPx + t.half_bins, f_hi = hi / kBinPx + t.half_bins;
         const int b_lo = std::clamp(int(std::floor(f_lo)), 0, nb - 1);
         const int b_hi = std::clamp(int(std::floor(f_hi)), 0, nb - 1);
+        touched_lo     = std::min(touched_lo, b_lo);
+        touched_hi     = std::max(touched_hi, b_hi);
         if (b_lo == b_hi || f_hi - f_lo < 1e-12) {
             mass[size_t(b_lo)] += m;
         } else {
@@ -318,6 +328,55 @@ bool pupil_span(const LensCharacter& lens, const Geometry& g, double psi, double
     }
     return hi > lo;
 }
+
+// The pupil span and the edge normal's cosine tabulated over the direction (linear
+// between entries; more than 8 entries a px of the largest radius), so a pixel costs one
+// lookup instead of the aperture's and the barrel's trigonometry.
+struct SpanLut {
+    int n = 0;
+    std::vector<float> lo, hi, ncos;
+    std::vector<uint8_t> ok;
+
+    SpanLut(const LensCharacter& lens, const Geometry& g, double r_max_px)
+    {
+        n = 1024;
+        while (n < 8.0 * r_max_px * kPi / 4.0 && n < 65536)
+            n *= 2;
+        lo.resize(size_t(n) + 1);
+        hi.resize(size_t(n) + 1);
+        ncos.resize(size_t(n) + 1);
+        ok.resize(size_t(n) + 1);
+        for (int i = 0; i <= n; ++i) {
+            const double psi = 2.0 * kPi * i / n;
+            double l = 0.0, h = 0.0;
+            ok[size_t(i)]   = pupil_span(lens, g, psi, l, h);
+            lo[size_t(i)]   = float(l);
+            hi[size_t(i)]   = float(h);
+            ncos[size_t(i)] = float(lens.aperture.edge_normal_cos(psi));
+        }
+    }
+    bool lookup(double psi, double& l, double& h, double& c) const
+    {
+        double f = psi * (n / (2.0 * kPi));
+        f -= n * std::floor(f / n);
+        const int i0 = std::min(int(f), n - 1);
+        const double t = f - i0;
+        const size_t a = size_t(i0), b = a + 1;
+        if (!ok[a] || !ok[b]) {
+            const size_t near = t < 0.5 ? a : b;
+            if (!ok[near])
+                return false;
+            l = lo[near];
+            h = hi[near];
+            c = ncos[near];
+            return true;
+        }
+        l = lo[a] + t * (lo[b] - lo[a]);
+        h = hi[a] + t * (hi[b] - hi[a]);
+        c = ncos[a] + t * (ncos[b] - ncos[a]);
+        return h > l;
+    }
+};
 
 // A smooth value noise in the pupil (surface noise), fixed, zero mean, unit-ish amplitude.
 double pupil_noise(double x, double y)
@@ -498,7 +557,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     const bool edge_law_on = lens.diffraction == DiffractionModel::EdgeLaw;
 
     RgbTable table;
-    table.K         = std::clamp(int(std::ceil(4.0 * r_max)), 32, 1024);  // a quarter px of radius apart
+    table.K         = std::clamp(int(std::ceil(2.0 * r_max)), 32, 1024);  // half a px of radius apart
     table.half_bins = int(std::ceil(r_max / kBinPx)) + 2;
     table.dens.assign(size_t(table.K + 1) * table.bins() * 3, 0.0f);
     {
@@ -549,6 +608,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     out.rgb.assign(size_t(w) * h * 3, 0.0f);
     const int cx = w / 2, cy = h / 2;
 
+    const SpanLut spans(lens, g, r_max);
     // RGB intensity at a point of the image (x right, y up, px from the centre).
     auto intensity = [&](double x, double y, double sum[3]) {
         const double qx = g.m_inv[0][0] * x + g.m_inv[0][1] * y;
@@ -558,8 +618,8 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
         const double phi = std::atan2(yr, xr);
         for (int branch = 1; branch >= -1; branch -= 2) {
             const double psi = branch > 0 ? phi : phi + kPi;
-            double lo, hi;
-            if (!pupil_span(lens, g, psi, lo, hi))
+            double lo, hi, ncos;
+            if (!spans.lookup(psi, lo, hi, ncos))
                 continue;
             double a[3] = { 0.0, 0.0, 0.0 }, b[3] = { 0.0, 0.0, 0.0 };
             double Rs = branch * R;
@@ -567,7 +627,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
             if (edge_law_on) {
                 const RgbTable::Rim rim = table.rim_at(hi);
                 if (rim.side == branch && rim.gain > 0.0) {
-                    const double d = (rim.radius - R) * lens.aperture.edge_normal_cos(psi);
+                    const double d = (rim.radius - R) * ncos;
                     if (d < -table.d_out && rim.gain >= 1.0)
                         continue;
                     if (d < table.d_in) {

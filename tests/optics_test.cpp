@@ -8,15 +8,20 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <iostream>
+#include <sstream>
 
 #include <OpenImageIO/imagebufalgo.h>
 
 #include <bokeh/aperture.h>
 #include <bokeh/blur.h>
+#include <bokeh/color.h>
 #include <bokeh/optics.h>
 #include <bokeh/spectrum.h>
 #include <bokeh/wave_optics.h>
+
+#include "test_util.h"
 
 namespace {
 
@@ -197,6 +202,41 @@ TEST(Spectrum, ColourMatchingFunctionsAndWhite)
     o.last_nm  = 400.0;
     EXPECT_FALSE(bokeh::spectral_samples(s, o, nullptr, err));
     EXPECT_NE(err.find("wavelength range"), std::string::npos) << err;
+}
+
+TEST(Spectrum, WorkingSpaceFromTheOcioConfig)
+{
+    // The shipped config with ACEScg as its working space: the weights come through its
+    // CIE-XYZ-D65 space, still sum to 1 per channel, and the wider AP1 gamut leaves the
+    // colour-matching functions' negative lobes smaller than Rec.709 does.
+    std::ifstream in(BOKEH_OCIO_CONFIG);
+    std::stringstream text;
+    text << in.rdbuf();
+    std::string cfg = text.str();
+    const std::string role = "scene_linear: lin_rec709";
+    ASSERT_NE(cfg.find(role), std::string::npos);
+    cfg.replace(cfg.find(role), role.size(), "scene_linear: ACEScg");
+    const std::string path = bokeh_test::fresh_dir("spectrum_ocio") + "/acescg.ocio";
+    std::ofstream(path) << cfg;
+    bokeh::ColorSystem acescg;
+    std::string err;
+    ASSERT_TRUE(acescg.load(path, err)) << err;
+    std::vector<bokeh::SpectralSample> ap1, rec709;
+    ASSERT_TRUE(bokeh::spectral_samples(ap1, {}, &acescg, err)) << err;
+    ASSERT_TRUE(bokeh::spectral_samples(rec709, {}, nullptr, err)) << err;
+    ASSERT_EQ(ap1.size(), rec709.size());
+    double most_negative_ap1 = 0.0, most_negative_709 = 0.0;
+    for (int c = 0; c < 3; ++c) {
+        double sum = 0.0;
+        for (size_t i = 0; i < ap1.size(); ++i) {
+            sum += ap1[i].rgb_weight[size_t(c)];
+            most_negative_ap1 = std::min(most_negative_ap1, ap1[i].rgb_weight[size_t(c)]);
+            most_negative_709 = std::min(most_negative_709, rec709[i].rgb_weight[size_t(c)]);
+        }
+        EXPECT_NEAR(sum, 1.0, 1e-9) << "channel " << c;
+    }
+    std::cout << "most negative weight: Rec.709 " << most_negative_709 << ", ACEScg " << most_negative_ap1 << "\n";
+    EXPECT_GT(most_negative_ap1, most_negative_709);
 }
 
 TEST(LensPsf, EnergyPerChannelAndSymmetry)

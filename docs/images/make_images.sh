@@ -26,3 +26,13 @@ done
 oiiotool "$tmp/c_disk.png" "$tmp/c_hex.png" "$tmp/c_polygon.png" "$tmp/c_gaussian.png" \
     --mosaic:pad=4 2x2 -o "$out/kernels.png"
 ls -l "$out"/*.png
+
+# Lens character (docs/optics.md): contact sheets of three lens designs with fringes and
+# onion rings, 9 defocus columns (front .. focus .. back) x 4 field rows (centre .. corner),
+# and the achromat's beam map. Each PSF is scaled to its own peak.
+for lens in uncorrected achromat apochromat:chromatic=10; do
+    name=${lens%%:*}
+    "$tool" -q --bokeh:lens=$lens:fstop=1.4:diffraction=exact:onion=0.15:catseye=0.5:kernel=polygon:blades=9:curvature=0.5:sheet=1 \
+        60 --resize 0x240 -o "$out/bokeh_$name.png"
+done
+"$tool" -q --bokeh:lens=achromat:fstop=1.4:map=1 40 -o "$out/beam_map_achromat.png"

@@ -24,6 +24,7 @@
 #include "defocus_task.h"
 #include "gegl_peer.h"
 #include "iris_task.h"
+#include "optics_task.h"
 #include "resample_task.h"
 #include "timing.h"
 
@@ -101,7 +102,8 @@ int main(int argc, char* argv[])
                                                    || std::string(argv[i + 1]) == "defocus"
                                                    || std::string(argv[i + 1]) == "resample"
                                                    || std::string(argv[i + 1]) == "iris"
-                                                   || std::string(argv[i + 1]) == "deep"))
+                                                   || std::string(argv[i + 1]) == "deep"
+                                                   || std::string(argv[i + 1]) == "optics"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -123,7 +125,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b] [--image FILE]...\n",
                          a.c_str());
@@ -145,6 +147,11 @@ int main(int argc, char* argv[])
         args.threads = threads;
         args.reps    = reps;
         if (!bokeh_bench::run_defocus_task(args, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "optics") {
+        if (!bokeh_bench::run_optics_task(threads, reps, rows))
             return 1;
         return write_csv(csv, rows);
     }
