@@ -10,8 +10,12 @@
 // diameter on the sensor, d distance inward from the geometric edge of the bokeh.
 #pragma once
 
+#include <functional>
 #include <memory>
+#include <string>
 #include <vector>
+
+#include <OpenImageIO/imagebuf.h>
 
 namespace bokeh {
 
@@ -124,13 +128,55 @@ public:
 };
 
 /// The exact profile: HankelPsf at v = u rho, times u^2 / (4 pi). `wavefront.defocus_waves`
-/// must be > 0 (it sets R). Evaluated out to rho_max (default 1.25).
+/// must be > 0 (it sets R). Evaluated out to rho_max (default 1.25). Null on bad values.
 std::unique_ptr<RadialProfile> exact_radial_profile(const RadialWavefront& wavefront,
                                                     double rho_max = 1.25);
 
 /// The straight-edge law (fresnel_edge_intensity) at v = 2 (1 - rho) sqrt(w), flat inside,
 /// scaled to unit energy over rho <= extent = 1 + 3 / sqrt(w) (the law's shadow side
-/// falls to 1 % of I_geo about 2.3 fringe scales out). `defocus_waves` > 0.
+/// falls below 0.2 % of I_geo there). `defocus_waves` > 0; null otherwise.
 std::unique_ptr<RadialProfile> edge_law_radial_profile(double defocus_waves);
+
+// ---------------------------------------------------------------------------------------
+// The exact PSF of any pupil by a zero-padded 2-D FFT (Fraunhofer diffraction of the pupil
+// function P exp(i 2 pi W) in the focal plane of the converging wave: defocus is part of W;
+// Goodman, "Introduction to Fourier Optics", 3rd ed., 6.4; as prysm and poppy do).
+
+/// A pupil at normalised coordinates (x, y): the round pupil of the f-number is the unit
+/// disc. Amplitude transmission in [0, 1] (an empty function: the unit disc) and the
+/// wavefront in waves (empty: 0). Shapes outside the unit disc are allowed (the pupil grid
+/// spans [-1, 1]^2 only: transmission outside it is not sampled).
+struct Pupil {
+    std::function<double(double x, double y)> transmission;
+    std::function<double(double x, double y)> wavefront_waves;
+};
+
+/// Sampling of pupil_psf_fft. OPTICS.md section 1: pupil samples across the diameter at
+/// least the CoC in units of lambda N (8 W20), with a 1.5-2x margin; the FFT at least twice
+/// that. The PSF pixel is then lambda N / Q, Q = fft_size / pupil_samples (pi / Q in v).
+struct PupilSampling {
+    int pupil_samples   = 0;  ///< across the diameter; 0: 8 x max |dW/drho| (4 per wave of tilt), >= 64
+    int fft_size        = 0;  ///< 0: the smallest 2^a 3^b 5^c >= 2 x pupil_samples
+    int edge_supersample = 4; ///< s x s sub-samples per pupil cell (antialiased pupil edge)
+};
+
+/// The PSF of a pupil: a 1-channel float image fft_size square, unit sum, the optical axis at
+/// pixel (fft_size / 2, fft_size / 2); its pixel in units of lambda N and of v.
+struct PupilPsf {
+    OIIO::ImageBuf image;
+    double pixel_lambda_n = 0.0;
+    double pixel_v        = 0.0;
+    int pupil_samples     = 0;
+};
+
+/// The PSF of `pupil` by FFT (FFTW, double). `max_slope_waves` (max |dW/drho|, e.g.
+/// RadialWavefront::max_slope_waves()) sets the default sampling. False with a message in
+/// `error` for bad sampling (pupil_samples < 8, fft_size < pupil_samples, over 8192) or a
+/// pupil that lets no light through.
+bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
+                   const PupilSampling& sampling = {}, std::string* error = nullptr);
+
+/// A round pupil with a radial wavefront (for comparing the FFT with HankelPsf).
+Pupil round_pupil(const RadialWavefront& wavefront);
 
 }  // namespace bokeh
