@@ -10,6 +10,7 @@
 // diameter on the sensor, d distance inward from the geometric edge of the bokeh.
 #pragma once
 
+#include <array>
 #include <functional>
 #include <memory>
 #include <string>
@@ -178,5 +179,95 @@ bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
 
 /// A round pupil with a radial wavefront (for comparing the FFT with HankelPsf).
 Pupil round_pupil(const RadialWavefront& wavefront);
+
+// ---------------------------------------------------------------------------------------
+// The seed's pseudo-diffraction map (SEEDS.md section 9; core/diffraction_map.cpp)
+//
+// A 2-D table of a made-up trigonometric fringe pattern, read the way the seed reads it:
+// U = log of the fringe width relative to the CoC (x = scale sqrt(lambda N / c)), V = radius
+// in a band around the geometric edge; each column energy-normalised with area weighting,
+// faded to its local mean where its fringes pass the Nyquist limit (of the table, and of
+// the output pixels at lookup), faded to zero a little outside the edge, clamped inside the
+// band. The seed publishes the rules and the fringe-width calibration (w2 ~ 0.75 sqrt(Fe c
+// lambda)), not its function: ours, below, is the simplest periodic one that follows them.
+// Use it to compare with the exact PSF (the seed asks for a better approximation: the edge
+// law answers, with the numbers in docs/methods/diffraction.md).
+
+struct SeedMapOptions {
+    int columns              = 64;      ///< U samples (log fringe width / CoC)
+    int rows                 = 256;     ///< V samples across a column's band
+    double min_width_ratio   = 1e-4;    ///< x at the map's large-bokeh end
+    double max_width_ratio   = 0.25;    ///< x at its near-focus end
+    double width_scale       = 0.75;    ///< the seed's w2 / sqrt(lambda N c) (its scale knob)
+    double band_widths       = 8.0;     ///< fringe widths stored inside the edge (then clamped)
+    double outside_widths    = 1.5;     ///< fringe widths stored outside the edge (fade to 0)
+    double first_max_widths  = 1.0;     ///< the first bright fringe, in fringe widths from the edge
+    double edge_value        = 0.25;    ///< intensity at the geometric edge (flat interior = 1)
+    double first_amplitude   = 0.35;    ///< the first bright fringe's height above 1
+    double reference_nm      = 710.0;   ///< the wavelength the map is made for (the seed's)
+};
+
+/// The trig fringe pattern against s = distance inward from the geometric edge in fringe
+/// widths (negative outside), before any fade or normalisation, flat interior = 1: outside,
+/// the edge value falling to 0 over outside_widths (smoothstep); from the edge to the first
+/// maximum the outermost fringe, e + (1 + A - e) sin^2(pi s / (2 s1)); beyond it
+/// 1 + A cos(2 pi (s - s1)) / (1 + (s - s1)): constant spacing of one fringe width, tapered
+/// to 1 (smoothstep) over the band's last two fringe widths.
+double seed_fringe_pattern(const SeedMapOptions& options, double s);
+
+class SeedDiffractionMap {
+public:
+    explicit SeedDiffractionMap(const SeedMapOptions& options = {});
+    const SeedMapOptions& options() const { return options_; }
+    /// Monochrome intensity at rho = r / R, unit energy (int 2 pi rho I drho = 1), for a
+    /// bokeh whose fringe width relative to its CoC is `width_ratio_ref` at the reference
+    /// wavelength, seen at `wavelength_ratio` = lambda / lambda_ref: the seed's horizontal
+    /// lookup at x_ref (lambda / lambda_ref)^0.5, its vertical squeeze keeping the geometric
+    /// edge at rho = 1, intensity scaled by the inverse square of the squeeze.
+    /// `pixel_rho` (> 0: one output pixel in units of R) fades the fringes to the local
+    /// mean where their period falls under 4 pixels (fully at 2).
+    double lookup(double rho, double width_ratio_ref, double wavelength_ratio = 1.0,
+                  double pixel_rho = 0.0) const;
+    /// The outer radius (rho) the lookup covers at fringe-width ratio x.
+    double extent(double width_ratio) const;
+    /// The radius inside which the lookup is clamped (flat) at x: 1 - 2 x band_widths, >= 0.
+    double clamp_radius(double width_ratio) const;
+    /// The fringe-width ratio of W20 / lambda = defocus_waves: width_scale / sqrt(8 w).
+    double width_ratio(double defocus_waves) const;
+
+private:
+    SeedMapOptions options_;
+    std::vector<float> value_, mean_;  // columns x rows, column-major; normalised
+};
+
+/// The seed map as a RadialProfile at W20 / lambda = defocus_waves, looked up at the map's
+/// reference wavelength's column for this W20 (so profiles at several wavelengths follow the
+/// seed's wavelength rule when built with their own defocus_waves). `pixel_rho` as in
+/// lookup. The map must outlive the profile. Null on bad values.
+std::unique_ptr<RadialProfile> seed_map_radial_profile(const SeedDiffractionMap& map,
+                                                       double defocus_waves, double pixel_rho = 0.0);
+
+/// One wavelength of a spectral integration: its weight in each of three output channels
+/// (the caller's colour-matching functions x illuminant x XYZ-to-RGB, and the step).
+struct SpectralSample {
+    double wavelength_nm = 0.0;
+    std::array<double, 3> weight{};
+};
+
+/// A three-channel radial profile sampled at rho = i * rho_step, i = 0 .. size - 1.
+struct RgbRadialProfile {
+    double rho_step = 0.0;
+    std::vector<std::array<double, 3>> values;
+};
+
+/// The seed's spectral path for one bokeh (CoC `coc_px` pixels, f-number, pixel pitch mm):
+/// the map looked up per wavelength (horizontal (lambda / lambda_ref)^0.5, squeeze, inverse
+/// square), summed with the weights; the clamped interior's tint blended toward white by
+/// (1 - 1/X)^2, X = 1 / (2 x_ref band_widths) the map's shrink (when X > 1); then each
+/// channel normalised to unit energy (white normalisation: a white light stays white).
+/// `samples` rho samples from 0 to the largest extent. False (and `out` empty) on bad values.
+bool seed_map_spectral_profile(RgbRadialProfile& out, const SeedDiffractionMap& map, double coc_px,
+                               double fnumber, double pixel_pitch_mm,
+                               const std::vector<SpectralSample>& spectrum, int samples = 1024);
 
 }  // namespace bokeh
