@@ -184,6 +184,39 @@ std::unique_ptr<RadialProfile> seed_map_radial_profile(const SeedDiffractionMap&
     return std::make_unique<SeedMapProfile>(map, defocus_waves, pixel_rho);
 }
 
+namespace {
+
+class FlatProfile final : public RadialProfile {
+public:
+    double operator()(double rho) const override { return std::abs(rho) < 1.0 ? 1.0 / kPi : 0.0; }
+    double extent() const override { return 1.0; }
+    const char* name() const override { return "flat disc"; }
+};
+
+}  // namespace
+
+std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod method, double coc_px,
+                                                          double fnumber, double wavelength_nm,
+                                                          double pixel_pitch_mm,
+                                                          const SeedDiffractionMap* map)
+{
+    const double w = defocus_waves_px(coc_px, fnumber, wavelength_nm, pixel_pitch_mm);
+    if (!(w > 0) || !std::isfinite(w) || !(wavelength_nm > 0))
+        return nullptr;
+    switch (method) {
+    case DiffractionMethod::None: return std::make_unique<FlatProfile>();
+    case DiffractionMethod::EdgeLaw: return edge_law_radial_profile(w);
+    case DiffractionMethod::SeedMap:
+        return map ? seed_map_radial_profile(*map, w, 2.0 / std::abs(coc_px)) : nullptr;
+    case DiffractionMethod::Exact: {
+        RadialWavefront wf;
+        wf.defocus_waves = w;
+        return exact_radial_profile(wf);
+    }
+    }
+    return nullptr;
+}
+
 bool seed_map_spectral_profile(RgbRadialProfile& out, const SeedDiffractionMap& map, double coc_px,
                                double fnumber, double pixel_pitch_mm,
                                const std::vector<SpectralSample>& spectrum, int samples)

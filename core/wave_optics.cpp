@@ -383,6 +383,14 @@ double defocus_waves_px(double coc_px, double fnumber, double wavelength_nm, dou
     return defocus_waves(coc_px * pixel_pitch_mm, fnumber, wavelength_nm * 1e-6);
 }
 
+double radius_v_px(double r_px, double fnumber, double wavelength_nm, double pixel_pitch_mm)
+{
+    if (!(pixel_pitch_mm > 0) || !(fnumber > 0) || !(wavelength_nm > 0) || std::isinf(fnumber)
+        || std::isinf(wavelength_nm) || std::isinf(pixel_pitch_mm))
+        return std::numeric_limits<double>::quiet_NaN();
+    return kPi * r_px * pixel_pitch_mm / (wavelength_nm * 1e-6 * fnumber);
+}
+
 // ---------------------------------------------------------------------------------------
 // Radial profiles.
 

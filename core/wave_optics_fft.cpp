@@ -76,7 +76,7 @@ Pupil round_pupil(const RadialWavefront& wavefront)
 }
 
 bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
-                   const PupilSampling& sampling, std::string* error)
+                   const PupilSampling& sampling, std::string* error, int nthreads)
 {
     if (!std::isfinite(max_slope_waves) || max_slope_waves < 0)
         return fail(error, format("pupil FFT: wavefront slope {} waves is not a finite value >= 0",
@@ -109,7 +109,7 @@ bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
     const int o      = (F - M) / 2;
     const double h   = 2.0 / M;
     const double inv = 1.0 / (double(s) * s);
-    parallel_for_chunks(0, M, 16, 0, [&](int64_t j0, int64_t j1) {
+    parallel_for_chunks(0, M, 16, nthreads, [&](int64_t j0, int64_t j1) {
         for (int64_t j = j0; j < j1; ++j)
             for (int i = 0; i < M; ++i) {
                 std::complex<double> a = 0.0;
@@ -147,7 +147,7 @@ bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
     // |FFT|^2, the zero frequency moved to (F / 2, F / 2); row sums in double, in row order.
     std::vector<double> power(n);
     std::vector<double> row_sum(size_t(F), 0.0);
-    parallel_for_chunks(0, F, 32, 0, [&](int64_t y0, int64_t y1) {
+    parallel_for_chunks(0, F, 32, nthreads, [&](int64_t y0, int64_t y1) {
         for (int64_t y = y0; y < y1; ++y) {
             const size_t sy = size_t((y + F / 2) % F);
             double sum      = 0.0;

@@ -1,5 +1,8 @@
 // wave_optics.h — scalar wave optics of a defocused lens: Fresnel integrals and the exact
-// straight-edge law for the fringes at a bokeh's rim.
+// straight-edge law for the fringes at a bokeh's rim; the exact defocused PSF of a round
+// pupil (Hankel integral, Lommel series) and of any pupil (FFT); the seed's
+// pseudo-diffraction map; radial profiles that make the models interchangeable.
+// docs/methods/diffraction.md has the formulas, the checks and the figures.
 //
 // Units. Functions that take physical lengths take them all in one unit of the caller's
 // choice (the parameter names say which quantity), so `fringe_scale(0.0005, 2, 12)` with
@@ -50,7 +53,6 @@ inline double edge_v(double distance, double fringe_scale_length)
     return 1.4142135623730951 * distance / fringe_scale_length;
 }
 
-
 // ---------------------------------------------------------------------------------------
 // The exact defocused PSF of a circular pupil (OPTICS.md section 1; Born & Wolf 8.8)
 //
@@ -73,7 +75,7 @@ struct RadialWavefront {
     double ripple_cycles     = 0.0;  ///< K, cycles per pupil diameter
     /// W(rho) in waves.
     double waves(double rho) const;
-    /// max over the pupil of |dW/drho| in waves (bounds the integrand's frequency).
+    /// An upper bound of |dW/drho| over the pupil, in waves (bounds the integrand's frequency).
     double max_slope_waves() const;
 };
 
@@ -111,6 +113,9 @@ double defocus_waves(double coc, double fnumber, double wavelength);
 /// The same from the project's units.
 double defocus_waves_px(double coc_px, double fnumber, double wavelength_nm, double pixel_pitch_mm);
 
+/// v = pi r / (lambda N) of a radius of r_px pixels.
+double radius_v_px(double r_px, double fnumber, double wavelength_nm, double pixel_pitch_mm);
+
 // ---------------------------------------------------------------------------------------
 // Radial profiles: interchangeable models of a round bokeh's intensity against rho = r / R
 // (R the geometric CoC radius), each at one wavelength, given w = W20 / lambda = c / (8 N lambda)
@@ -145,8 +150,8 @@ std::unique_ptr<RadialProfile> edge_law_radial_profile(double defocus_waves);
 
 /// A pupil at normalised coordinates (x, y): the round pupil of the f-number is the unit
 /// disc. Amplitude transmission in [0, 1] (an empty function: the unit disc) and the
-/// wavefront in waves (empty: 0). Shapes outside the unit disc are allowed (the pupil grid
-/// spans [-1, 1]^2 only: transmission outside it is not sampled).
+/// wavefront in waves (empty: 0). The pupil grid spans [-1, 1]^2 only: transmission outside
+/// it is not sampled. Both are called from several threads at once.
 struct Pupil {
     std::function<double(double x, double y)> transmission;
     std::function<double(double x, double y)> wavefront_waves;
@@ -175,7 +180,8 @@ struct PupilPsf {
 /// `error` for bad sampling (pupil_samples < 8, fft_size < pupil_samples, over 8192) or a
 /// pupil that lets no light through.
 bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
-                   const PupilSampling& sampling = {}, std::string* error = nullptr);
+                   const PupilSampling& sampling = {}, std::string* error = nullptr,
+                   int nthreads = 0);
 
 /// A round pupil with a radial wavefront (for comparing the FFT with HankelPsf).
 Pupil round_pupil(const RadialWavefront& wavefront);
@@ -239,6 +245,22 @@ private:
     SeedMapOptions options_;
     std::vector<float> value_, mean_;  // columns x rows, column-major; normalised
 };
+
+/// The diffraction models of a round bokeh, interchangeable as RadialProfiles.
+enum class DiffractionMethod {
+    None,     ///< the flat disc of geometric optics (1 / pi inside rho < 1)
+    EdgeLaw,  ///< edge_law_radial_profile
+    SeedMap,  ///< seed_map_radial_profile (needs a map), faded at the output's Nyquist limit
+    Exact,    ///< exact_radial_profile (pure defocus; seconds for large bokeh, see the docs)
+};
+
+/// One wavelength's profile of a round bokeh of CoC `coc_px` pixels (the sign ignored) at an
+/// f-number, wavelength (nm) and pixel pitch (mm), by `method`. Null on bad values, or for
+/// SeedMap without a map (which must outlive the profile).
+std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod method, double coc_px,
+                                                          double fnumber, double wavelength_nm,
+                                                          double pixel_pitch_mm,
+                                                          const SeedDiffractionMap* map = nullptr);
 
 /// The seed map as a RadialProfile at W20 / lambda = defocus_waves, looked up at the map's
 /// reference wavelength's column for this W20 (so profiles at several wavelengths follow the
