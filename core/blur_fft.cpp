@@ -37,6 +37,7 @@
 #include <bokeh/image.h>
 #include <bokeh/parallel.h>
 
+#include "fftw_planner.h"
 #include "plane.h"
 
 #include <algorithm>
@@ -54,14 +55,17 @@ namespace bokeh {
 using namespace detail;
 using OIIO::Strutil::fmt::format;
 
-namespace {
-
-// FFTW's planner is not thread-safe; execution of a made plan on new arrays is.
-std::mutex& planner_mutex()
+// FFTW's planner is not thread-safe; execution of a made plan on new arrays is. One mutex
+// for every FFTW user in the library (fftw_planner.h).
+std::mutex& detail::fftw_planner_mutex()
 {
     static std::mutex m;
     return m;
 }
+
+namespace {
+
+std::mutex& planner_mutex() { return fftw_planner_mutex(); }
 
 struct FftBuffer {
     double* data = nullptr;

@@ -1,5 +1,6 @@
 // wave_optics.cpp — Fresnel integrals and the straight-edge law for the fringes at a
-// bokeh's rim (../shared/OPTICS.md section 2).
+// bokeh's rim (../shared/OPTICS.md section 2); the exact defocused PSF of a round pupil by
+// its Hankel integral and Lommel's series (section 1); the radial profiles built on them.
 //
 // Sources: Born & Wolf, "Principles of Optics", 7th ed., section 8.7 (Fresnel diffraction
 // at a straight edge, the Cornu spiral) and 8.8 (the defocused circular pupil, Lommel);
@@ -20,6 +21,15 @@
 // against the exact defocused-pupil integral at W20 = 100 waves). Limits: no free
 // parameter, but it ignores the far rim's lambda N ripple and the disc's curvature, so it
 // fails within a few fringe widths of focus (c of a few lambda N).
+//
+// Hankel integral: composite Simpson over rho with ~100 nodes per cycle of the integrand
+// (the pupil phase's and J0's frequencies added); agrees with the Lommel series to 2e-9 of
+// I_geo at W20 0.25-40 waves (tests). J0 per node is the costly part: a cubic Hermite table
+// below x = 20 and the Hankel asymptotic expansion above, with its phase advanced by one
+// complex product per node, ~35 ns a node (W20 100 waves out to v = u: 40k nodes, ~1.4 ms
+// per radius on this machine, one thread).
+// Lommel: Bessel functions of every order at once by Miller's backward recurrence.
+// Limits: scalar, paraxial (NA well under 0.5, i.e. f/1 and slower); cost linear in W20.
 
 #include <bokeh/wave_optics.h>
 
@@ -371,6 +381,14 @@ double defocus_waves_px(double coc_px, double fnumber, double wavelength_nm, dou
     if (!(pixel_pitch_mm > 0) || std::isinf(pixel_pitch_mm))
         return std::numeric_limits<double>::quiet_NaN();
     return defocus_waves(coc_px * pixel_pitch_mm, fnumber, wavelength_nm * 1e-6);
+}
+
+double radius_v_px(double r_px, double fnumber, double wavelength_nm, double pixel_pitch_mm)
+{
+    if (!(pixel_pitch_mm > 0) || !(fnumber > 0) || !(wavelength_nm > 0) || std::isinf(fnumber)
+        || std::isinf(wavelength_nm) || std::isinf(pixel_pitch_mm))
+        return std::numeric_limits<double>::quiet_NaN();
+    return kPi * r_px * pixel_pitch_mm / (wavelength_nm * 1e-6 * fnumber);
 }
 
 // ---------------------------------------------------------------------------------------

@@ -1,5 +1,8 @@
 // wave_optics.h — scalar wave optics of a defocused lens: Fresnel integrals and the exact
-// straight-edge law for the fringes at a bokeh's rim.
+// straight-edge law for the fringes at a bokeh's rim; the exact defocused PSF of a round
+// pupil (Hankel integral, Lommel series) and of any pupil (FFT); the seed's
+// pseudo-diffraction map; radial profiles that make the models interchangeable.
+// docs/methods/diffraction.md has the formulas, the checks and the figures.
 //
 // Units. Functions that take physical lengths take them all in one unit of the caller's
 // choice (the parameter names say which quantity), so `fringe_scale(0.0005, 2, 12)` with
@@ -10,8 +13,15 @@
 // diameter on the sensor, d distance inward from the geometric edge of the bokeh.
 #pragma once
 
+#include <array>
+#include <functional>
+#include <bokeh/spectrum.h>
+
 #include <memory>
+#include <string>
 #include <vector>
+
+#include <OpenImageIO/imagebuf.h>
 
 namespace bokeh {
 
@@ -45,7 +55,6 @@ inline double edge_v(double distance, double fringe_scale_length)
     return 1.4142135623730951 * distance / fringe_scale_length;
 }
 
-
 // ---------------------------------------------------------------------------------------
 // The exact defocused PSF of a circular pupil (OPTICS.md section 1; Born & Wolf 8.8)
 //
@@ -68,7 +77,7 @@ struct RadialWavefront {
     double ripple_cycles     = 0.0;  ///< K, cycles per pupil diameter
     /// W(rho) in waves.
     double waves(double rho) const;
-    /// max over the pupil of |dW/drho| in waves (bounds the integrand's frequency).
+    /// An upper bound of |dW/drho| over the pupil, in waves (bounds the integrand's frequency).
     double max_slope_waves() const;
 };
 
@@ -106,6 +115,9 @@ double defocus_waves(double coc, double fnumber, double wavelength);
 /// The same from the project's units.
 double defocus_waves_px(double coc_px, double fnumber, double wavelength_nm, double pixel_pitch_mm);
 
+/// v = pi r / (lambda N) of a radius of r_px pixels.
+double radius_v_px(double r_px, double fnumber, double wavelength_nm, double pixel_pitch_mm);
+
 // ---------------------------------------------------------------------------------------
 // Radial profiles: interchangeable models of a round bokeh's intensity against rho = r / R
 // (R the geometric CoC radius), each at one wavelength, given w = W20 / lambda = c / (8 N lambda)
@@ -124,13 +136,156 @@ public:
 };
 
 /// The exact profile: HankelPsf at v = u rho, times u^2 / (4 pi). `wavefront.defocus_waves`
-/// must be > 0 (it sets R). Evaluated out to rho_max (default 1.25).
+/// must be > 0 (it sets R). Evaluated out to rho_max (default 1.25). Null on bad values.
 std::unique_ptr<RadialProfile> exact_radial_profile(const RadialWavefront& wavefront,
                                                     double rho_max = 1.25);
 
 /// The straight-edge law (fresnel_edge_intensity) at v = 2 (1 - rho) sqrt(w), flat inside,
 /// scaled to unit energy over rho <= extent = 1 + 3 / sqrt(w) (the law's shadow side
-/// falls to 1 % of I_geo about 2.3 fringe scales out). `defocus_waves` > 0.
+/// falls below 0.2 % of I_geo there). `defocus_waves` > 0; null otherwise.
 std::unique_ptr<RadialProfile> edge_law_radial_profile(double defocus_waves);
+
+// ---------------------------------------------------------------------------------------
+// The exact PSF of any pupil by a zero-padded 2-D FFT (Fraunhofer diffraction of the pupil
+// function P exp(i 2 pi W) in the focal plane of the converging wave: defocus is part of W;
+// Goodman, "Introduction to Fourier Optics", 3rd ed., 6.4; as prysm and poppy do).
+
+/// A pupil at normalised coordinates (x, y): the round pupil of the f-number is the unit
+/// disc. Amplitude transmission in [0, 1] (an empty function: the unit disc) and the
+/// wavefront in waves (empty: 0). The pupil grid spans [-1, 1]^2 only: transmission outside
+/// it is not sampled. Both are called from several threads at once.
+struct Pupil {
+    std::function<double(double x, double y)> transmission;
+    std::function<double(double x, double y)> wavefront_waves;
+};
+
+/// Sampling of pupil_psf_fft. OPTICS.md section 1: pupil samples across the diameter at
+/// least the CoC in units of lambda N (8 W20), with a 1.5-2x margin; the FFT at least twice
+/// that. The PSF pixel is then lambda N / Q, Q = fft_size / pupil_samples (pi / Q in v).
+struct PupilSampling {
+    int pupil_samples   = 0;  ///< across the diameter; 0: 8 x max |dW/drho| (4 per wave of tilt), >= 64
+    int fft_size        = 0;  ///< 0: the smallest 2^a 3^b 5^c >= 2 x pupil_samples
+    int edge_supersample = 4; ///< s x s sub-samples per pupil cell (antialiased pupil edge)
+};
+
+/// The PSF of a pupil: a 1-channel float image fft_size square, unit sum, the optical axis at
+/// pixel (fft_size / 2, fft_size / 2); its pixel in units of lambda N and of v.
+struct PupilPsf {
+    OIIO::ImageBuf image;
+    double pixel_lambda_n = 0.0;
+    double pixel_v        = 0.0;
+    int pupil_samples     = 0;
+};
+
+/// The PSF of `pupil` by FFT (FFTW, double). `max_slope_waves` (max |dW/drho|, e.g.
+/// RadialWavefront::max_slope_waves()) sets the default sampling. False with a message in
+/// `error` for bad sampling (pupil_samples < 8, fft_size < pupil_samples, over 8192) or a
+/// pupil that lets no light through.
+bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
+                   const PupilSampling& sampling = {}, std::string* error = nullptr,
+                   int nthreads = 0);
+
+/// A round pupil with a radial wavefront (for comparing the FFT with HankelPsf).
+Pupil round_pupil(const RadialWavefront& wavefront);
+
+// ---------------------------------------------------------------------------------------
+// The seed's pseudo-diffraction map (SEEDS.md section 9; core/diffraction_map.cpp)
+//
+// A 2-D table of a made-up trigonometric fringe pattern, read the way the seed reads it:
+// U = log of the fringe width relative to the CoC (x = scale sqrt(lambda N / c)), V = radius
+// in a band around the geometric edge; each column energy-normalised with area weighting,
+// faded to its local mean where its fringes pass the Nyquist limit (of the table, and of
+// the output pixels at lookup), faded to zero a little outside the edge, clamped inside the
+// band. The seed publishes the rules and the fringe-width calibration (w2 ~ 0.75 sqrt(Fe c
+// lambda)), not its function: ours, below, is the simplest periodic one that follows them.
+// Use it to compare with the exact PSF (the seed asks for a better approximation: the edge
+// law answers, with the numbers in docs/methods/diffraction.md).
+
+struct SeedMapOptions {
+    int columns              = 64;      ///< U samples (log fringe width / CoC)
+    int rows                 = 256;     ///< V samples across a column's band
+    double min_width_ratio   = 1e-4;    ///< x at the map's large-bokeh end
+    double max_width_ratio   = 0.25;    ///< x at its near-focus end
+    double width_scale       = 0.75;    ///< the seed's w2 / sqrt(lambda N c) (its scale knob)
+    double band_widths       = 8.0;     ///< fringe widths stored inside the edge (then clamped)
+    double outside_widths    = 1.5;     ///< fringe widths stored outside the edge (fade to 0)
+    double first_max_widths  = 1.0;     ///< the first bright fringe, in fringe widths from the edge
+    double edge_value        = 0.25;    ///< intensity at the geometric edge (flat interior = 1)
+    double first_amplitude   = 0.35;    ///< the first bright fringe's height above 1
+    double reference_nm      = 710.0;   ///< the wavelength the map is made for (the seed's)
+};
+
+/// The trig fringe pattern against s = distance inward from the geometric edge in fringe
+/// widths (negative outside), before any fade or normalisation, flat interior = 1: outside,
+/// the edge value falling to 0 over outside_widths (smoothstep); from the edge to the first
+/// maximum the outermost fringe, e + (1 + A - e) sin^2(pi s / (2 s1)); beyond it
+/// 1 + A cos(2 pi (s - s1)) / (1 + (s - s1)): constant spacing of one fringe width, tapered
+/// to 1 (smoothstep) over the band's last two fringe widths.
+double seed_fringe_pattern(const SeedMapOptions& options, double s);
+
+class SeedDiffractionMap {
+public:
+    explicit SeedDiffractionMap(const SeedMapOptions& options = {});
+    const SeedMapOptions& options() const { return options_; }
+    /// Monochrome intensity at rho = r / R, unit energy (int 2 pi rho I drho = 1), for a
+    /// bokeh whose fringe width relative to its CoC is `width_ratio_ref` at the reference
+    /// wavelength, seen at `wavelength_ratio` = lambda / lambda_ref: the seed's horizontal
+    /// lookup at x_ref (lambda / lambda_ref)^0.5, its vertical squeeze keeping the geometric
+    /// edge at rho = 1, intensity scaled by the inverse square of the squeeze.
+    /// `pixel_rho` (> 0: one output pixel in units of R) fades the fringes to the local
+    /// mean where their period falls under 4 pixels (fully at 2).
+    double lookup(double rho, double width_ratio_ref, double wavelength_ratio = 1.0,
+                  double pixel_rho = 0.0) const;
+    /// The outer radius (rho) the lookup covers at fringe-width ratio x.
+    double extent(double width_ratio) const;
+    /// The radius inside which the lookup is clamped (flat) at x: 1 - 2 x band_widths, >= 0.
+    double clamp_radius(double width_ratio) const;
+    /// The fringe-width ratio of W20 / lambda = defocus_waves: width_scale / sqrt(8 w).
+    double width_ratio(double defocus_waves) const;
+
+private:
+    SeedMapOptions options_;
+    std::vector<float> value_, mean_;  // columns x rows, column-major; normalised
+};
+
+/// The diffraction models of a round bokeh, interchangeable as RadialProfiles.
+enum class DiffractionMethod {
+    None,     ///< the flat disc of geometric optics (1 / pi inside rho < 1)
+    EdgeLaw,  ///< edge_law_radial_profile
+    SeedMap,  ///< seed_map_radial_profile (needs a map), faded at the output's Nyquist limit
+    Exact,    ///< exact_radial_profile (pure defocus; seconds for large bokeh, see the docs)
+};
+
+/// One wavelength's profile of a round bokeh of CoC `coc_px` pixels (the sign ignored) at an
+/// f-number, wavelength (nm) and pixel pitch (mm), by `method`. Null on bad values, or for
+/// SeedMap without a map (which must outlive the profile).
+std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod method, double coc_px,
+                                                          double fnumber, double wavelength_nm,
+                                                          double pixel_pitch_mm,
+                                                          const SeedDiffractionMap* map = nullptr);
+
+/// The seed map as a RadialProfile at W20 / lambda = defocus_waves, looked up at the map's
+/// reference wavelength's column for this W20 (so profiles at several wavelengths follow the
+/// seed's wavelength rule when built with their own defocus_waves). `pixel_rho` as in
+/// lookup. The map must outlive the profile. Null on bad values.
+std::unique_ptr<RadialProfile> seed_map_radial_profile(const SeedDiffractionMap& map,
+                                                       double defocus_waves, double pixel_rho = 0.0);
+
+/// A three-channel radial profile sampled at rho = i * rho_step, i = 0 .. size - 1.
+struct RgbRadialProfile {
+    double rho_step = 0.0;
+    std::vector<std::array<double, 3>> values;
+};
+
+/// The seed's spectral path for one bokeh (CoC `coc_px` pixels, f-number, pixel pitch mm):
+/// the map looked up per wavelength (horizontal (lambda / lambda_ref)^0.5, squeeze, inverse
+/// square), summed with the weights; the clamped interior's tint blended toward white by
+/// (1 - 1/X)^2, X = 1 / (2 x_ref band_widths) the map's shrink (when X > 1); then each
+/// channel normalised to unit energy (white normalisation: a white light stays white).
+/// The spectrum's weights are spectrum.h's (spectral_samples); any three channel weights
+/// per wavelength will do. `samples` rho samples from 0 to the largest extent. False (and `out` empty) on bad values.
+bool seed_map_spectral_profile(RgbRadialProfile& out, const SeedDiffractionMap& map, double coc_px,
+                               double fnumber, double pixel_pitch_mm,
+                               const std::vector<SpectralSample>& spectrum, int samples = 1024);
 
 }  // namespace bokeh

@@ -15,6 +15,8 @@
 // --task defocus runs the depth-defocus task instead (defocus_task.cpp); --task resample
 // the reduced-buffer and enlargement study (resample_task.cpp), which writes two more
 // tables beside --csv FILE: <FILE stem>_artifacts.csv and <FILE stem>_figures.csv.
+// --task diffraction times the fringe models of a bokeh's rim against the exact PSF
+// (diffraction_task.cpp; its own CSV columns, one thread).
 //
 //   bokeh-bench [--task blur|defocus|resample|iris] [--threads N] [--reps N] [--csv FILE] [--quick]
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
@@ -22,6 +24,7 @@
 #include "bench_common.h"
 #include "deep_task.h"
 #include "defocus_task.h"
+#include "diffraction_task.h"
 #include "gegl_peer.h"
 #include "iris_task.h"
 #include "optics_task.h"
@@ -103,7 +106,8 @@ int main(int argc, char* argv[])
                                                    || std::string(argv[i + 1]) == "resample"
                                                    || std::string(argv[i + 1]) == "iris"
                                                    || std::string(argv[i + 1]) == "deep"
-                                                   || std::string(argv[i + 1]) == "optics"))
+                                                   || std::string(argv[i + 1]) == "optics"
+                                                   || std::string(argv[i + 1]) == "diffraction"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -125,7 +129,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b] [--image FILE]...\n",
                          a.c_str());
@@ -142,6 +146,12 @@ int main(int argc, char* argv[])
         return 1;
     }
     std::vector<std::string> rows;
+    if (task == "diffraction") {  // radial profiles, one thread: its own columns
+        rows.push_back(bokeh_bench::kDiffractionCsvHeader);
+        if (!bokeh_bench::run_diffraction_task(reps, quick, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
     rows.push_back(bokeh_bench::kCsvHeader);
     if (task == "defocus") {
         args.threads = threads;
