@@ -13,10 +13,10 @@
 // diameter on the sensor, d distance inward from the geometric edge of the bokeh.
 #pragma once
 
-#include <array>
-#include <functional>
 #include <bokeh/spectrum.h>
 
+#include <array>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
