@@ -242,6 +242,12 @@ TEST(Cli, Sequences)
     expect_clean_failure(r, "no files match", "");
     r = bokehtool(format("--frames 1-x {0}/in.#.exr -o {0}/x.#.exr", dir));
     expect_clean_failure(r, "--frames: '1-x' is not a frame list", "");
+    // A frame list is built whole before the first frame: two billion frames took 8 GB
+    // (tests/fuzz/regressions/command_line/frames-1-2000000000); refused by its size.
+    r = bokehtool(format("--frames 1-2000000000 {0}/in.#.exr -o {0}/x.#.exr", dir));
+    expect_clean_failure(r, "--frames: '1-2000000000' holds more than 1000000 frames", "");
+    r = bokehtool(format("{0}/in.1-3000000#.exr -o {0}/x.#.exr", dir));
+    expect_clean_failure(r, "--frames: '1-3000000' holds more than 1000000 frames", "");
 }
 
 TEST(Cli, ThreadCountDoesNotChangeResults)

@@ -3,7 +3,10 @@
 
 #include "sequence.h"
 
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <regex>
 
 #include <OpenImageIO/filesystem.h>
@@ -20,6 +23,45 @@ static bool looks_like_pattern(const std::string& arg)
         return false;
     return arg.find('#') != std::string::npos || arg.find('@') != std::string::npos
            || std::regex_search(arg, printf_frame);
+}
+
+// How many frames a frame list may hold: a farm job's chunk, with room to spare. OIIO's
+// enumerate_sequence builds the whole list (4 bytes a frame), so "1-2000000000" would take
+// 8 GB before the first frame runs (found by the command-line fuzz target).
+constexpr int64_t kMaxFrames = 1000000;
+
+// An upper bound of the frames in `spec` (OIIO's grammar: items "A", "A-B", "A-BxS",
+// "A-ByS", comma-separated): |B - A| / |S| + 1 for x, |B - A| + 1 otherwise. An item
+// that does not parse counts 1 (enumerate_sequence then takes or refuses it).
+static int64_t frames_bound(const std::string& spec)
+{
+    int64_t total = 0;
+    for (std::string item : OIIO::Strutil::splits(spec, ",")) {
+        item = std::string(OIIO::Strutil::strip(item));
+        const char* p = item.c_str();
+        char* end     = nullptr;
+        const long long a = std::strtoll(p, &end, 10);
+        if (end == p || *end != '-') {
+            total += 1;
+            continue;
+        }
+        p = end + 1;
+        const long long b = std::strtoll(p, &end, 10);
+        if (end == p) {
+            total += 1;
+            continue;
+        }
+        long double span = std::fabs(static_cast<long double>(b) - static_cast<long double>(a));
+        if (*end == 'x') {
+            const long long step = std::strtoll(end + 1, nullptr, 10);
+            if (step != 0)
+                span /= std::fabs(static_cast<long double>(step));
+        }
+        total += span >= kMaxFrames ? kMaxFrames + 1 : int64_t(span) + 1;
+        if (total > kMaxFrames)
+            break;
+    }
+    return total;
 }
 
 bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::string& err)
@@ -71,6 +113,11 @@ bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::str
 
     const std::string spec = frames_spec.empty() ? range_in_pattern : frames_spec;
     if (!spec.empty()) {
+        if (frames_bound(spec) > kMaxFrames) {
+            err = format("--frames: '{}' holds more than {} frames, the most one run takes", spec,
+                         kMaxFrames);
+            return false;
+        }
         if (!OIIO::Filesystem::enumerate_sequence(spec, plan.frames) || plan.frames.empty()) {
             err = format("--frames: '{}' is not a frame list (e.g. 1-10, 1-10x2, 3,5,8)", spec);
             return false;
