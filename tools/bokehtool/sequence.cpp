@@ -1,8 +1,12 @@
 // sequence.cpp — frame-sequence expansion on OIIO's Filesystem helpers (parse_pattern,
-// enumerate_sequence, scan_for_matching_filenames), the ones oiiotool uses.
+// enumerate_sequence), the ones oiiotool uses; the files on disk are matched here
+// (scan_frames, below, says why).
 
 #include "sequence.h"
 
+#include <algorithm>
+#include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -62,6 +66,43 @@ static int64_t frames_bound(const std::string& spec)
             break;
     }
     return total;
+}
+
+// The frames whose files exist: the entries of the pattern's directory that the pattern,
+// printf'd with the number they hold, gives back exactly. Not OIIO's
+// scan_for_matching_filenames: it makes a std::regex of the file name unescaped, so '.'
+// matches any character and a name holding '*' runs for minutes (found by the command-line
+// fuzz target: `bokehtool 'a********************@.exr' -o x.@.exr` ran past 60 s).
+static bool scan_frames(const std::string& normalized, std::vector<int>& frames)
+{
+    const std::string dir  = OIIO::Filesystem::parent_path(normalized);
+    const std::string name = OIIO::Filesystem::filename(normalized);
+    const size_t pct       = name.find('%');
+    const size_t conv_end  = pct == std::string::npos ? pct : name.find('d', pct);
+    if (conv_end == std::string::npos)
+        return false;  // the conversion is in the directory part: no file can match
+    const std::string prefix = name.substr(0, pct), suffix = name.substr(conv_end + 1);
+    std::vector<std::string> entries;
+    OIIO::Filesystem::get_directory_entries(dir.empty() ? "." : dir, entries, false);
+    for (const std::string& entry : entries) {
+        const std::string f = OIIO::Filesystem::filename(entry);
+        if (f.size() <= prefix.size() + suffix.size() || !OIIO::Strutil::starts_with(f, prefix)
+            || !OIIO::Strutil::ends_with(f, suffix))
+            continue;
+        const std::string digits = f.substr(prefix.size(), f.size() - prefix.size() - suffix.size());
+        char* end    = nullptr;
+        errno        = 0;
+        const long v = std::strtol(digits.c_str(), &end, 10);
+        if (*end != '\0' || errno != 0 || v < INT_MIN || v > INT_MAX)
+            continue;
+        char again[4096];
+        std::snprintf(again, sizeof(again), name.c_str(), int(v));
+        if (f == again)
+            frames.push_back(int(v));
+    }
+    std::sort(frames.begin(), frames.end());
+    frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+    return !frames.empty();
 }
 
 bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::string& err)
@@ -125,10 +166,7 @@ bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::str
         return true;
     }
     // No range given: the frames are the files on disk matching the first pattern.
-    std::vector<std::string> files;
-    const std::string& first = plan.normalized.front();
-    if (!OIIO::Filesystem::scan_for_matching_filenames(first, plan.frames, files)
-        || plan.frames.empty()) {
+    if (!scan_frames(plan.normalized.front(), plan.frames)) {
         err = format("{}: no files match this frame pattern (give --frames for outputs)",
                      plan.args[size_t(plan.pattern_args.front())]);
         return false;
