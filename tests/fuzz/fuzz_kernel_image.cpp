@@ -175,6 +175,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     for (int c = 0; c < src_nch; ++c)
         if (opts.border == bokeh::Border::Black)
             lo[c] = std::min(lo[c], 0.0f);
+    if (std::getenv("BOKEH_FUZZ_VERBOSE")) {  // what a finding is: the kernel and the result
+        std::fprintf(stderr, "kernel %dx%d, %d channels, iris %g, border %d, grow %d:", kernel.spec().width,
+                     kernel.spec().height, kernel.nchannels(), double(opts.iris), int(opts.border), int(opts.grow));
+        for (OIIO::ImageBuf::ConstIterator<float> it(kernel); !it.done(); ++it)
+            for (int c = 0; c < kernel.nchannels(); ++c)
+                std::fprintf(stderr, " %g", double(it[c]));
+        std::fprintf(stderr, "\n");
+        for (OIIO::ImageBuf::ConstIterator<float> it(dst); !it.done(); ++it)
+            for (int c = 0; c < dst.nchannels(); ++c)
+                if (!std::isfinite(it[c]) || std::fabs(it[c]) > 2)
+                    std::fprintf(stderr, "  out (%d, %d) channel %d: %g\n", it.x(), it.y(), c, double(it[c]));
+    }
     for (OIIO::ImageBuf::ConstIterator<float> it(dst); !it.done(); ++it)
         for (int c = 0; c < dst.nchannels(); ++c) {
             const float v = it[c];
