@@ -99,11 +99,13 @@ void expect_same_bits_for_1_2_8_threads(const std::string& family, const std::ve
     }
 }
 
+// Each test makes its inputs in a directory of its own: ctest runs the tests of this file
+// as separate processes, side by side.
 class Determinism : public testing::Test {
 protected:
-    static void SetUpTestSuite()
+    void SetUp() override
     {
-        s_dir = fresh_dir("determinism");
+        s_dir = fresh_dir(std::string("determinism_") + testing::UnitTest::GetInstance()->current_test_info()->name());
         const RunResult r = bokehtool(format("-d float --scene lights:width=96:height=64 -o {0}/scene.exr "
                                              "--scene lights:width=9:height=7 --ch R,G,B,A -o {0}/kernel.exr",
                                              s_dir));
