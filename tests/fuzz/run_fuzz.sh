@@ -5,6 +5,7 @@
 # WORK_DIR/<target>-crash-*, -timeout-*, -oom-*; the script fails naming them.
 #
 #   run_fuzz.sh BIN_DIR WORK_DIR SECONDS TARGET...   (TARGET: read_image, command_line, ...)
+#   run_fuzz.sh --fresh BIN_DIR WORK_DIR ...          (WORK_DIR emptied first: ctest's run)
 #   run_fuzz.sh --skip "why"                         (exit 77: ctest's "skipped")
 #
 # Used by ctest (fuzz_smoke: a few seconds a target) and by `make fuzz` (FUZZ_SECONDS).
@@ -12,6 +13,10 @@ set -u
 if [ "${1:-}" = "--skip" ]; then
   echo "fuzz_smoke: skipped: ${2:-}"
   exit 77
+fi
+if [ "${1:-}" = "--fresh" ]; then
+  shift
+  rm -rf "$2"
 fi
 mkdir -p "$2"
 bin=$(cd "$1" && pwd) work=$(cd "$2" && pwd) seconds=$3
