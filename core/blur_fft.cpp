@@ -307,6 +307,9 @@ Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,
 
 namespace {
 
+// How far a kernel image's weights may cancel: their absolute sum over their sum.
+constexpr double kMaxKernelCancellation = 1e6;
+
 // A kernel image (float, any data window) as normalised weights for an image of `nc`
 // channels: kernels[kernel_of[c]] blurs channel c (convolve_image's rules, blur.h). False +
 // `err` for a kernel it refuses.
@@ -338,7 +341,7 @@ bool kernel_image_weights(const OIIO::ImageBuf& kf, int nc, float iris, std::vec
     for (int c = 0; c < knc; ++c) {
         KernelWeights& k = kernels[size_t(c)];
         k.w.assign(size_t(2 * rx + 1) * size_t(2 * ry + 1), 0.0);
-        double sum = 0.0;
+        double sum = 0.0, abs_sum = 0.0;
         for (OIIO::ImageBuf::ConstIterator<float> it(kf); !it.done(); ++it) {
             if (!std::isfinite(it[c])) {
                 err = format("the kernel image has a non-finite value at ({}, {})", it.x(), it.y());
@@ -346,9 +349,21 @@ bool kernel_image_weights(const OIIO::ImageBuf& kf, int nc, float iris, std::vec
             }
             k.w[size_t(it.y() - cy + ry) * size_t(2 * rx + 1) + size_t(it.x() - cx + rx)] = it[c];
             sum += it[c];
+            abs_sum += std::fabs(double(it[c]));
         }
         if (!(sum > 0.0)) {
             err = format("kernel image channel {} sums to {}; it must be positive", c, sum);
+            return false;
+        }
+        // Weights that cancel to a sum far below their size make each output a difference of
+        // huge terms, up to abs_sum / sum times the source's values: past float's range, and
+        // decided by rounding (the kernel-image fuzz target's 7x1 kernel 1, 1, 1, -3e38, 1,
+        // 3e38, 0.5 gave infinities on a source in [0, 1];
+        // tests/fuzz/regressions/kernel_image). A sharpening kernel is a few times its sum.
+        if (abs_sum > kMaxKernelCancellation * sum) {
+            err = format("kernel image channel {}: its weights cancel (absolute sum {:g}, sum {:g}); the "
+                         "absolute sum may be at most {:g} times the sum",
+                         c, abs_sum, sum, kMaxKernelCancellation);
             return false;
         }
         // A weighted mean of exp(k x) with negative weights can fall to 0 or below, whose log

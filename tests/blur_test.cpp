@@ -2880,6 +2880,22 @@ TEST(BlurImageKernel, BadKernelsAreRefused)
     EXPECT_NE(out.geterror().find("non-finite value at (1, 1)"), std::string::npos) << out.geterror();
     EXPECT_FALSE(convolve_image(out, src, OIIO::ImageBuf()));
     EXPECT_NE(out.geterror().find("kernel image"), std::string::npos) << out.geterror();
+    // Weights that cancel (the kernel-image fuzz target's 7x1 finding; summed in double the
+    // 1s before -3e38 are lost, so the sum reads 0.5): infinities from a
+    // finite source before; refused, as in check_kernel_image. A sharpening kernel passes.
+    OIIO::ImageBuf cancel(OIIO::ImageSpec(7, 1, 1, OIIO::TypeFloat));
+    const float weights[7] = { 1, 1, 1, -3e38f, 1, 3e38f, 0.5f };
+    ASSERT_TRUE(cancel.set_pixels(OIIO::ROI::All(), OIIO::TypeFloat, weights));
+    EXPECT_FALSE(convolve_image(out, src, cancel));
+    const std::string refused = out.geterror();
+    EXPECT_NE(refused.find("kernel image channel 0: its weights cancel (absolute sum 6e+38, sum 0.5)"),
+              std::string::npos) << refused;
+    std::string why;
+    EXPECT_FALSE(check_kernel_image(cancel, src.nchannels(), {}, why));
+    EXPECT_NE(why.find("its weights cancel"), std::string::npos) << why;
+    const float sharpen_weights[7] = { 0, -1, -1, 5, -1, -1, 0 };
+    ASSERT_TRUE(cancel.set_pixels(OIIO::ROI::All(), OIIO::TypeFloat, sharpen_weights));
+    EXPECT_TRUE(convolve_image(out, src, cancel)) << out.geterror();
     // More kernel channels than the image's: the extra ones would be dropped unseen.
     OIIO::ImageBuf wide(OIIO::ImageSpec(3, 3, src.nchannels() + 1, OIIO::TypeFloat));
     OIIO::ImageBufAlgo::fill(wide, std::vector<float>(size_t(src.nchannels() + 1), 1.0f));

@@ -242,6 +242,22 @@ TEST(Cli, Sequences)
     expect_clean_failure(r, "no files match", "");
     r = bokehtool(format("--frames 1-x {0}/in.#.exr -o {0}/x.#.exr", dir));
     expect_clean_failure(r, "--frames: '1-x' is not a frame list", "");
+    // A frame list is built whole before the first frame: two billion frames took 8 GB
+    // (tests/fuzz/regressions/command_line/frames-1-2000000000); refused by its size.
+    r = bokehtool(format("--frames 1-2000000000 {0}/in.#.exr -o {0}/x.#.exr", dir));
+    expect_clean_failure(r, "--frames: '1-2000000000' holds more than 1000000 frames", "");
+    // Files are matched literally: a name holding '*' took OIIO's regex match minutes
+    // (tests/fuzz/regressions/command_line/stars-and-at-pattern), and '.' is no wildcard.
+    r = bokehtool(format("'{0}/a********************@.exr' -o {0}/x.@.exr", dir));
+    expect_clean_failure(r, "no files match this frame pattern", "");
+    ASSERT_TRUE(OIIO::Filesystem::copy(dir + "/in.0002.exr", dir + "/inX0002Yexr"));
+    r = bokehtool(format("{0}/in.#Yexr -o {0}/y.#.exr", dir));
+    expect_clean_failure(r, "no files match this frame pattern", "");
+    r = bokehtool(format("{0}/inX#Yexr -o {0}/y.#.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(exists(dir + "/y.0002.exr"));
+    r = bokehtool(format("{0}/in.1-3000000#.exr -o {0}/x.#.exr", dir));
+    expect_clean_failure(r, "--frames: '1-3000000' holds more than 1000000 frames", "");
 }
 
 TEST(Cli, ThreadCountDoesNotChangeResults)

@@ -185,9 +185,10 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// the kernel's (alpha, say) use the mean of the kernel's channels; a kernel with more
 /// channels than the source is refused, unless the one too many is the kernel's alpha
 /// (an RGBA aperture picture on an RGB image: its alpha is dropped). Each kernel channel
-/// is normalised to sum 1 (energy kept); a channel summing to <= 0, or any non-finite
-/// kernel value, is refused, and in iris mode a kernel with negative weights (its mean
-/// of exp(k x) could fall to 0 or below). NaN and infinite source values reach exactly the
+/// is normalised to sum 1 (energy kept); a channel summing to <= 0 or whose weights cancel
+/// (absolute sum over 1e6 times the sum), or any non-finite kernel value, is refused, and
+/// in iris mode a kernel with negative weights (its mean of exp(k x) could fall to 0 or
+/// below). NaN and infinite source values reach exactly the
 /// outputs whose kernel channel has weight on them, as for blur() (an infinity through a
 /// negative weight changes sign). opts.method and opts.bands are ignored; opts.iris applies.
 /// Computed in overlap-save tiles (core/blur_fft.cpp) in double.

@@ -956,19 +956,36 @@ void Host::read_ahead(const std::vector<std::string>& line)
     }
 }
 
+// Pass 1: plan the frames, check the whole line (of the first frame) and take the global
+// options.
+bool Host::check_line(const std::vector<std::string>& args, FramePlan& plan)
+{
+    std::string err;
+    if (!plan_frames(args, plan, err))
+        return fail("", err);
+    return parse(plan.frames.empty() ? plan.args : args_for_frame(plan, plan.frames.front()), true);
+}
+
+bool Host::check_only(const std::vector<std::string>& args)
+{
+    if (!load_plugins()) {
+        for (const std::string& f : m_plugin_failures)
+            std::cerr << format("{} ERROR: {}\n", kProgram, f);
+        return false;
+    }
+    FramePlan plan;
+    return check_line(args, plan);
+}
+
 int Host::run_frames(const std::vector<std::string>& args)
 {
     OIIO::Timer run_timer;
     FramePlan plan;
-    std::string err;
-    if (!plan_frames(args, plan, err))
-        return fail("", err), 1;
+    if (!check_line(args, plan))
+        return 1;
     const bool sequence = !plan.frames.empty();
     const std::vector<int> frames = sequence ? plan.frames : std::vector<int>{ 0 };
-
-    // Pass 1: check the whole line and take the global options.
-    if (!parse(sequence ? args_for_frame(plan, frames.front()) : plan.args, true))
-        return 1;
+    std::string err;
     if (!m_colors.load(bokeh::resolve_color_config(m_colorconfig, shipped_color_config()), err))
         return fail("--colorconfig", err), 1;
     OIIO::attribute("threads", m_threads);

@@ -26,11 +26,20 @@ class ArgParse;
 
 namespace bokehtool {
 
+struct FramePlan;
+
 class Host {
 public:
     Host();
     /// Run the program on the arguments after its name; returns the exit status.
     int main(const std::vector<std::string>& args);
+
+    /// Pass 1 alone, as main() runs it before touching a pixel: load the plugins, plan the
+    /// frames, check the first frame's command line (commands, arguments, options, stack
+    /// depths) and take its global options. Nothing is read, run or written. False after
+    /// the one-line error on stderr. The command-line fuzz target
+    /// (tests/fuzz/fuzz_command_line.cpp) drives the parser through this.
+    bool check_only(const std::vector<std::string>& args);
 
 private:
     struct PendingWrite {
@@ -54,6 +63,7 @@ private:
     int print_markdown(const std::vector<std::string>& args, bool plugins_ok);
 
     bool parse(const std::vector<std::string>& args, bool checking);
+    bool check_line(const std::vector<std::string>& args, FramePlan& plan);
     void dispatch(OIIO::ArgParse& ap, const std::vector<std::string>& argv, bool checking);
     bool check_command(const bokeh::Command& cmd, const std::string& modifiers,
                        const std::vector<std::string>& args, bokeh::OptionValues& opts);

@@ -1,9 +1,16 @@
 // sequence.cpp — frame-sequence expansion on OIIO's Filesystem helpers (parse_pattern,
-// enumerate_sequence, scan_for_matching_filenames), the ones oiiotool uses.
+// enumerate_sequence), the ones oiiotool uses; the files on disk are matched here
+// (scan_frames, below, says why).
 
 #include "sequence.h"
 
+#include <algorithm>
+#include <cerrno>
+#include <climits>
+#include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <regex>
 
 #include <OpenImageIO/filesystem.h>
@@ -20,6 +27,82 @@ static bool looks_like_pattern(const std::string& arg)
         return false;
     return arg.find('#') != std::string::npos || arg.find('@') != std::string::npos
            || std::regex_search(arg, printf_frame);
+}
+
+// How many frames a frame list may hold: a farm job's chunk, with room to spare. OIIO's
+// enumerate_sequence builds the whole list (4 bytes a frame), so "1-2000000000" would take
+// 8 GB before the first frame runs (found by the command-line fuzz target).
+constexpr int64_t kMaxFrames = 1000000;
+
+// An upper bound of the frames in `spec` (OIIO's grammar: items "A", "A-B", "A-BxS",
+// "A-ByS", comma-separated): |B - A| / |S| + 1 for x, |B - A| + 1 otherwise. An item
+// that does not parse counts 1 (enumerate_sequence then takes or refuses it).
+static int64_t frames_bound(const std::string& spec)
+{
+    int64_t total = 0;
+    for (std::string item : OIIO::Strutil::splits(spec, ",")) {
+        item = std::string(OIIO::Strutil::strip(item));
+        const char* p = item.c_str();
+        char* end     = nullptr;
+        const long long a = std::strtoll(p, &end, 10);
+        if (end == p || *end != '-') {
+            total += 1;
+            continue;
+        }
+        p = end + 1;
+        const long long b = std::strtoll(p, &end, 10);
+        if (end == p) {
+            total += 1;
+            continue;
+        }
+        long double span = std::fabs(static_cast<long double>(b) - static_cast<long double>(a));
+        if (*end == 'x') {
+            const long long step = std::strtoll(end + 1, nullptr, 10);
+            if (step != 0)
+                span /= std::fabs(static_cast<long double>(step));
+        }
+        total += span >= kMaxFrames ? kMaxFrames + 1 : int64_t(span) + 1;
+        if (total > kMaxFrames)
+            break;
+    }
+    return total;
+}
+
+// The frames whose files exist: the entries of the pattern's directory that the pattern,
+// printf'd with the number they hold, gives back exactly. Not OIIO's
+// scan_for_matching_filenames: it makes a std::regex of the file name unescaped, so '.'
+// matches any character and a name holding '*' runs for minutes (found by the command-line
+// fuzz target: `bokehtool 'a********************@.exr' -o x.@.exr` ran past 60 s).
+static bool scan_frames(const std::string& normalized, std::vector<int>& frames)
+{
+    const std::string dir  = OIIO::Filesystem::parent_path(normalized);
+    const std::string name = OIIO::Filesystem::filename(normalized);
+    const size_t pct       = name.find('%');
+    const size_t conv_end  = pct == std::string::npos ? pct : name.find('d', pct);
+    if (conv_end == std::string::npos)
+        return false;  // the conversion is in the directory part: no file can match
+    const std::string prefix = name.substr(0, pct), suffix = name.substr(conv_end + 1);
+    std::vector<std::string> entries;
+    OIIO::Filesystem::get_directory_entries(dir.empty() ? "." : dir, entries, false);
+    for (const std::string& entry : entries) {
+        const std::string f = OIIO::Filesystem::filename(entry);
+        if (f.size() <= prefix.size() + suffix.size() || !OIIO::Strutil::starts_with(f, prefix)
+            || !OIIO::Strutil::ends_with(f, suffix))
+            continue;
+        const std::string digits = f.substr(prefix.size(), f.size() - prefix.size() - suffix.size());
+        char* end    = nullptr;
+        errno        = 0;
+        const long v = std::strtol(digits.c_str(), &end, 10);
+        if (*end != '\0' || errno != 0 || v < INT_MIN || v > INT_MAX)
+            continue;
+        char again[4096];
+        std::snprintf(again, sizeof(again), name.c_str(), int(v));
+        if (f == again)
+            frames.push_back(int(v));
+    }
+    std::sort(frames.begin(), frames.end());
+    frames.erase(std::unique(frames.begin(), frames.end()), frames.end());
+    return !frames.empty();
 }
 
 bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::string& err)
@@ -81,6 +164,11 @@ bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::str
 
     const std::string spec = frames_spec.empty() ? range_in_pattern : frames_spec;
     if (!spec.empty()) {
+        if (frames_bound(spec) > kMaxFrames) {
+            err = format("--frames: '{}' holds more than {} frames, the most one run takes", spec,
+                         kMaxFrames);
+            return false;
+        }
         if (!OIIO::Filesystem::enumerate_sequence(spec, plan.frames) || plan.frames.empty()) {
             err = format("--frames: '{}' is not a frame list (e.g. 1-10, 1-10x2, 3,5,8)", spec);
             return false;
@@ -88,10 +176,7 @@ bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::str
         return true;
     }
     // No range given: the frames are the files on disk matching the first pattern.
-    std::vector<std::string> files;
-    const std::string& first = plan.normalized.front();
-    if (!OIIO::Filesystem::scan_for_matching_filenames(first, plan.frames, files)
-        || plan.frames.empty()) {
+    if (!scan_frames(plan.normalized.front(), plan.frames)) {
         err = format("{}: no files match this frame pattern (give --frames for outputs)",
                      plan.args[size_t(plan.pattern_args.front())]);
         return false;
