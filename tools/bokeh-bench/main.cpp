@@ -14,14 +14,16 @@
 //
 // --task defocus runs the depth-defocus task instead (defocus_task.cpp); --task resample
 // the reduced-buffer and enlargement study (resample_task.cpp), which writes two more
-// tables beside --csv FILE: <FILE stem>_artifacts.csv and <FILE stem>_figures.csv.
+// tables beside --csv FILE: <FILE stem>_artifacts.csv and <FILE stem>_figures.csv; --task
+// lens lens character's highlight sprites against the plain defocus (lens_task.cpp).
 //
-//   bokeh-bench [--task blur|defocus|resample|iris] [--threads N] [--reps N] [--csv FILE] [--quick]
+//   bokeh-bench [--task blur|defocus|resample|iris|deep|lens] [--threads N] [--reps N] [--csv FILE] [--quick]
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
 
 #include "bench_common.h"
 #include "deep_task.h"
 #include "defocus_task.h"
+#include "lens_task.h"
 #include "gegl_peer.h"
 #include "iris_task.h"
 #include "resample_task.h"
@@ -101,7 +103,8 @@ int main(int argc, char* argv[])
                                                    || std::string(argv[i + 1]) == "defocus"
                                                    || std::string(argv[i + 1]) == "resample"
                                                    || std::string(argv[i + 1]) == "iris"
-                                                   || std::string(argv[i + 1]) == "deep"))
+                                                   || std::string(argv[i + 1]) == "deep"
+                                                   || std::string(argv[i + 1]) == "lens"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -123,7 +126,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|lens] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b] [--image FILE]...\n",
                          a.c_str());
@@ -145,6 +148,13 @@ int main(int argc, char* argv[])
         args.threads = threads;
         args.reps    = reps;
         if (!bokeh_bench::run_defocus_task(args, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "lens") {
+        args.threads = threads;
+        args.reps    = reps;
+        if (!bokeh_bench::run_lens_task(args, rows))
             return 1;
         return write_csv(csv, rows);
     }
