@@ -27,6 +27,8 @@
 //   are computed in tiles, only where they hold pixels (trimmed to the pixels' reach), with
 //   kernels of at most 2 q px unless at full resolution.
 // * Iris mode: the layers average exp(k colour) and come back by log / k (IrisSpace).
+// * Lens character (core/defocus_sprites.cpp): highlights leave the layers and are drawn
+//   as the lens's PSF into the layer of their depth (composite_layers, after the layer).
 // * Gather (SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
 //   few representative CoCs (4 behind focus, 3 in front; large ones in 1/2 and 1/4
 //   buffers), per-pixel smoothstep blend between the two levels around its CoC, a back-
@@ -426,6 +428,9 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
                 }
             }
         });
+        // Lens character: the layer's highlights, before any nearer layer hides them.
+        if (f.sprites)
+            draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads);
     }
 }
 
@@ -867,7 +872,7 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
         err = format("reference step {} px is outside 1/64..8", o.reference_step_px);
         return false;
     }
-    return true;
+    return check_sprite_options(o, err);
 }
 
 namespace {
@@ -928,13 +933,18 @@ bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, Defoc
         dilate_nearest(f.coc, f.data.width(), f.data.height(), o.depth_dilate_px, nthreads);
     if (o.bloom_gain != 1.0f)
         apply_bloom(f.img, o.bloom_threshold, o.bloom_gain, nthreads);
+    // Highlights leave the layers in linear light (before iris mode's exp space).
+    if (o.lens_character && !select_sprites(f, o, src.spec(), nthreads, err))
+        return false;
     if (o.iris != 0.0f && !to_iris_space(f, o.iris, nthreads, err))
         return false;
 
     const auto [lo, hi] = std::minmax_element(f.coc.begin(), f.coc.end());
     rep.min_coc_px      = f.coc.empty() ? 0.0f : *lo;
     rep.max_coc_px      = f.coc.empty() ? 0.0f : *hi;
-    const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
+    // Sprites spread as far as their PSFs (aberrations can reach past the CoC).
+    const float extreme = std::max({ -rep.min_coc_px, rep.max_coc_px,
+                                     f.sprites ? 2.0f * f.sprites->extent_px : 0.0f });
     f.out               = defocus_output_region(src.spec(), f.data, extreme, o);
     return true;
 }
@@ -1031,6 +1041,28 @@ const char* method_name(DefocusMethod m)
     return "?";
 }
 
+namespace {
+
+// The result plane (RGBA over f.out) into dst: R, G, B(, A) as float, src's metadata.
+void write_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Plane& out, int nthreads)
+{
+    const int nc = f.img.has_alpha ? 4 : 3;
+    reset_uninitialised(dst, derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
+                                               : std::vector<std::string>{ "R", "G", "B" },
+                           f.out));
+    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y) {
+            float* d       = static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y));
+            const float* s = out.row(y);
+            for (int x = 0; x < out.w; ++x)
+                for (int c = 0; c < nc; ++c)
+                    d[size_t(x) * size_t(nc) + size_t(c)] = s[size_t(x) * 4 + size_t(c)];
+        }
+    });
+}
+
+}  // namespace
+
 bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
              DefocusReport* report, int nthreads)
 {
@@ -1080,28 +1112,40 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
     }
     if (rep.method != DefocusMethod::Gather)
         fill_disocclusions(out, f, rep.max_coc_px, nthreads);
-    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}", method_name(rep.method),
+    report_sprites(rep, f.sprites.get());
+    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}", method_name(rep.method),
                          rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width(),
                          f.out.height(),
                          rep.nonfinite.total() ? format(", {} non-finite values replaced",
                                                         rep.nonfinite.total())
-                                               : std::string());
+                                               : std::string(),
+                         sprite_summary(rep));
 
-    const int nc = f.img.has_alpha ? 4 : 3;
-    reset_uninitialised(dst, derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
-                                               : std::vector<std::string>{ "R", "G", "B" },
-                           f.out));
-    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y) {
-            float* d       = static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y));
-            const float* s = out.row(y);
-            for (int x = 0; x < out.w; ++x)
-                for (int c = 0; c < nc; ++c)
-                    d[size_t(x) * size_t(nc) + size_t(c)] = s[size_t(x) * 4 + size_t(c)];
-        }
-    });
+    write_result(dst, src, f, out, nthreads);
     if (report)
         *report = std::move(rep);
+    return true;
+}
+
+bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
+                               int nthreads)
+{
+    DefocusOptions o  = opts;
+    o.lens_character  = false;  // every pixel is scattered here; none is taken out
+    o.method          = DefocusMethod::Reference;
+    DefocusReport rep;
+    Frame f;
+    std::string err;
+    Plane out;
+    if (src.initialized() && src.deep()) {
+        dst.errorfmt("defocus scatter reference: a flat image only (--flatten a deep one)");
+        return false;
+    }
+    if (!prepare(f, src, o, rep, nthreads, err) || !scatter_reference(out, f, o, src.spec(), nthreads, err)) {
+        dst.errorfmt("defocus scatter reference: {}", err);
+        return false;
+    }
+    write_result(dst, src, f, out, nthreads);
     return true;
 }
 

@@ -16,6 +16,10 @@
 // rung's CoC to the next rung's (the last a point), so a later merge with another deep
 // element interleaves by depth, and the flatten of the result is the flat output.
 //
+// Lens character (core/defocus_sprites.cpp): a bright piece's sprite share is taken out of
+// each layer it has a share in (as far as it shows through the nearer pieces of that
+// layer) and drawn there with the lens PSF of the piece's own CoC.
+//
 // Limits: every layer holds a dense RGBA and visibility plane over the data window (20
 // bytes a pixel a layer: 18 layers of LowResLeftView's 1024x576, 212 MB); samples between
 // two rungs are blurred by a mix of the two kernels (as in the flat method); within a layer, the order of a pixel's pieces is kept but their blur is
@@ -28,8 +32,11 @@
 #include "defocus_layers.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
+#include <mutex>
+#include <tuple>
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/strutil.h>
@@ -41,6 +48,7 @@ using namespace detail;
 namespace {
 
 using OIIO::Strutil::fmt::format;
+using Clock = std::chrono::steady_clock;
 
 // One piece of a sample: premultiplied colour and alpha, its CoC.
 struct Piece {
@@ -178,7 +186,12 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                                          std::clamp(m.coc_px[k], std::min(c_lo, c_hi), std::max(c_lo, c_hi)));
     }
     const float bloom_t = o.bloom_threshold, bloom_g = o.bloom_gain;
+    // Lens character: each piece's sprite share, per layer it is drawn in (taken out of
+    // the layers below, once the brightest are chosen).
+    std::vector<Sprite> highlights;
+    std::mutex highlights_mutex;
     parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
+        std::vector<Sprite> found;
         std::vector<Piece> pieces;
         std::vector<double> cuts;
         std::vector<float> T(K, 1.0f), self(K), nearer_t(K), in_layer_t(K);
@@ -264,6 +277,17 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                     float* v = f.layer_rgba[k].data() + size_t(p) * 4;
                     for (int c = 0; c < 4; ++c)
                         v[c] += T[k] * w * pc.rgba[c];
+                    float lum;
+                    const float share = o.lens_character ? sprite_share(pc.rgba, o.highlight_threshold, lum) : 0.0f;
+                    if (share > 0.0f) {
+                        Sprite sp;
+                        sp.at     = size_t(p);
+                        sp.layer  = int(k);
+                        sp.coc_px = pc.coc;
+                        for (int c = 0; c < 3; ++c)
+                            sp.rgb[c] = T[k] * w * share * pc.rgba[c];
+                        found.push_back(sp);
+                    }
                     // Whatever follows lies behind this piece in depth: hidden by all of it,
                     // whichever share of it this layer holds.
                     T[k] *= 1.0f - alpha;
@@ -277,16 +301,54 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                 f.layer_vis[k][size_t(p)] = self[k] * (1.0f - (1.0f - nearer_t[k]) * in_layer_t[k]);
             std::fill(T.begin(), T.end(), 1.0f);
         }
+        if (!found.empty()) {
+            std::lock_guard<std::mutex> lock(highlights_mutex);
+            highlights.insert(highlights.end(), found.begin(), found.end());
+        }
     });
+    float sprite_extent_px = 0.0f;
+    if (o.lens_character) {
+        const Clock::time_point t0 = Clock::now();
+        auto set = std::make_shared<SpriteSet>();
+        LensCharacter lens;
+        if (!defocus_lens(o, spec, lens, err))
+            return fail(err);
+        auto luminance = [](const Sprite& a) { return 0.2126f * a.rgb[0] + 0.7152f * a.rgb[1] + 0.0722f * a.rgb[2]; };
+        set->candidates = int64_t(highlights.size());
+        if (highlights.size() > size_t(o.max_sprites)) {
+            std::nth_element(highlights.begin(), highlights.begin() + o.max_sprites, highlights.end(),
+                             [&](const Sprite& a, const Sprite& b) {
+                                 return luminance(a) > luminance(b)
+                                        || (luminance(a) == luminance(b) && std::tie(a.at, a.layer) < std::tie(b.at, b.layer));
+                             });
+            highlights.resize(size_t(o.max_sprites));
+        }
+        // A fixed order (the threads' is not), by pixel as the drawing wants.
+        std::sort(highlights.begin(), highlights.end(), [](const Sprite& a, const Sprite& b) {
+            return std::make_tuple(a.at, a.layer, a.coc_px, a.rgb[0], a.rgb[1], a.rgb[2])
+                   < std::make_tuple(b.at, b.layer, b.coc_px, b.rgb[0], b.rgb[1], b.rgb[2]);
+        });
+        const int w = f.data.width();
+        for (Sprite& sp : highlights) {
+            sp.x     = f.data.xbegin + int(sp.at % size_t(w));
+            sp.y     = f.data.ybegin + int(sp.at / size_t(w));
+            float* v = f.layer_rgba[size_t(sp.layer)].data() + sp.at * 4;
+            for (int c = 0; c < 3; ++c)
+                v[c] -= sp.rgb[c];
+        }
+        set->sprites = std::move(highlights);
+        PsfCache cache(lens, nthreads);
+        if (!fetch_sprite_psfs(*set, cache, FieldFrame(src.spec(), lens), nthreads, err))
+            return fail(err);
+        set->seconds     = std::chrono::duration<double>(Clock::now() - t0).count();
+        sprite_extent_px = set->extent_px;
+        f.sprites        = std::move(set);
+    }
 
-    const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
+    const float extreme = std::max({ -rep.min_coc_px, rep.max_coc_px, 2.0f * sprite_extent_px });
     f.out               = defocus_output_region(src.spec(), f.data, extreme, o);
     rep.layer_coc_px    = m.coc_px;
     rep.layer_reduction = m.reduction;
-    rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}", method_name(rep.method),
-                         rep.min_coc_px, rep.max_coc_px, K, f.out.width(), f.out.height(),
-                         o.deep_output ? ", deep" : "",
-                         repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string());
 
     if (!o.deep_output) {
         Plane out(f.out.width(), f.out.height(), 4);
@@ -350,6 +412,12 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         });
         dst = std::move(result);
     }
+    report_sprites(rep, f.sprites.get());
+    rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}{}", method_name(rep.method),
+                         rep.min_coc_px, rep.max_coc_px, K, f.out.width(), f.out.height(),
+                         o.deep_output ? ", deep" : "",
+                         repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string(),
+                         sprite_summary(rep));
     if (report)
         *report = std::move(rep);
     return true;

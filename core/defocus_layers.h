@@ -15,10 +15,34 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace bokeh::detail {
+
+// A highlight scattered with the lens's PSF (core/defocus_sprites.cpp): the share of a
+// pixel's premultiplied colour taken out of the layers, drawn as the crossfade of the PSFs
+// of the two CoC bins around its CoC (weights linear in log CoC).
+struct Sprite {
+    int x = 0, y = 0;             // the pixel, full-resolution coordinates
+    size_t at = 0;                // its index in the data window (flat frames)
+    int layer = -1;               // deep frames: the layer it is drawn in (flat: by membership)
+    float coc_px = 0.0f;
+    float rgb[3] = { 0, 0, 0 };   // premultiplied colour taken from the pixel
+    std::shared_ptr<const Psf> psf[2];
+    int psf_id[2]     = { -1, -1 };  // the PSFs' order of first use (a fixed order for merging)
+    float weight[2] = { 1.0f, 0.0f };
+};
+
+struct SpriteSet {
+    std::vector<Sprite> sprites;
+    int64_t candidates = 0;
+    float extent_px   = 0.0f;  // the largest half-size of a sprite's PSFs, px
+    size_t psfs       = 0;
+    int64_t drawn     = 0;     // sprites drawn, after merging those of a block (per layer)
+    double seconds    = 0.0;   // selection, PSFs and (added as they are drawn) scatter
+};
 
 // Iris mode (SEEDS.md section 3) in the layers: colour is carried as
 // A (exp(k (colour / A - shift)) - 1) (premultiplied exp-space colour), so each layer
@@ -46,6 +70,8 @@ struct Frame {
     // (1 - (1 - u) a for a sample shared u / 1 - u with the nearer layer); the layer is
     // divided by its blur, as a flat frame's layers are by their visibility.
     std::vector<std::vector<float>> layer_vis;
+    // Lens character: the highlights taken out of img (null: off).
+    std::shared_ptr<SpriteSet> sprites;
 
     bool deep() const { return !layer_rgba.empty(); }
 
@@ -98,6 +124,51 @@ OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& da
 /// there instead (one RGBA plane over f.out per layer) and `out` is left alone.
 void composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
                       int nthreads, std::vector<Plane>* per_layer = nullptr);
+
+/// The display window's centre and half-diagonal, for field positions; a lens whose PSF
+/// does not change with the field (no cat's eye, field curvature, astigmatism or offset
+/// rings) gets every request at the centre, so the cache builds one PSF a CoC bin.
+struct FieldFrame {
+    double cx = 0.0, cy = 0.0, half_diagonal = 1.0;
+    bool used = true;
+    FieldFrame(const OIIO::ImageSpec& spec, const LensCharacter& lens);
+    PsfRequest at(int x, int y, double coc_px) const;  // field at its cache bin's centre
+};
+
+/// The lens of a defocus: o.lens with the defocus's own aperture, aspect and camera.
+bool defocus_lens(const DefocusOptions& o, const OIIO::ImageSpec& spec, LensCharacter& lens,
+                  std::string& err);
+
+/// Check the sprite options. False + `err` naming the option.
+bool check_sprite_options(const DefocusOptions& o, std::string& err);
+
+/// The sprite share of a pixel of premultiplied colour `rgb` (smoothstep in log luminance
+/// from threshold / 2 to threshold * 2), and its luminance.
+float sprite_share(const float* rgb, float threshold, float& luminance);
+
+/// Lens character on a flat frame: select the highlights of f.img (f.coc known), take
+/// their share out of f.img and fetch their PSFs into f.sprites. False + `err`.
+bool select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec, int nthreads,
+                    std::string& err);
+
+/// Fetch both PSFs of every sprite from `cache` and set the set's extent. False + `err`.
+bool fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int nthreads,
+                       std::string& err);
+
+/// Add the sprites of layer k (share by `m` for flat frames, their own layer for deep
+/// ones) into `target` (RGBA over f.out; colour only: a sprite is the light of a pixel
+/// whose coverage stays in the layer).
+void draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads);
+
+/// The report's sprite figures from `set` (null: lens character off), and its summary
+/// part (", N sprites, CoC a .. b px, t s"; empty when off).
+void report_sprites(DefocusReport& rep, const SpriteSet* set);
+std::string sprite_summary(const DefocusReport& rep);
+
+/// The brute-force reference (defocus_scatter_reference) over a prepared flat frame: grows
+/// f.out by the PSFs' reach and fills `out` (RGBA over f.out). False + `err`.
+bool scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec,
+                       int nthreads, std::string& err);
 
 /// The defocus of a deep image (core/defocus_deep.cpp); bokeh::defocus calls it.
 bool defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& o,

@@ -153,3 +153,23 @@ TEST(CliDefocus, DiffPrintsPsnr)
     ASSERT_EQ(f.status, 0) << f.err;
     EXPECT_NE(f.out.find("PSNR"), std::string::npos) << f.out;
 }
+
+TEST(CliDefocus, LensCharacterSprites)
+{
+    // lens= switches lens character on; -v says how many sprites, their CoC range and time;
+    // without any lens option the file is the plain defocus's.
+    const std::string dir = fresh_dir("cli_defocus_lens");
+    const RunResult r = bokehtool(format("-v {} --defocus:focus=6:fstop=2:lens=achromat:diffraction=exact:"
+                                         "highlights=2 -o {}/lens.exr", kScene, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("sprites"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("CoC"), std::string::npos) << r.out;
+    ASSERT_EQ(bokehtool(format("{} --defocus:focus=6:fstop=2 -o {}/plain.exr", kScene, dir)).status, 0);
+    OIIO::ImageBuf lens(dir + "/lens.exr"), plain(dir + "/plain.exr");
+    EXPECT_GT(max_difference(lens, plain), 0.01) << "the highlights took the lens's shape";
+    const std::string out = dir + "/bad.exr";
+    expect_clean_failure(bokehtool(format("{} --defocus:lens=zoom -o {}", kScene, out)), "lens", out);
+    expect_clean_failure(bokehtool(format("{} --defocus:highlights=0 -o {}", kScene, out)), "highlights", out);
+    expect_clean_failure(bokehtool(format("{} --defocus:lens=achromat:method=gather -o {}", kScene, out)),
+                         "gather", out);
+}

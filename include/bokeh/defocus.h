@@ -10,6 +10,7 @@
 #include <bokeh/blur.h>
 #include <bokeh/image.h>
 #include <bokeh/lens.h>
+#include <bokeh/optics.h>
 
 #include <string>
 #include <vector>
@@ -66,6 +67,24 @@ struct DefocusOptions {
     /// A deep input's result as a deep image: one sample a layer per pixel, each a volume
     /// over its layer's depth range; its flatten is the flat result.
     bool deep_output = false;
+
+    /// Lens character (optics.h) on the highlights: pixels brighter than
+    /// `highlight_threshold` are scattered as sprites, each the lens's PSF at its signed
+    /// CoC and field position, inside the layer of its depth (nearer layers hide them as
+    /// they hide any pixel); the rest goes through the layers. Off: the output is the
+    /// plain method's, bit for bit. Only the lens's aberrations, spectrum, diffraction,
+    /// onion rings and field effects are read from `lens`: its aperture, aspect and camera
+    /// (f-stop, focal length, pixel pitch) are this defocus's own (`aperture`, `aspect`,
+    /// `coc`). The gather method has no layers to put sprites in and refuses it.
+    bool lens_character = false;
+    LensCharacter lens;
+    /// Premultiplied luminance (Rec. 709 weights) at which a pixel is half a sprite: the
+    /// sprite's share of the pixel rises smoothly (smoothstep in log luminance) from 0 at
+    /// threshold / 2 to 1 at threshold * 2, so exposure or threshold changes never pop one.
+    float highlight_threshold = 1.0f;
+    /// At most this many sprites, the brightest (by the sprite's luminance); the rest stay
+    /// in the layers. A cost guard: a pixel crossing the cut does pop.
+    int max_sprites = 20000;
 };
 
 /// What a defocus decided and found, for `-v` and for tests.
@@ -75,6 +94,15 @@ struct DefocusReport {
     std::vector<int> layer_reduction; ///< Layers: each layer's buffer reduction
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
     NonFiniteCount nonfinite;
+    /// Lens character: how many sprites were scattered, their CoC range, the seconds their
+    /// selection, PSFs and scatter took, and the PSFs the cache built.
+    bool lens_character = false;
+    int64_t sprites = 0;
+    int64_t sprite_candidates = 0;  ///< pixels with a sprite share before the max_sprites cut
+    int64_t sprites_drawn = 0;      ///< sprites drawn: large ones merged by source blocks
+    float sprite_min_coc_px = 0.0f, sprite_max_coc_px = 0.0f;
+    double sprite_seconds = 0.0;
+    size_t sprite_psfs = 0;
     std::string summary;  ///< one line
 };
 
@@ -92,6 +120,15 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
 /// index + share), so a user sees where layer boundaries fall.
 bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
                int nthreads = 0);
+
+/// The brute-force reference of lens character: every pixel of a flat `src` scattered with
+/// the lens PSF of its own CoC (exact to `opts.reference_step_px`) and field position,
+/// into one full-resolution layer per CoC step (alpha scattered with the PSF's mean of
+/// R, G, B), layers composited nearer over farther. No visibility division and no
+/// disocclusion fill: meant for small scenes whose occlusions are simple (lights over a
+/// background). Uses opts.lens as `defocus` does (lens_character need not be set).
+bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
+                               const DefocusOptions& opts, int nthreads = 0);
 
 /// Method names for messages ("layers", "gather", ...).
 const char* method_name(DefocusMethod m);

@@ -47,6 +47,8 @@ bool defocus_command(CommandContext& c)
         // The thin-lens rays through the scene a deep image encodes (truth.h).
         if (!in.buf->deep())
             return c.fail("method=truth traces rays through a deep image; this one is flat (--deepen makes one)");
+        if (o.lens_character)
+            return c.fail("lens character (lens=, highlights=, sprites=, ...) is for the layered methods, not method=truth");
         if (what != "image")
             return c.fail(format("method=truth gives an image, not output={}", what));
         for (const char* name : { "layers", "reduction", "budget", "bloom", "bloomgain", "iris", "zdilate",
@@ -85,6 +87,15 @@ bool defocus_command(CommandContext& c)
                 c.message(format("  layer CoC px (/reduction):{}{}", layers,
                                  report.layer_coc_px.size() > 64 ? " ..." : ""));
         }
+        if (ok && report.lens_character && c.verbosity >= 1)
+            c.message(format("  defocus lens character: {} sprites{}, CoC {:.1f} .. {:.1f} px, {} PSFs, "
+                             "{} drawn, {:.3f} s",
+                             report.sprites,
+                             report.sprite_candidates > report.sprites
+                                 ? format(" (the brightest of {} highlights)", report.sprite_candidates)
+                                 : std::string(),
+                             report.sprite_min_coc_px, report.sprite_max_coc_px, report.sprite_psfs,
+                             report.sprites_drawn, report.sprite_seconds));
         if (ok && report.nonfinite.total() > 0 && c.verbosity >= 1)
             c.message(format("  warning: {} non-finite colour and {} non-finite depth values "
                              "replaced (colour by 0, depth by far)",
@@ -162,5 +173,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
         OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
     };
+    // Lens character on the highlights (any of these switches it on).
+    for (OptionSpec& spec : bokeh::defocus_sprite_option_specs())
+        c.options.push_back(std::move(spec));
     r.add(c);
 }

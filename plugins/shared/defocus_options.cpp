@@ -1,10 +1,12 @@
 // defocus_options.cpp — `--defocus`'s option values made into bokeh::DefocusOptions (see
 // defocus_options.h): the lens (camera facts from the image's metadata unless given), the
-// depth interpretation, the aperture, the method and its budget, bloom, iris and borders.
+// depth interpretation, the aperture, the method and its budget, bloom, iris, borders and
+// lens character (highlights scattered with the lens's PSF).
 
 #include "defocus_options.h"
 
 #include "aperture_options.h"
+#include "lens_options.h"
 
 #include <charconv>
 #include <cmath>
@@ -162,7 +164,31 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
     o.nonfinite = v.get_string("nonfinite") == "error" ? NonFinitePolicy::Error
                                                        : NonFinitePolicy::Zero;
     o.reference_step_px = float(v.get_float("step"));
+
+    // Lens character: on when any of its options (lens_option_specs, highlights=,
+    // sprites=) is given.
+    bool character = v.given("highlights") || v.given("sprites");
+    for (const OptionSpec& spec : lens_option_specs())
+        character = character || v.given(spec.name);
+    o.lens_character = character;
+    if (character) {
+        if (!lens_character_from(v, o.lens, err))
+            return false;
+        o.highlight_threshold = float(v.get_float("highlights"));
+        o.max_sprites         = v.get_int("sprites");
+    }
     return true;
+}
+
+std::vector<OptionSpec> defocus_sprite_option_specs()
+{
+    std::vector<OptionSpec> specs = lens_option_specs();
+    specs.push_back(OptionSpec::Float("highlights", 1.0, 1e-6, 1e30,
+                                      "lens character: luminance at which a pixel is half a sprite "
+                                      "(a smooth share from half to twice it)"));
+    specs.push_back(OptionSpec::Int("sprites", 20000, 0, 10000000,
+                                    "lens character: at most this many sprites, the brightest"));
+    return specs;
 }
 
 }  // namespace bokeh

@@ -9,6 +9,7 @@
 
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <OpenImageIO/imagebuf.h>
 
@@ -25,6 +26,11 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
 /// that channel its depth (z_channel). False + `err` when the image has no such channel.
 bool with_named_depth(const OptionValues& v, const std::shared_ptr<OIIO::ImageBuf>& in,
                       std::shared_ptr<OIIO::ImageBuf>& out, std::string& err);
+
+/// The lens-character options of `--defocus`: lens_option_specs() (lens=, diffraction=,
+/// onion=, catseye=, ...) and highlights= (the sprite threshold), sprites= (their most).
+/// Giving any of them switches lens character on.
+std::vector<OptionSpec> defocus_sprite_option_specs();
 
 /// The method `v` names: `quality=` and `method=` are one option under two spellings
 /// (defocus_options_from refuses them when they disagree).

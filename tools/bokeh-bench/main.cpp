@@ -16,15 +16,18 @@
 // the reduced-buffer and enlargement study (resample_task.cpp), which writes two more
 // tables beside --csv FILE: <FILE stem>_artifacts.csv and <FILE stem>_figures.csv.
 // --task diffraction times the fringe models of a bokeh's rim against the exact PSF
-// (diffraction_task.cpp; its own CSV columns, one thread).
+// (diffraction_task.cpp; its own CSV columns, one thread); --task optics the lens PSFs
+// (optics_task.cpp); --task lens lens character's highlight sprites against the plain
+// defocus (lens_task.cpp).
 //
-//   bokeh-bench [--task blur|defocus|resample|iris] [--threads N] [--reps N] [--csv FILE] [--quick]
+//   bokeh-bench [--task blur|defocus|resample|iris|deep|lens] [--threads N] [--reps N] [--csv FILE] [--quick]
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
 
 #include "bench_common.h"
 #include "deep_task.h"
 #include "defocus_task.h"
 #include "diffraction_task.h"
+#include "lens_task.h"
 #include "gegl_peer.h"
 #include "iris_task.h"
 #include "optics_task.h"
@@ -107,7 +110,8 @@ int main(int argc, char* argv[])
                                                    || std::string(argv[i + 1]) == "iris"
                                                    || std::string(argv[i + 1]) == "deep"
                                                    || std::string(argv[i + 1]) == "optics"
-                                                   || std::string(argv[i + 1]) == "diffraction"))
+                                                   || std::string(argv[i + 1]) == "diffraction"
+                                                   || std::string(argv[i + 1]) == "lens"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -129,7 +133,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b] [--image FILE]...\n",
                          a.c_str());
@@ -162,6 +166,13 @@ int main(int argc, char* argv[])
     }
     if (task == "optics") {
         if (!bokeh_bench::run_optics_task(threads, reps, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "lens") {
+        args.threads = threads;
+        args.reps    = reps;
+        if (!bokeh_bench::run_lens_task(args, rows))
             return 1;
         return write_csv(csv, rows);
     }

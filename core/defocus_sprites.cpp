@@ -1,0 +1,501 @@
+// defocus_sprites.cpp — lens character in the depth defocus: highlights scattered as
+// sprites carrying the lens's own PSF (optics.h), the rest left to the layers; and the
+// brute-force reference every pixel scattered with its own PSF.
+//
+// The hybrid is SEEDS.md section 11's ("scatter only bright, important pixels; fringes and
+// onion rings only on scattered sprites"). Ours:
+// * Selection: a pixel's sprite share is a smoothstep in log2 of its premultiplied
+//   luminance (Rec. 709 weights), 0 at threshold / 2 and 1 at threshold * 2, so a change
+//   of exposure or threshold moves energy between the layers and the sprite continuously.
+//   The share of the colour goes to the sprite and leaves the layers (colour - share *
+//   colour stays), so it is counted once; the pixel's alpha stays in the layers, so its
+//   coverage and what it hides are unchanged.
+// * Shape: the PSFs of the cache's two CoC bins around the sprite's CoC (1/8 octave for
+//   |CoC| >= 1 px, 1/8 px below), crossfaded with weights linear in log2 |CoC| (linear in
+//   CoC below 1 px), at the field bin of the pixel (field = position from the display
+//   window's centre over its half-diagonal, y up). Each channel of a PSF sums to 1.
+// * Occlusion: a sprite is added, colour only, into the layer of its depth after that
+//   layer is composited and before any nearer one is: "over" is linear, so this is
+//   exactly the sprite added into the layer's premultiplied colour (with zero alpha: the
+//   light of a pixel whose coverage the layer already holds); nearer layers then hide it
+//   as they hide the layer. A pixel shared between two layers shares its sprite alike.
+// Limits: the sprite is drawn pixel by pixel over its PSFs' full squares (no span or
+// running-sum interior, no 2x2 source decimation, no supersampled output); field bins are
+// not interpolated (a sprite moving across a 1/8 field bin changes shape at once); the
+// `max_sprites` cut is hard; past the data window (clamp, mirror) the layers repeat the
+// highlight-less pixels, so highlights are not repeated there.
+
+#include <bokeh/defocus.h>
+#include <bokeh/parallel.h>
+
+#include "defocus_layers.h"
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <tuple>
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using namespace detail;
+
+namespace {
+
+using OIIO::Strutil::fmt::format;
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0)
+{
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+float smoothstep01(float t)
+{
+    t = std::clamp(t, 0.0f, 1.0f);
+    return t * t * (3.0f - 2.0f * t);
+}
+
+// The two cache bins around CoC c (their CoCs, signed) and the weight t of the second.
+void bins_around(float c, double& c0, double& c1, double& t)
+{
+    const double a    = std::abs(double(c));
+    const double sign = c < 0.0f ? -1.0 : 1.0;
+    if (a < 1.0) {  // the cache's linear bins, 1/8 px (the last one's neighbour is 1 px)
+        const double l  = 8.0 * a;
+        const double b0 = std::floor(l);
+        c0 = sign * b0 / 8.0;
+        c1 = sign * (b0 + 1.0) / 8.0;
+        t  = l - b0;
+        return;
+    }
+    const double l  = 8.0 * std::log2(a);
+    const double b0 = std::floor(l);
+    c0 = sign * std::exp2(b0 / 8.0);
+    c1 = sign * std::exp2((b0 + 1.0) / 8.0);
+    t  = l - b0;
+}
+
+// Add `scale` * psf (per channel: rgb[c]) centred on (cx, cy) into rows [y0, y1) of
+// `target` (RGBA over `out`).
+void add_psf(Plane& target, const OIIO::ROI& out, const Psf& psf, int cx, int cy, const float rgb[3],
+             float scale, int y0, int y1)
+{
+    const int hw = psf.width / 2, hh = psf.height / 2;
+    const int top = std::max(cy - hh, y0), bottom = std::min(cy + hh + 1, y1);
+    const int left = std::max(cx - hw, out.xbegin), right = std::min(cx + hw + 1, out.xend);
+    if (left >= right)
+        return;
+    const float k[3] = { rgb[0] * scale, rgb[1] * scale, rgb[2] * scale };
+    for (int y = top; y < bottom; ++y) {
+        float* d       = target.row(y - out.ybegin) + size_t(left - out.xbegin) * 4;
+        const float* p = psf.rgb.data() + (size_t(y - (cy - hh)) * size_t(psf.width) + size_t(left - (cx - hw))) * 3;
+        for (int x = left; x < right; ++x, d += 4, p += 3) {
+            d[0] += k[0] * p[0];
+            d[1] += k[1] * p[1];
+            d[2] += k[2] * p[2];
+        }
+    }
+}
+
+}  // namespace
+
+detail::FieldFrame::FieldFrame(const OIIO::ImageSpec& spec, const LensCharacter& lens)
+{
+    // The field enters lens_psf through these alone (core/lens_psf.cpp: field curvature and
+    // astigmatism by H^2, the barrel circle and the rings' centre by H).
+    const bool rings = lens.onion > 0.0 || lens.onion_waves > 0.0 || lens.surface_noise > 0.0;
+    used = lens.catseye > 0.0 || lens.field_curvature_px != 0.0 || lens.astigmatism_px != 0.0
+           || (rings && lens.onion_offset != 0.0);
+    const bool full = spec.full_width > 0 && spec.full_height > 0;
+    const double x0 = full ? spec.full_x : spec.x, y0 = full ? spec.full_y : spec.y;
+    const double w = full ? spec.full_width : spec.width, h = full ? spec.full_height : spec.height;
+    cx            = x0 + 0.5 * w;
+    cy            = y0 + 0.5 * h;
+    half_diagonal = std::max(0.5, 0.5 * std::hypot(w, h));
+}
+
+PsfRequest detail::FieldFrame::at(int x, int y, double coc_px) const
+{
+    // At the centre of the cache's field bin (1/8 of the half-diagonal, optics.h).
+    PsfRequest r;
+    r.coc_px  = coc_px;
+    if (!used)
+        return r;
+    // Overscan far past the display window: the PSF's field model stops at H = 1.5.
+    double fx = (x + 0.5 - cx) / half_diagonal, fy = (cy - (y + 0.5)) / half_diagonal;
+    const double h = std::hypot(fx, fy);
+    if (h > 1.4)
+        fx *= 1.4 / h, fy *= 1.4 / h;
+    r.field_x = std::round(8.0 * fx) / 8.0;
+    r.field_y = std::round(8.0 * fy) / 8.0;
+    return r;
+}
+
+bool detail::defocus_lens(const DefocusOptions& o, const OIIO::ImageSpec& spec, LensCharacter& lens,
+                          std::string& err)
+{
+    lens = o.lens;
+    if (!Aperture::from_kernel(o.aperture, lens.aperture, err))
+        return false;
+    const int width_px  = spec.full_width > 0 ? spec.full_width : spec.width;
+    lens.aspect         = o.aspect;
+    lens.fstop          = o.coc.lens.fstop;
+    lens.focal_mm       = o.coc.lens.focal_mm;
+    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / std::max(1, width_px);
+    if (!validate_lens(lens, err)) {
+        err = "lens character: " + err;
+        return false;
+    }
+    return true;
+}
+
+bool detail::check_sprite_options(const DefocusOptions& o, std::string& err)
+{
+    if (!o.lens_character)
+        return true;
+    if (!(std::isfinite(o.highlight_threshold) && o.highlight_threshold > 0.0f)) {
+        err = format("highlight threshold {} is not a positive luminance", o.highlight_threshold);
+        return false;
+    }
+    if (o.max_sprites < 0 || o.max_sprites > 10000000) {
+        err = format("max sprites {} is outside 0..10000000", o.max_sprites);
+        return false;
+    }
+    if (o.method == DefocusMethod::Gather) {
+        err = "lens character puts highlights into layers; the gather method has none (use "
+              "method=layers, auto or reference)";
+        return false;
+    }
+    return true;
+}
+
+float detail::sprite_share(const float* rgb, float threshold, float& luminance)
+{
+    luminance = 0.2126f * rgb[0] + 0.7152f * rgb[1] + 0.0722f * rgb[2];
+    if (!(luminance > 0.5f * threshold))
+        return 0.0f;
+    if (luminance >= 2.0f * threshold)
+        return 1.0f;
+    return smoothstep01(0.5f * (std::log2(luminance / threshold) + 1.0f));
+}
+
+bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int nthreads,
+                               std::string& err)
+{
+    // Each sprite's two requests, at their bins' centres (FieldFrame::at snaps the field to
+    // the cache's bins), so equal requests are equal bins: the distinct ones are built in
+    // parallel, each once, then read back from the cache.
+    using Key = std::tuple<double, double, double>;
+    std::map<Key, std::shared_ptr<const Psf>> wanted;
+    std::vector<std::array<PsfRequest, 2>> requests(set.sprites.size());
+    for (size_t i = 0; i < set.sprites.size(); ++i) {
+        Sprite& s = set.sprites[i];
+        double c0, c1, t;
+        bins_around(s.coc_px, c0, c1, t);
+        s.weight[0]    = float(1.0 - t);
+        s.weight[1]    = float(t);
+        requests[i][0] = field.at(s.x, s.y, c0);
+        requests[i][1] = field.at(s.x, s.y, c1);
+        for (int j = 0; j < (t > 0.0 ? 2 : 1); ++j)
+            wanted.emplace(Key(requests[i][j].coc_px, requests[i][j].field_x, requests[i][j].field_y), nullptr);
+    }
+    std::vector<std::pair<const Key, std::shared_ptr<const Psf>>*> todo;
+    for (auto& w : wanted)
+        todo.push_back(&w);
+    std::vector<std::string> errors(todo.size());
+    parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i) {
+            PsfRequest r;
+            std::tie(r.coc_px, r.field_x, r.field_y) = todo[size_t(i)]->first;
+            todo[size_t(i)]->second = cache.get(r, errors[size_t(i)]);
+        }
+    });
+    for (size_t i = 0; i < todo.size(); ++i)
+        if (!todo[i]->second) {
+            err = errors[i];
+            return false;
+        }
+    std::map<const Psf*, int> ids;
+    for (size_t i = 0; i < set.sprites.size(); ++i) {
+        Sprite& s = set.sprites[i];
+        for (int j = 0; j < 2; ++j) {
+            if (j == 1 && !(s.weight[1] > 0.0f))
+                continue;
+            const PsfRequest& r = requests[i][size_t(j)];
+            s.psf[j]            = wanted.at(Key(r.coc_px, r.field_x, r.field_y));
+            set.extent_px = std::max(set.extent_px, float(std::max(s.psf[j]->width, s.psf[j]->height) / 2));
+            s.psf_id[j]   = ids.emplace(s.psf[j].get(), int(ids.size())).first->second;
+        }
+    }
+    set.psfs = cache.size();
+    return true;
+}
+
+bool detail::select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec, int nthreads,
+                            std::string& err)
+{
+    const Clock::time_point t0 = Clock::now();
+    LensCharacter lens;
+    if (!defocus_lens(o, spec, lens, err))
+        return false;
+    auto set = std::make_shared<SpriteSet>();
+    struct Candidate {
+        size_t at;
+        float share, luminance;
+    };
+    std::vector<Candidate> found;
+    const size_t n = f.coc.size();
+    for (size_t i = 0; i < n; ++i) {
+        float lum;
+        const float share = sprite_share(f.img.rgba.data() + i * 4, o.highlight_threshold, lum);
+        if (share > 0.0f)
+            found.push_back({ i, share, lum });
+    }
+    set->candidates = int64_t(found.size());
+    if (found.size() > size_t(o.max_sprites)) {
+        std::nth_element(found.begin(), found.begin() + o.max_sprites, found.end(),
+                         [](const Candidate& a, const Candidate& b) {
+                             return a.share * a.luminance > b.share * b.luminance
+                                    || (a.share * a.luminance == b.share * b.luminance && a.at < b.at);
+                         });
+        found.resize(size_t(o.max_sprites));
+    }
+    std::sort(found.begin(), found.end(), [](const Candidate& a, const Candidate& b) { return a.at < b.at; });
+    const int w = f.data.width();
+    for (const Candidate& c : found) {
+        Sprite s;
+        s.at     = c.at;
+        s.x      = f.data.xbegin + int(c.at % size_t(w));
+        s.y      = f.data.ybegin + int(c.at / size_t(w));
+        s.coc_px = f.coc[c.at];
+        float* px = f.img.rgba.data() + c.at * 4;
+        for (int k = 0; k < 3; ++k) {
+            s.rgb[k] = px[k] * c.share;
+            px[k]    = px[k] - s.rgb[k];
+        }
+        set->sprites.push_back(s);
+    }
+    PsfCache cache(lens, nthreads);
+    if (!fetch_sprite_psfs(*set, cache, FieldFrame(spec, lens), nthreads, err))
+        return false;
+    set->seconds = seconds_since(t0);
+    f.sprites    = std::move(set);
+    return true;
+}
+
+void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads)
+{
+    if (!f.sprites || f.sprites->sprites.empty())
+        return;
+    const Clock::time_point t0 = Clock::now();
+    // The layer's sprites, as colour per PSF (share and crossfade weight applied), and the
+    // source block each falls in.
+    struct Drawn {
+        int x, y, bx, by;
+        const Psf* psf[2];
+        int id[2];
+        float rgb[2][3];
+    };
+    std::vector<Drawn> list;
+    for (const Sprite& s : f.sprites->sprites) {
+        float share;
+        if (s.layer >= 0)
+            share = s.layer == k ? 1.0f : 0.0f;
+        else {
+            const int lo   = m.lower[s.at];
+            const float up = m.upper[s.at];
+            share          = lo == k ? 1.0f - up : lo + 1 == k ? up : 0.0f;
+        }
+        if (!(share > 0.0f))
+            continue;
+        Drawn d;
+        d.x = s.x, d.y = s.y;
+        // The seed's decimation (SEEDS.md section 11): sources of a large PSF are drawn once
+        // per block of b x b pixels, b the largest power of two up to its width / 32 (at
+        // most 8), at the block's brightest-weighted pixel: a shift of at most b / 2 px, a
+        // 1/64 of the PSF's width.
+        const int width = s.psf[0]->width;
+        int b           = 1;
+        while (b < 8 && 2 * b * 32 <= width)
+            b *= 2;
+        d.bx = floor_div(s.x, b), d.by = floor_div(s.y, b);
+        for (int j = 0; j < 2; ++j) {
+            d.psf[j] = s.psf[j].get();
+            d.id[j]  = s.psf_id[j];
+            for (int c = 0; c < 3; ++c)
+                d.rgb[j][c] = s.psf[j] ? s.rgb[c] * share * s.weight[j] : 0.0f;
+        }
+        list.push_back(d);
+    }
+    if (list.empty())
+        return;
+    // Merge the sprites of a block that share both PSFs (their colours add: drawing is
+    // linear), placed at the luminance-weighted mean position, rounded.
+    auto key = [](const Drawn& d) { return std::make_tuple(d.by, d.bx, d.id[0], d.id[1], d.y, d.x); };
+    std::sort(list.begin(), list.end(), [&](const Drawn& a, const Drawn& b) { return key(a) < key(b); });
+    std::vector<Drawn> merged;
+    for (size_t i = 0; i < list.size();) {
+        size_t e = i + 1;
+        while (e < list.size() && list[e].by == list[i].by && list[e].bx == list[i].bx && list[e].id[0] == list[i].id[0]
+               && list[e].id[1] == list[i].id[1])
+            ++e;
+        Drawn d = list[i];
+        if (e > i + 1) {
+            double sx = 0.0, sy = 0.0, sw = 0.0;
+            for (size_t j = i; j < e; ++j) {
+                const Drawn& o  = list[j];
+                const double lum = 0.2126 * (o.rgb[0][0] + o.rgb[1][0]) + 0.7152 * (o.rgb[0][1] + o.rgb[1][1])
+                                   + 0.0722 * (o.rgb[0][2] + o.rgb[1][2]);
+                const double wgt = std::max(lum, 1e-30);
+                sx += wgt * o.x, sy += wgt * o.y, sw += wgt;
+                if (j > i)
+                    for (int p = 0; p < 2; ++p)
+                        for (int c = 0; c < 3; ++c)
+                            d.rgb[p][c] += o.rgb[p][c];
+            }
+            d.x = int(std::lround(sx / sw));
+            d.y = int(std::lround(sy / sw));
+        }
+        merged.push_back(d);
+        i = e;
+    }
+    std::stable_sort(merged.begin(), merged.end(), [](const Drawn& a, const Drawn& b) { return a.y < b.y; });
+    const int reach = int(std::ceil(f.sprites->extent_px));
+    constexpr int kBand = 16;
+    parallel_for_chunks(f.out.ybegin, f.out.yend, kBand, nthreads, [&](int64_t b, int64_t e) {
+        const int y0 = int(b), y1 = int(e);
+        // Sprites are sorted by y: those within reach of the band.
+        auto first = std::lower_bound(merged.begin(), merged.end(), y0 - reach,
+                                      [](const Drawn& d, int y) { return d.y < y; });
+        for (auto it = first; it != merged.end() && it->y < y1 + reach; ++it)
+            for (int j = 0; j < 2; ++j)
+                if (it->psf[j])
+                    add_psf(target, f.out, *it->psf[j], it->x, it->y, it->rgb[j], 1.0f, y0, y1);
+    });
+    f.sprites->drawn += int64_t(merged.size());
+    f.sprites->seconds += seconds_since(t0);
+}
+
+void detail::report_sprites(DefocusReport& rep, const SpriteSet* set)
+{
+    rep.lens_character = set != nullptr;
+    if (!set)
+        return;
+    rep.sprites           = int64_t(set->sprites.size());
+    rep.sprite_candidates = set->candidates;
+    rep.sprites_drawn     = set->drawn;
+    rep.sprite_seconds    = set->seconds;
+    rep.sprite_psfs       = set->psfs;
+    for (size_t i = 0; i < set->sprites.size(); ++i) {
+        const float c         = set->sprites[i].coc_px;
+        rep.sprite_min_coc_px = i == 0 ? c : std::min(rep.sprite_min_coc_px, c);
+        rep.sprite_max_coc_px = i == 0 ? c : std::max(rep.sprite_max_coc_px, c);
+    }
+}
+
+std::string detail::sprite_summary(const DefocusReport& rep)
+{
+    if (!rep.lens_character)
+        return std::string();
+    return format(", {} sprites{} (CoC {:.1f} .. {:.1f} px, {} PSFs, {} drawn) in {:.3f} s", rep.sprites,
+                  rep.sprite_candidates > rep.sprites ? format(" of {} highlights", rep.sprite_candidates)
+                                                      : std::string(),
+                  rep.sprite_min_coc_px, rep.sprite_max_coc_px, rep.sprite_psfs, rep.sprites_drawn,
+                  rep.sprite_seconds);
+}
+
+bool detail::scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec,
+                               int nthreads, std::string& err)
+{
+    LensCharacter lens;
+    if (!defocus_lens(o, spec, lens, err))
+        return false;
+    // Field positions matter only with field effects; then PSFs are kept per 1/64 of the
+    // half-diagonal (8 times the cache's bins).
+    const FieldFrame field(spec, lens);
+    const bool by_field = field.used;
+    const float step = o.reference_step_px;
+    struct Point {
+        size_t at;
+        int x, y;
+        std::tuple<int64_t, int, int> key;  // CoC step, field x, field y
+    };
+    std::vector<Point> points;
+    std::map<std::tuple<int64_t, int, int>, std::shared_ptr<Psf>> psfs;
+    const int w = f.data.width();
+    for (size_t i = 0; i < f.coc.size(); ++i) {
+        const float* px = f.img.rgba.data() + i * 4;
+        if (px[0] == 0.0f && px[1] == 0.0f && px[2] == 0.0f && px[3] == 0.0f)
+            continue;
+        const int x = f.data.xbegin + int(i % size_t(w)), y = f.data.ybegin + int(i / size_t(w));
+        const double fx = (x + 0.5 - field.cx) / field.half_diagonal, fy = (field.cy - (y + 0.5)) / field.half_diagonal;
+        const auto key  = std::make_tuple(int64_t(std::llround(f.coc[i] / step)),
+                                          by_field ? int(std::lround(64.0 * fx)) : 0,
+                                          by_field ? int(std::lround(64.0 * fy)) : 0);
+        points.push_back({ i, x, y, key });
+        psfs.emplace(key, nullptr);
+    }
+    float extent = 0.0f;
+    for (auto& [key, psf] : psfs) {
+        PsfRequest r;
+        r.coc_px  = double(std::get<0>(key)) * step;
+        r.field_x = std::get<1>(key) / 64.0;
+        r.field_y = std::get<2>(key) / 64.0;
+        psf       = std::make_shared<Psf>();
+        if (!lens_psf(*psf, lens, r, err, nthreads))
+            return false;
+        extent = std::max(extent, float(std::max(psf->width, psf->height) / 2));
+    }
+    const float extreme = std::max({ std::abs(*std::min_element(f.coc.begin(), f.coc.end())),
+                                     std::abs(*std::max_element(f.coc.begin(), f.coc.end())), 2.0f * extent });
+    f.out = defocus_output_region(spec, f.data, extreme, o);
+    out   = Plane(f.out.width(), f.out.height(), 4);
+    std::fill_n(out.px.get(), out.size(), 0.0f);
+    // Layers back to front: points by CoC step (descending), then by y.
+    std::sort(points.begin(), points.end(), [](const Point& a, const Point& b) {
+        return std::get<0>(a.key) != std::get<0>(b.key) ? std::get<0>(a.key) > std::get<0>(b.key) : a.y < b.y;
+    });
+    Plane layer(f.out.width(), f.out.height(), 4);
+    const int reach = int(std::ceil(extent));
+    for (size_t b = 0; b < points.size();) {
+        size_t e = b;
+        while (e < points.size() && std::get<0>(points[e].key) == std::get<0>(points[b].key))
+            ++e;
+        std::fill_n(layer.px.get(), layer.size(), 0.0f);
+        parallel_for_chunks(f.out.ybegin, f.out.yend, 16, nthreads, [&](int64_t y0, int64_t y1) {
+            auto first = std::lower_bound(points.begin() + int64_t(b), points.begin() + int64_t(e),
+                                          int(y0) - reach, [](const Point& p, int y) { return p.y < y; });
+            for (auto it = first; it != points.begin() + int64_t(e) && it->y < int(y1) + reach; ++it) {
+                const Psf& psf  = *psfs.at(it->key);
+                const float* px = f.img.rgba.data() + it->at * 4;
+                // Colour with its channel's PSF, alpha with their mean.
+                add_psf(layer, f.out, psf, it->x, it->y, px, 1.0f, int(y0), int(y1));
+                const int hw = psf.width / 2, hh = psf.height / 2;
+                for (int y = std::max(it->y - hh, int(y0)); y < std::min(it->y + hh + 1, int(y1)); ++y)
+                    for (int x = std::max(it->x - hw, f.out.xbegin); x < std::min(it->x + hw + 1, f.out.xend); ++x) {
+                        const float* p = &psf.rgb[(size_t(y - it->y + hh) * size_t(psf.width) + size_t(x - it->x + hw)) * 3];
+                        layer.row(y - f.out.ybegin)[size_t(x - f.out.xbegin) * 4 + 3] += px[3] * (p[0] + p[1] + p[2]) / 3.0f;
+                    }
+            }
+        });
+        parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int y = int(y0); y < int(y1); ++y) {
+                float* d       = out.row(y);
+                const float* l = layer.row(y);
+                for (int x = 0; x < out.w; ++x, d += 4, l += 4) {
+                    const float behind = 1.0f - l[3];
+                    for (int c = 0; c < 4; ++c)
+                        d[c] = l[c] + behind * d[c];
+                }
+            }
+        });
+        b = e;
+    }
+    return true;
+}
+
+}  // namespace bokeh

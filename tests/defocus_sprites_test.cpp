@@ -1,0 +1,419 @@
+// Lens character in the depth defocus (defocus.h: lens_character; core/defocus_sprites.cpp):
+// off is bit for bit the plain defocus, energy is counted once, a lone bright pixel is the
+// lens PSF, an exposure ramp does not pop sprites, nearer layers hide sprites, deep input,
+// and the brute-force scatter reference.
+#include <bokeh/deep.h>
+#include <bokeh/defocus.h>
+#include <bokeh/metrics.h>
+#include <bokeh/optics.h>
+
+#include "test_util.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <OpenImageIO/deepdata.h>
+
+using namespace bokeh;
+
+namespace {
+
+struct Px {
+    float r = 0.0f, g = 0.0f, b = 0.0f, a = 1.0f, z = 0.0f;
+};
+
+OIIO::ImageBuf image(int w, int h, const std::function<Px(int, int)>& fn, OIIO::ROI full = {})
+{
+    return bokeh_test::rgbaz_image(
+        w, h,
+        [&](int x, int y) {
+            const Px p = fn(x, y);
+            return std::array<float, 5>{ p.r, p.g, p.b, p.a, p.z };
+        },
+        0, 0, full);
+}
+
+// Z is the signed CoC in px.
+DefocusOptions direct(DefocusMethod m = DefocusMethod::Layers, Border border = Border::Black)
+{
+    DefocusOptions o;
+    o.coc.mode = DepthMode::Direct;
+    o.method   = m;
+    o.border   = border;
+    return o;
+}
+
+DefocusOptions with_lens(DefocusOptions o, LensPreset preset)
+{
+    o.lens_character = true;
+    o.lens.preset    = preset;
+    return o;
+}
+
+OIIO::ImageBuf run(const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport* rep = nullptr)
+{
+    OIIO::ImageBuf dst;
+    EXPECT_TRUE(defocus(dst, src, o, rep)) << dst.geterror();
+    return dst;
+}
+
+float at(const OIIO::ImageBuf& img, int x, int y, int c)
+{
+    const OIIO::ROI d = img.roi();
+    if (x < d.xbegin || x >= d.xend || y < d.ybegin || y >= d.yend)
+        return 0.0f;
+    return static_cast<const float*>(img.pixeladdr(x, y))[c];
+}
+
+double channel_sum(const OIIO::ImageBuf& img, int c)
+{
+    double s = 0.0;
+    const OIIO::ROI d = img.roi();
+    for (int y = d.ybegin; y < d.yend; ++y)
+        for (int x = d.xbegin; x < d.xend; ++x)
+            s += at(img, x, y, c);
+    return s;
+}
+
+bool bit_identical(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b)
+{
+    if (a.roi() != b.roi() || a.nchannels() != b.nchannels() || a.deep() != b.deep())
+        return false;
+    if (a.deep()) {
+        const OIIO::DeepData &da = *a.deepdata(), &db = *b.deepdata();
+        for (int64_t p = 0; p < da.pixels(); ++p) {
+            if (da.samples(p) != db.samples(p))
+                return false;
+            for (int s = 0; s < int(da.samples(p)); ++s)
+                for (int c = 0; c < da.channels(); ++c) {
+                    const float u = da.deep_value(p, c, s), v = db.deep_value(p, c, s);
+                    if (std::memcmp(&u, &v, sizeof u) != 0)
+                        return false;
+                }
+        }
+        return true;
+    }
+    const OIIO::ROI r = a.roi();
+    for (int y = r.ybegin; y < r.yend; ++y)
+        for (int x = r.xbegin; x < r.xend; ++x)
+            for (int c = 0; c < a.nchannels(); ++c) {
+                const float u = at(a, x, y, c), v = at(b, x, y, c);
+                if (std::memcmp(&u, &v, sizeof u) != 0)
+                    return false;
+            }
+    return true;
+}
+
+float hash01(int x, int y)
+{
+    const unsigned h = unsigned(x) * 73856093u ^ unsigned(y) * 19349663u;
+    return float((h * 2654435761u) >> 8) / float(1u << 24);
+}
+
+// 96 x 72 of dim texture (CoC +24) with 12 lights in front of it (20 .. 2000, CoCs -12 ..
+// +20) on a 24 px grid, in a display window 48 px larger each side (black border: the
+// bokeh have room). (A light behind an opaque background, seen through a one-pixel hole,
+// is hidden by it in the layer model, and its energy with it.)
+const OIIO::ROI kLightsDisplay(-48, 144, -48, 120);
+OIIO::ImageBuf lights_scene(float exposure = 1.0f)
+{
+    return image(
+        96, 72,
+        [&](int x, int y) {
+            Px p;
+            p.r = p.g = p.b = 0.02f * hash01(x, y) * exposure;
+            p.z             = 24.0f;
+            if ((x - 12) % 24 == 0 && (y - 12) % 24 == 0) {
+                const int i = (x - 12) / 24 + 4 * ((y - 12) / 24);
+                const float v = 20.0f * std::pow(10.0f, float(i) / 5.5f) * exposure;
+                p.r = v, p.g = 0.8f * v, p.b = 0.5f * v;
+                p.z = -12.0f + 32.0f * float(i) / 11.0f;
+            }
+            return p;
+        },
+        kLightsDisplay);
+}
+
+}  // namespace
+
+TEST(DefocusSprites, LensCharacterOffIsBitForBitThePlainDefocus)
+{
+    // The lens described and the threshold changed, but lens character off: no difference
+    // in any bit, for every method and for deep input.
+    const OIIO::ImageBuf src = lights_scene();
+    for (DefocusMethod m : { DefocusMethod::Auto, DefocusMethod::Layers, DefocusMethod::Reference,
+                             DefocusMethod::Gather }) {
+        SCOPED_TRACE(method_name(m));
+        DefocusOptions described = with_lens(direct(m, Border::Clamp), LensPreset::Uncorrected);
+        described.lens_character      = false;
+        described.highlight_threshold = 0.01f;
+        described.max_sprites         = 3;
+        described.lens.diffraction    = DiffractionModel::EdgeLaw;
+        DefocusReport rep;
+        EXPECT_TRUE(bit_identical(run(src, direct(m, Border::Clamp)), run(src, described, &rep)));
+        EXPECT_FALSE(rep.lens_character);
+        EXPECT_EQ(rep.sprites, 0);
+    }
+    std::vector<bokeh_test::DeepPixel> px(32 * 32);
+    for (int i = 0; i < 32 * 32; ++i)
+        px[size_t(i)] = { { 0.1, 0.1, 0.1, 0.5, 2.0, 2.0 }, { 40.0 * hash01(i, 1), 5.0, 1.0, 1.0, 8.0, 8.0 } };
+    const OIIO::ImageBuf deep = bokeh_test::make_deep(32, 32, px);
+    DefocusOptions plain = direct(DefocusMethod::Auto, Border::Clamp), described = plain;
+    described.lens.preset         = LensPreset::Achromat;
+    described.highlight_threshold = 0.01f;
+    EXPECT_TRUE(bit_identical(run(deep, plain), run(deep, described)));
+    plain.deep_output = described.deep_output = true;
+    EXPECT_TRUE(bit_identical(run(deep, plain), run(deep, described)));
+}
+
+TEST(DefocusSprites, EnergyIsCountedOnce)
+{
+    // Sum of each colour channel out = in within 1e-4 (relative), with sprites on: the
+    // sprites' share left the layers. Stated with the plain defocus alongside (its own
+    // conservation on this scene is the floor).
+    const OIIO::ImageBuf src = lights_scene();
+    for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat, LensPreset::Uncorrected }) {
+        SCOPED_TRACE(lens_preset_name(preset));
+        DefocusOptions o = with_lens(direct(), preset);
+        o.lens.diffraction = DiffractionModel::EdgeLaw;
+        DefocusReport rep;
+        const OIIO::ImageBuf out   = run(src, o, &rep);
+        const OIIO::ImageBuf plain = run(src, direct());
+        EXPECT_EQ(rep.sprites, 12) << "every light is a whole sprite (20 > 2 x threshold)";
+        for (int c = 0; c < 3; ++c) {
+            const double in = channel_sum(src, c), lens = channel_sum(out, c), base = channel_sum(plain, c);
+            std::printf("[ figures  ] energy %-11s channel %d: in %.6g, sprites %.6g (%.2e), plain %.6g (%.2e)\n",
+                        lens_preset_name(preset), c, in, lens, lens / in - 1.0, base, base / in - 1.0);
+            EXPECT_NEAR(lens / in, 1.0, 1e-4);
+        }
+    }
+}
+
+TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
+{
+    // A 1e6 pixel at CoC 32 px (a bin centre: no crossfade) in the display window's centre
+    // (field 0), on transparent black: one sprite, each channel holding 1e6 (1e-5), and
+    // every pixel equal to 1e6 times lens_psf's (1e-5 of the peak).
+    const OIIO::ROI display(-48, 113, -48, 113);
+    const OIIO::ImageBuf src = image(
+        65, 65,
+        [](int x, int y) {
+            Px p;
+            p.a = 0.0f;
+            p.z = 32.0f;
+            if (x == 32 && y == 32)
+                p.r = p.g = p.b = 1e6f, p.a = 1.0f;
+            return p;
+        },
+        display);
+    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    o.lens.diffraction = DiffractionModel::EdgeLaw;
+    DefocusReport rep;
+    const OIIO::ImageBuf out = run(src, o, &rep);
+    EXPECT_EQ(rep.sprites, 1);
+    EXPECT_FLOAT_EQ(rep.sprite_min_coc_px, 32.0f);
+
+    LensCharacter lens = o.lens;
+    lens.fstop          = o.coc.lens.fstop;
+    lens.focal_mm       = o.coc.lens.focal_mm;
+    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / display.width();
+    PsfRequest req;
+    req.coc_px = 32.0;
+    Psf psf;
+    std::string err;
+    ASSERT_TRUE(lens_psf(psf, lens, req, err)) << err;
+    float peak = 0.0f;
+    for (float v : psf.rgb)
+        peak = std::max(peak, v);
+    double worst = 0.0;
+    for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(channel_sum(out, c) / 1e6, 1.0, 1e-5) << "channel " << c;
+        for (int y = -48; y < 113; ++y)
+            for (int x = -48; x < 113; ++x) {
+                const int px = x - 32 + psf.width / 2, py = y - 32 + psf.height / 2;
+                const bool inside = px >= 0 && px < psf.width && py >= 0 && py < psf.height;
+                const double want = inside ? 1e6 * psf.at(px, py, c) : 0.0;
+                worst = std::max(worst, std::abs(at(out, x, y, c) - want) / (1e6 * peak));
+            }
+    }
+    std::printf("[ figures  ] lone pixel: PSF %dx%d, largest difference %.2e of the peak\n", psf.width,
+                psf.height, worst);
+    EXPECT_LT(worst, 1e-5);
+}
+
+TEST(DefocusSprites, ExposureRampDoesNotPop)
+{
+    // 128 lights, 1/8 octave apart from 2^-6 to 2^9.9, over a dim floor, CoCs 10 .. 24 px,
+    // with a lens whose sprites differ strongly from the layers' disk (uncorrected, onion
+    // rings 0.8); exposure 2^(k/8), k = 0 .. 23, so 16 lights are inside the threshold band
+    // (luminance 0.5 .. 2) in every frame. Each frame divided by its exposure: the step
+    // d_k = RMS(frame k+1 - frame k) should follow the ramp smoothly. The lights in the band
+    // are 2^(-1/8) as bright (after the division) each frame, so d_k falls by that factor a
+    // step; a light moving wholly from the layers into a sprite in one step (a hard
+    // threshold) would stand out of that trend by the whole difference of its two shapes,
+    // where the smoothstep over 16 steps moves at most 1.5 / 16 of it a step. Bound: every
+    // d_k within 0.75 .. 1.33 of the mean of its two neighbours.
+    auto scene = [](float e) {
+        return image(256, 128, [e](int x, int y) {
+            Px p;
+            p.r = p.g = p.b = 0.01f * hash01(x, y) * e;
+            p.z             = 26.0f;  // behind every light
+            if ((x - 8) % 16 == 0 && (y - 8) % 16 == 0) {
+                const int i = (x - 8) / 16 + 16 * ((y - 8) / 16);
+                const float v = std::exp2(float(i - 48) / 8.0f) * e;
+                p.r = p.g = p.b = v;
+                p.z = 10.0f + 14.0f * float(i % 5) / 4.0f;
+            }
+            return p;
+        }, OIIO::ROI(-32, 288, -32, 160));
+    };
+    DefocusOptions o = with_lens(direct(), LensPreset::Uncorrected);
+    o.lens.onion     = 0.8;
+    std::vector<OIIO::ImageBuf> frames;
+    std::vector<float> exposure;
+    for (int k = 0; k < 24; ++k) {
+        exposure.push_back(std::exp2(float(k) / 8.0f));
+        frames.push_back(run(scene(exposure.back()), o));
+    }
+    std::vector<double> d;
+    for (int k = 0; k + 1 < 24; ++k) {
+        const OIIO::ROI r = frames[size_t(k)].roi();
+        double sq = 0.0;
+        for (int y = r.ybegin; y < r.yend; ++y)
+            for (int x = r.xbegin; x < r.xend; ++x)
+                for (int c = 0; c < 3; ++c) {
+                    const double u = at(frames[size_t(k) + 1], x, y, c) / exposure[size_t(k) + 1];
+                    const double v = at(frames[size_t(k)], x, y, c) / exposure[size_t(k)];
+                    sq += (u - v) * (u - v);
+                }
+        d.push_back(std::sqrt(sq / (3.0 * double(r.npixels()))));
+    }
+    double mean = 0.0, lo = 1e30, hi = 0.0;
+    std::string list;
+    for (size_t i = 0; i < d.size(); ++i) {
+        mean += d[i] / double(d.size());
+        if (i > 0 && i + 1 < d.size()) {
+            const double r = d[i] / (0.5 * (d[i - 1] + d[i + 1]));
+            lo = std::min(lo, r), hi = std::max(hi, r);
+        }
+        char buf[32];
+        std::snprintf(buf, sizeof buf, " %.2e", d[i]);
+        list += buf;
+    }
+    std::printf("[ figures  ] exposure ramp: d_k =%s\n[ figures  ]   mean %.3e; d_k over the mean of its "
+                "neighbours %.3f .. %.3f\n",
+                list.c_str(), mean, lo, hi);
+    EXPECT_GT(mean, 1e-6) << "the ramp moves energy between layers and sprites";
+    EXPECT_GE(lo, 0.75) << "popping";
+    EXPECT_LE(hi, 1.33) << "popping";
+}
+
+TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
+{
+    // A 1e4 light at CoC 24 behind a sharp (CoC 0) opaque grey 0.3 card over x >= 40: the
+    // light's sprite reaches to x = 42 and more, but every card pixel stays 0.3 (1e-5),
+    // while the light shows left of the card.
+    const OIIO::ImageBuf src = image(96, 64, [](int x, int y) {
+        Px p;
+        p.z = 24.0f;
+        if (x == 30 && y == 32)
+            p.r = p.g = p.b = 1e4f;
+        if (x >= 40)
+            p.r = p.g = p.b = 0.3f, p.z = 0.0f;
+        return p;
+    }, OIIO::ROI(-32, 128, -32, 96));
+    for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+        SCOPED_TRACE(method_name(m));
+        DefocusReport rep;
+        const OIIO::ImageBuf out = run(src, with_lens(direct(m), LensPreset::Uncorrected), &rep);
+        EXPECT_EQ(rep.sprites, 1);
+        double card = 0.0, left = 0.0;
+        for (int y = 0; y < 64; ++y) {
+            for (int x = 40; x < 96; ++x)
+                card = std::max(card, double(std::abs(at(out, x, y, 0) - 0.3f)));
+            for (int x = 0; x < 40; ++x)
+                left += at(out, x, y, 0);
+        }
+        EXPECT_LT(card, 1e-5) << "the sprite shows through the card";
+        EXPECT_GT(left, 0.5 * 1e4) << "the light's visible part";
+    }
+}
+
+TEST(DefocusSprites, DeepInputGetsSprites)
+{
+    // A deep 48 x 48: a grey card (alpha 0.5, CoC 2) in front of a light of 1e3 at CoC 12 in
+    // the middle: one sprite, in its own layer; the colour's sum is the card's and half
+    // the light's, which shows through the card (1e-4; clamp: the uniform card keeps its
+    // sum at the frame's edges, and the light's bokeh stays inside).
+    std::vector<bokeh_test::DeepPixel> px(48 * 48);
+    for (int y = 0; y < 48; ++y)
+        for (int x = 0; x < 48; ++x) {
+            bokeh_test::DeepPixel& p = px[size_t(y) * 48 + size_t(x)];
+            p.push_back({ 0.05, 0.05, 0.05, 0.5, 2.0, 2.0 });
+            if (x == 24 && y == 24)
+                p.push_back({ 1e3, 1e3, 1e3, 1.0, 12.0, 12.0 });
+        }
+    const OIIO::ImageBuf deep = bokeh_test::make_deep(48, 48, px);
+    DefocusOptions o = with_lens(direct(DefocusMethod::Auto, Border::Clamp), LensPreset::Achromat);
+    DefocusReport rep;
+    const OIIO::ImageBuf out = run(deep, o, &rep);
+    EXPECT_EQ(rep.sprites, 1);
+    EXPECT_FLOAT_EQ(rep.sprite_max_coc_px, 12.0f);
+    const double in = 48.0 * 48.0 * 0.05 + 0.5 * 1e3;  // the card's, and the light's half through it
+    EXPECT_NEAR(channel_sum(out, 0) / in, 1.0, 1e-4);
+    DefocusOptions deep_out = o;
+    deep_out.deep_output    = true;
+    OIIO::ImageBuf as_deep = run(deep, deep_out), flat;
+    ASSERT_TRUE(flatten(flat, as_deep, {}));
+    EXPECT_NEAR(channel_sum(flat, 0) / in, 1.0, 1e-4) << "the deep result's flatten";
+}
+
+TEST(DefocusSprites, HybridAgainstTheScatterReference)
+{
+    // The brute force (every pixel its own PSF) against the hybrid on the lights scene, lens
+    // off (the PSF is the aperture: the two agree but for the CoC bins' crossfade and the
+    // layers' reductions) and achromat (the dim floor has no character in the hybrid).
+    const OIIO::ImageBuf src = lights_scene();
+    for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat }) {
+        SCOPED_TRACE(lens_preset_name(preset));
+        const DefocusOptions o = with_lens(direct(), preset);
+        OIIO::ImageBuf ref;
+        ASSERT_TRUE(defocus_scatter_reference(ref, src, o)) << ref.geterror();
+        const OIIO::ImageBuf out = run(src, o);
+        ImageError e;
+        std::string err;
+        ASSERT_TRUE(compare(e, out, ref, err)) << err;
+        std::printf("[ figures  ] hybrid vs scatter reference, %s: PSNR %.1f dB\n", lens_preset_name(preset),
+                    e.psnr_db);
+        EXPECT_GT(e.psnr_db, 35.0);
+        for (int c = 0; c < 3; ++c)
+            EXPECT_NEAR(channel_sum(ref, c) / channel_sum(src, c), 1.0, 1e-3) << "the reference's energy";
+    }
+}
+
+TEST(DefocusSprites, BadOptionsRefusedByName)
+{
+    const OIIO::ImageBuf src = lights_scene();
+    auto refused = [&](DefocusOptions o, const char* word) {
+        OIIO::ImageBuf dst;
+        EXPECT_FALSE(defocus(dst, src, o));
+        EXPECT_NE(dst.geterror().find(word), std::string::npos) << dst.geterror();
+    };
+    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    o.highlight_threshold = 0.0f;
+    refused(o, "threshold");
+    o = with_lens(direct(), LensPreset::Achromat);
+    o.max_sprites = -1;
+    refused(o, "sprites");
+    refused(with_lens(direct(DefocusMethod::Gather), LensPreset::Achromat), "gather");
+    o = with_lens(direct(), LensPreset::Achromat);
+    o.lens.onion = 2.0;
+    refused(o, "onion");
+}
