@@ -33,6 +33,6 @@ ls -l "$out"/*.png
 for lens in uncorrected achromat apochromat:chromatic=10; do
     name=${lens%%:*}
     "$tool" -q --bokeh:lens=$lens:fstop=1.4:diffraction=exact:onion=0.15:catseye=0.5:kernel=polygon:blades=9:curvature=0.5:sheet=1 \
-        60 --resize 0x240 -o "$out/bokeh_$name.png"
+        60 -o "$out/bokeh_$name.png"
 done
 "$tool" -q --bokeh:lens=achromat:fstop=1.4:map=1 40 -o "$out/beam_map_achromat.png"
