@@ -87,15 +87,6 @@ bool defocus_command(CommandContext& c)
                 c.message(format("  layer CoC px (/reduction):{}{}", layers,
                                  report.layer_coc_px.size() > 64 ? " ..." : ""));
         }
-        if (ok && report.lens_character && c.verbosity >= 1)
-            c.message(format("  defocus lens character: {} sprites{}, CoC {:.1f} .. {:.1f} px, {} PSFs, "
-                             "{} drawn, {:.3f} s",
-                             report.sprites,
-                             report.sprite_candidates > report.sprites
-                                 ? format(" (the brightest of {} highlights)", report.sprite_candidates)
-                                 : std::string(),
-                             report.sprite_min_coc_px, report.sprite_max_coc_px, report.sprite_psfs,
-                             report.sprites_drawn, report.sprite_seconds));
         if (ok && report.nonfinite.total() > 0 && c.verbosity >= 1)
             c.message(format("  warning: {} non-finite colour and {} non-finite depth values "
                              "replaced (colour by 0, depth by far)",
