@@ -19,6 +19,8 @@
 //     is at |r(hi)|; the intensity near it is the plateau density times the Fresnel edge
 //     law F(v) (core/wave_optics.cpp), v = sqrt(2) d / sqrt(l N c_eff), d the distance
 //     across the edge in image px and c_eff = 2 |dr/ds| at the rim (OPTICS.md section 2).
+//     DiffractionModel::SeedMap puts the seed's pseudo-diffraction map in place of F: pi
+//     times its lookup at rho = 1 - d / (c_eff / 2), at the wavelength's own fringe width.
 //     Where the rim is not the outermost ray (a caustic), the law does not hold and the
 //     rim stays geometric. Pixels in the fringe band are averaged over 4 x 4 samples, so
 //     fringes finer than a pixel fade to their mean (the seed's Nyquist fade).
@@ -453,6 +455,11 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
                 for (int c = 0; c < 3; ++c)
                     t.fringe[(size_t(j) * t.nd + i) * 3 + c] = 1.0f;
     std::vector<double> num(size_t(t.nd) * 3), den(3);
+    // DiffractionModel::SeedMap: the seed's pseudo-diffraction map (core/diffraction_map.cpp),
+    // relative to its flat level 1 / pi, in place of the edge law.
+    const bool seed = lens.diffraction == DiffractionModel::SeedMap;
+    static const SeedDiffractionMap seed_map;
+    const SeedDiffractionMap* map = seed ? &seed_map : nullptr;
     constexpr int kSubsamples = 8;  // per distance step, then a pixel-wide box
     for (int j = 0; j <= t.Kf; ++j) {
         const double s     = t.s_lo + (1.0 - t.s_lo) * j / t.Kf;
@@ -491,6 +498,11 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
             const double p     = s / (std::max(r, 1e-6) * slope_l);
             const double c_eff = std::max(2.0 * slope_l * g.kappa, 1e-3);
             const double scale = fringe_scale_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm);
+            // The seed's map at this wavelength's own fringe-width ratio: its horizontal
+            // lookup at (l / l_ref)^0.5 is the width ratio's own sqrt(l) scaling.
+            const double seed_width
+                = seed ? map->width_ratio(defocus_waves_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm))
+                       : 0.0;
             for (int c = 0; c < 3; ++c)
                 den[size_t(c)] += smp.rgb_weight[size_t(c)] * p;
             for (int i = 0; i < t.nd; ++i) {
@@ -499,7 +511,9 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
                 for (int k = 0; k < kSubsamples; ++k) {
                     const double d_mid = -t.d_out + i * RgbTable::kFringeStep + (k + 0.5) / kSubsamples / g.kappa - 0.5 / g.kappa;
                     const double d_l   = d_mid + r - std::abs(r_mid);
-                    f += gain_l * edge_law(edge_v(d_l * g.kappa, scale)) + (1.0 - gain_l) * (d_l > 0.0 ? 1.0 : 0.0);
+                    const double fringe = seed ? kPi * map->lookup(1.0 - d_l * g.kappa / (0.5 * c_eff), seed_width)
+                                               : edge_law(edge_v(d_l * g.kappa, scale));
+                    f += gain_l * fringe + (1.0 - gain_l) * (d_l > 0.0 ? 1.0 : 0.0);
                 }
                 f /= kSubsamples;
                 for (int c = 0; c < 3; ++c)
@@ -554,7 +568,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
         for (int i = 0; i <= 256; ++i)
             r_max = std::max(r_max, std::abs(L.r(i / 256.0)));
     }
-    const bool edge_law_on = lens.diffraction == DiffractionModel::EdgeLaw;
+    const bool edge_law_on = lens.diffraction != DiffractionModel::Off;  // either fringe model
 
     RgbTable table;
     table.K         = std::clamp(int(std::ceil(2.0 * r_max)), 32, 1024);  // half a px of radius apart

@@ -428,6 +428,22 @@ TEST(LensPsf, EdgeLawFringeAtTheRim)
     EXPECT_NEAR(prof[best] / plateau, 1.37, 0.12);
     // At the geometric edge a quarter of the plateau.
     EXPECT_NEAR(prof[size_t(coc / 2.0)] / plateau, 0.25, 0.1);
+
+    // The seed's pseudo-diffraction map in its place: unit energy, and a first fringe
+    // within the seed's own stated 30 % of the exact law's position.
+    lens.diffraction   = bokeh::DiffractionModel::SeedMap;
+    const bokeh::Psf q = psf_of(lens, coc);
+    EXPECT_NEAR(channel_sum(q, 1), 1.0, 1e-5);
+    const std::vector<double> qprof = radial_profile(q, 1);
+    const double qplateau = annulus_mean(q, 1, 0.0, 0.5 * coc / 2.0);
+    size_t qbest = lo;
+    for (size_t r = lo; r <= hi; ++r)
+        if (qprof[r] > qprof[qbest])
+            qbest = r;
+    const double qd = coc / 2.0 - double(qbest);
+    std::cout << "seed map: first fringe at d = " << qd << " px, height " << qprof[qbest] / qplateau << " I_geo\n";
+    EXPECT_NEAR(qd, 0.861 * scale, 0.3 * 0.861 * scale + 1.0);
+    EXPECT_GT(qprof[qbest] / qplateau, 1.05);
 }
 
 TEST(LensPsf, AchromatAndApochromatRimColours)

@@ -50,6 +50,8 @@ enum class LensPreset {
 enum class DiffractionModel {
     Off,       ///< geometric rim
     EdgeLaw,   ///< the exact Fresnel straight-edge law at the rim (OPTICS.md section 2)
+    SeedMap,   ///< the seed's pseudo-diffraction map (SEEDS.md section 9; its fringes sit
+               ///< 4-16 % off the exact ones, docs/methods/diffraction.md)
 };
 
 struct LensCharacter {
