@@ -670,13 +670,13 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
                 table.cumulative(Rs, lo, b);
             }
             double m[3] = { 1.0, 1.0, 1.0 };
-            if (modulated) {
+            // The pupil pattern only where light lands (most of a PSF's square is dark).
+            if (modulated && (a[0] != b[0] || a[1] != b[1] || a[2] != b[2])) {
                 const double s  = std::min(1.0, R / (0.5 * std::abs(g.c_ref)));
                 const double px = s * std::cos(psi), py = s * std::sin(psi);
-                const double ring = (std::pow(std::abs(std::cos(0.5 * kPi * lens.onion_cycles
-                                                                * std::hypot(px - g.onion_x, py - g.onion_y))),
-                                              p_sharp)
-                                     - mean_p)
+                const double wave = std::abs(std::cos(0.5 * kPi * lens.onion_cycles
+                                                      * std::hypot(px - g.onion_x, py - g.onion_y)));
+                const double ring = ((p_sharp == 1.0 ? wave : std::pow(wave, p_sharp)) - mean_p)
                                     / std::max(mean_p, 1.0 - mean_p);
                 const double noise = lens.surface_noise > 0.0 ? lens.surface_noise * pupil_noise(px, py) : 0.0;
                 for (int c = 0; c < 3; ++c)
