@@ -244,6 +244,16 @@ bool parse_extent(std::string_view text, float& width, float& height)
     return true;
 }
 
+bool parse_number(std::string_view text, double& value)
+{
+    double v             = 0.0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+    if (ec != std::errc() || end != text.data() + text.size() || !std::isfinite(v))
+        return false;
+    value = v;
+    return true;
+}
+
 bool parse_size(std::string_view text, int& width, int& height)
 {
     float w = 0.0f, h = 0.0f;

@@ -85,6 +85,10 @@ bool parse_size(std::string_view text, int& width, int& height);
 /// Parse a kernel extent "WxH" or "N" in pixels; finite, >= 0, fractions allowed.
 bool parse_extent(std::string_view text, float& width, float& height);
 
+/// Parse a finite decimal number filling the whole text ("-60", "0.87", "1e3"). False if
+/// malformed or not finite.
+bool parse_number(std::string_view text, double& value);
+
 /// What a command is given and gives back.
 struct CommandContext {
     std::vector<std::string> args;    ///< the command's own arguments, after the command

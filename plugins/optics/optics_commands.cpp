@@ -11,7 +11,6 @@
 #include <bokeh/optics.h>
 #include <bokeh/plugin.h>
 
-#include <charconv>
 #include <cmath>
 
 #include <OpenImageIO/strutil.h>
@@ -22,12 +21,6 @@ using bokeh::CommandContext;
 using bokeh::OptionSpec;
 using OIIO::Strutil::fmt::format;
 
-bool parse_double(std::string_view s, double& v)
-{
-    const char* end = s.data() + s.size();
-    auto r          = std::from_chars(s.data(), end, v);
-    return r.ec == std::errc() && r.ptr == end && std::isfinite(v);
-}
 
 bool aperture_from(CommandContext& c, bokeh::Aperture& out, std::string& err)
 {
@@ -52,7 +45,7 @@ bool bokeh_command(CommandContext& c)
 {
     const auto& v = c.options;
     double coc_px;
-    if (!parse_double(c.args[0], coc_px))
+    if (!bokeh::parse_number(c.args[0], coc_px))
         return c.fail(format("'{}' is not a signed CoC in px (negative: in front of focus)", c.args[0]));
     bokeh::LensCharacter lens;
     std::string err;
@@ -63,7 +56,7 @@ bool bokeh_command(CommandContext& c)
     lens.focal_mm = v.get_float("focal");
     double sensor_mm;
     const std::string& sensor = v.get_string("sensor");
-    if (!bokeh::film_back_width(sensor, sensor_mm) && !parse_double(sensor, sensor_mm))
+    if (!bokeh::film_back_width(sensor, sensor_mm) && !bokeh::parse_number(sensor, sensor_mm))
         return c.fail(format("sensor '{}' is neither a width in mm nor a film back", sensor));
     lens.pixel_pitch_mm = sensor_mm / v.get_int("width");
     if (!bokeh::lens_character_from(v, lens, err))
@@ -88,7 +81,7 @@ bool bokeh_command(CommandContext& c)
         const std::string& field = v.get_string("field");
         std::vector<std::string> xy;
         OIIO::Strutil::split(field, xy, ",");
-        if (xy.size() != 2 || !parse_double(xy[0], req.field_x) || !parse_double(xy[1], req.field_y))
+        if (xy.size() != 2 || !bokeh::parse_number(xy[0], req.field_x) || !bokeh::parse_number(xy[1], req.field_y))
             return c.fail(format("field '{}' is not a position x,y in half-diagonals (0,0 centre, "
                                  "0.87,0.49 a 16:9 frame's top-right corner)",
                                  field));

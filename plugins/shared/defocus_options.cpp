@@ -8,7 +8,6 @@
 #include "aperture_options.h"
 #include "lens_options.h"
 
-#include <charconv>
 #include <cmath>
 
 #include <OpenImageIO/strutil.h>
@@ -25,12 +24,6 @@ bool fail(std::string& err, std::string why)
     return false;
 }
 
-bool parse_number(std::string_view s, double& v)
-{
-    const char* end = s.data() + s.size();
-    auto r          = std::from_chars(s.data(), end, v);
-    return r.ec == std::errc() && r.ptr == end && std::isfinite(v);
-}
 
 // Millimetres per unit of the depth channel.
 bool unit_mm(const std::string& u, double& mm)

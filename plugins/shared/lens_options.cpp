@@ -3,7 +3,6 @@
 
 #include "lens_options.h"
 
-#include <charconv>
 #include <cmath>
 
 #include <OpenImageIO/strutil.h>
@@ -42,15 +41,6 @@ std::vector<OptionSpec> lens_option_specs()
         OptionSpec::Float("anamorphicfocus", 0.0, -4096.0, 4096.0, "horizontal minus vertical CoC px"),
     };
 }
-
-namespace {
-bool parse_number(std::string_view s, double& v)
-{
-    const char* end = s.data() + s.size();
-    auto r          = std::from_chars(s.data(), end, v);
-    return r.ec == std::errc() && r.ptr == end && std::isfinite(v);
-}
-}  // namespace
 
 bool lens_character_from(const OptionValues& v, LensCharacter& lens, std::string& err)
 {
