@@ -22,23 +22,20 @@ using bokeh::OptionSpec;
 using OIIO::Strutil::fmt::format;
 
 
+// The aperture: star and picture here, the rest by the rule --defocus reads its own by.
 bool aperture_from(CommandContext& c, bokeh::Aperture& out, std::string& err)
 {
     const auto& v            = c.options;
     const std::string& shape = v.get_string("kernel");
-    if (!bokeh::aperture_options_apply(v, shape, err))
-        return false;
-    if (shape == "image")
-        return bokeh::Aperture::from_picture(*c.inputs.back().buf, out, err);
-    if (shape == "star")
-        return bokeh::Aperture::star(v.get_int("blades"), v.get_float("inner"), v.get_float("rotation"), out, err);
+    if (shape == "image" || shape == "star") {
+        if (!bokeh::aperture_options_apply(v, shape, err))
+            return false;
+        return shape == "image"
+                   ? bokeh::Aperture::from_picture(*c.inputs.back().buf, out, err)
+                   : bokeh::Aperture::star(v.get_int("blades"), v.get_float("inner"), v.get_float("rotation"), out, err);
+    }
     bokeh::Kernel k;
-    k.shape        = shape == "disk" ? bokeh::KernelShape::Disk : bokeh::KernelShape::Polygon;
-    k.blades       = shape == "hex" ? 6 : v.get_int("blades");
-    k.rotation_deg = float(v.get_float("rotation"));
-    k.curvature    = float(v.get_float("curvature"));
-    k.hole         = float(v.get_float("hole"));
-    return bokeh::Aperture::from_kernel(k, out, err);
+    return bokeh::aperture_kernel_from(v, k, err) && bokeh::Aperture::from_kernel(k, out, err);
 }
 
 bool bokeh_command(CommandContext& c)

@@ -31,4 +31,17 @@ bool aperture_options_apply(const OptionValues& v, const std::string& kernel, st
     return true;
 }
 
+bool aperture_kernel_from(const OptionValues& v, Kernel& k, std::string& why)
+{
+    const std::string& shape = v.get_string("kernel");
+    if (!aperture_options_apply(v, shape, why))
+        return false;
+    k.shape        = shape == "disk" ? KernelShape::Disk : KernelShape::Polygon;
+    k.blades       = shape == "hex" ? 6 : v.get_int("blades");
+    k.rotation_deg = float(v.get_float("rotation"));
+    k.curvature    = float(v.get_float("curvature"));
+    k.hole         = float(v.get_float("hole"));
+    return true;
+}
+
 }  // namespace bokeh

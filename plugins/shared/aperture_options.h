@@ -3,6 +3,7 @@
 // plugins, not in the registry (core/plugin.cpp), which knows no kernel or algorithm.
 #pragma once
 
+#include <bokeh/blur.h>
 #include <bokeh/plugin.h>
 
 #include <string>
@@ -14,5 +15,10 @@ namespace bokeh {
 /// (of those `v` has) that the kernel would ignore (`kernel=hex:blades=5`, `kernel=disk:
 /// rotation=30`), so it is refused rather than dropped unseen.
 bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why);
+
+/// The disk, hex or polygon aperture `kernel=` names, with `blades`, `rotation`,
+/// `curvature` and `hole` from `v` (size left 0), after aperture_options_apply's check:
+/// the rule --defocus and --bokeh read their aperture by. False + `why`.
+bool aperture_kernel_from(const OptionValues& v, Kernel& k, std::string& why);
 
 }  // namespace bokeh

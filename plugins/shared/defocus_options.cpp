@@ -115,16 +115,10 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
     coc.back_gain     = v.get_float("back");
     coc.max_coc_px    = v.get_float("maxcoc");
 
-    const std::string& shape = v.get_string("kernel");
     std::string why;
-    if (!aperture_options_apply(v, shape, why))
+    if (!aperture_kernel_from(v, o.aperture, why))
         return fail(err, why);
-    o.aperture.shape  = shape == "disk" ? KernelShape::Disk : KernelShape::Polygon;
-    o.aperture.blades = shape == "hex" ? 6 : v.get_int("blades");
-    o.aperture.rotation_deg = float(v.get_float("rotation"));
-    o.aperture.curvature    = float(v.get_float("curvature"));
-    o.aperture.hole         = float(v.get_float("hole"));
-    o.aspect                = float(v.get_float("aspect"));
+    o.aspect = float(v.get_float("aspect"));
 
     // quality= and method= are one option under two spellings (method= the docs' and -v's).
     if (v.given("quality") && v.given("method") && v.get_string("quality") != v.get_string("method"))
