@@ -3,11 +3,13 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <fstream>
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/strutil.h>
+#include <tbb/task_arena.h>
 
 #include <unistd.h>
 
@@ -334,4 +336,101 @@ TEST(Multipart, WriteReadRoundTripAndBudget)
     tight.memory_budget_bytes = 24 * 16 * 6 * 4;
     EXPECT_FALSE(read_image(back, dir + "/p.exr", tight, err));
     EXPECT_NE(err.find("more than the memory budget"), std::string::npos) << err;
+}
+
+// Zip and zips files are compressed by the library (core/exr_deflate.cpp), not by
+// OpenEXR: they must read back bit for bit through OpenEXR's own zlib decoder, carry the
+// header OIIO writes, be no larger than OpenEXR's, and not depend on the thread count.
+TEST(Write, ZipChunksReadBackThroughOpenExr)
+{
+    const std::string dir = fresh_dir("io_zip");
+    // 97 x 53: the last zip chunk holds 5 scanlines. The first 16 rows are random bits
+    // (no deflate makes them smaller: the chunk is stored raw); the rest a smooth ramp.
+    OIIO::ImageSpec spec(97, 53, 5, OIIO::TypeFloat);
+    spec.channelnames = { "R", "G", "B", "A", "Z" };
+    spec.z_channel    = 4;
+    spec.x            = -3;
+    spec.y            = 11;
+    spec.attribute("studio:shot", "zz_0020");
+    spec.attribute("studio:lens_mm", 35.0f);
+    OIIO::ImageBuf img(spec);
+    uint32_t state = 12345u;
+    for (int y = spec.y; y < spec.y + spec.height; ++y)
+        for (int x = spec.x; x < spec.x + spec.width; ++x)
+            for (int c = 0; c < 5; ++c) {
+                float v = 0.01f * float(x) + 0.1f * float(y) + float(c);
+                if (y < spec.y + 16) {
+                    state = state * 1664525u + 1013904223u;
+                    const uint32_t bits = (state & 0x3fffffffu) | 0x00800000u;  // finite
+                    std::memcpy(&v, &bits, 4);
+                }
+                static_cast<float*>(img.pixeladdr(x, y))[c] = v;
+            }
+    auto raw_pixels = [](const std::string& path, OIIO::ImageSpec& native) {
+        auto in = OIIO::ImageInput::open(path);
+        EXPECT_TRUE(in) << OIIO::geterror();
+        std::vector<float> px;
+        if (!in)
+            return px;
+        native = in->spec();
+        px.resize(native.image_pixels() * size_t(native.nchannels));
+        EXPECT_TRUE(in->read_image(0, 0, 0, native.nchannels, OIIO::TypeFloat, px.data()));
+        return px;
+    };
+    const std::vector<float> want(static_cast<const float*>(img.localpixels()),
+                                  static_cast<const float*>(img.localpixels())
+                                      + spec.image_pixels() * 5);
+    for (const std::string compression : { "zip", "zips" }) {
+        SCOPED_TRACE(compression);
+        WriteOptions opts;
+        opts.compression = compression;
+        std::string err;
+        const std::string ours = dir + "/ours_" + compression + ".exr";
+        ASSERT_TRUE(write_image(img, ours, opts, err)) << err;
+        OIIO::ImageSpec ours_spec, oiio_spec;
+        const std::vector<float> back = raw_pixels(ours, ours_spec);
+        ASSERT_EQ(back.size(), want.size());
+        EXPECT_EQ(std::memcmp(back.data(), want.data(), want.size() * 4), 0) << "bit for bit";
+        EXPECT_EQ(ours_spec.get_string_attribute("compression"), compression);
+
+        // OpenEXR's own writer, through OIIO, for the header and the size.
+        OIIO::ImageSpec direct_spec = spec;
+        direct_spec.attribute("compression", compression);
+        const std::string theirs = dir + "/oiio_" + compression + ".exr";
+        {
+            auto out = OIIO::ImageOutput::create(theirs);
+            ASSERT_TRUE(out && out->open(theirs, direct_spec)
+                        && out->write_image(OIIO::TypeFloat, img.localpixels()) && out->close());
+        }
+        raw_pixels(theirs, oiio_spec);
+        ASSERT_EQ(ours_spec.extra_attribs.size(), oiio_spec.extra_attribs.size());
+        for (const OIIO::ParamValue& p : oiio_spec.extra_attribs) {
+            if (p.name() == "DateTime")  // the clock's
+                continue;
+            const OIIO::ParamValue* q = ours_spec.find_attribute(p.name());
+            ASSERT_NE(q, nullptr) << p.name();
+            EXPECT_EQ(q->type(), p.type()) << p.name();
+            EXPECT_EQ(q->get_string(), p.get_string()) << p.name();
+        }
+        EXPECT_EQ(ours_spec.x, spec.x);
+        EXPECT_EQ(ours_spec.y, spec.y);
+        const uint64_t ours_bytes   = OIIO::Filesystem::file_size(ours);
+        const uint64_t theirs_bytes = OIIO::Filesystem::file_size(theirs);
+        EXPECT_LE(double(ours_bytes), 1.01 * double(theirs_bytes))
+            << ours_bytes << " bytes against OpenEXR's " << theirs_bytes;
+
+        // One thread and two give the same file.
+        std::string one, two;
+        for (int threads : { 1, 2 }) {
+            const std::string path = dir + "/t" + std::to_string(threads) + ".exr";
+            tbb::task_arena arena(threads);
+            bool wrote = false;
+            arena.execute([&] { wrote = write_image(img, path, opts, err); });
+            ASSERT_TRUE(wrote) << err;
+            std::string bytes;
+            ASSERT_TRUE(OIIO::Filesystem::read_text_file(path, bytes));
+            (threads == 1 ? one : two) = bytes;
+        }
+        EXPECT_TRUE(one == two) << "thread count changed the file";
+    }
 }

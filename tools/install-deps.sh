@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
   build-essential cmake pkg-config
   libopenimageio-dev openimageio-tools libopenexr-dev openexr
-  libopencolorio-dev opencolorio-tools libtbb-dev libglm-dev libfftw3-dev
+  libopencolorio-dev opencolorio-tools libtbb-dev libglm-dev libfftw3-dev libdeflate-dev
   libgtest-dev libbenchmark-dev
   python3-matplotlib
   pybind11-dev python3-dev python3-numpy python3-openimageio python3-pytest
