@@ -1,12 +1,12 @@
-// resample.cpp — reduction, enlargement and depth-aware enlargement (resample.h).
+// resample.cpp — reduction and enlargement (resample.h); the depth-aware enlargement
+// is in resample_depth_aware.cpp.
 //
 // Source: SEEDS.md section 4 (reduced buffers; the enlargement methods the seed compares:
 // bilinear, reduced-buffer blur, bicubic, Lanczos, Gaussian, upscale-blur, its fused and
-// two-stage forms) and section 6 (PCF for the reduced blend buffer). Kernels: Keys 1981
+// two-stage forms). Kernels: Keys 1981
 // ("Cubic convolution interpolation for digital image processing", a = -0.5 is
 // Catmull-Rom), Mitchell & Netravali 1988 (the cubic B-spline is their B = 1, C = 0),
-// Lanczos' windowed sinc, Reeves, Salesin & Cook 1987 (PCF), Kopf et al. 2007 (joint
-// bilateral upsampling).
+// Lanczos' windowed sinc.
 //
 // How. Every enlargement method is a separable linear filter, so each becomes, per axis,
 // a list of weights per output column (or row): the kernel evaluated at the sample
@@ -29,14 +29,14 @@
 // nearest-depth reducers for depth and CoC channels (the seed only averages colour).
 //
 // Known limits: filters are separable (tensor-product), not radial; the compound methods
-// only enlarge; PCF uses the 2 x 2 bilinear footprint (the seed's "bicubic" PCF is not
-// built); depth-aware enlargement assumes depth > 0 (relative tolerances).
+// only enlarge.
 
 #include <bokeh/image.h>
 #include <bokeh/parallel.h>
 #include <bokeh/resample.h>
 
 #include "plane.h"
+#include "resample_common.h"
 
 #include <algorithm>
 #include <cmath>
@@ -48,33 +48,26 @@
 
 namespace bokeh {
 
+using detail::bspline;
+using detail::check_image;
+using detail::check_map;
+using detail::check_planes;
+using detail::contiguous_float;
+using detail::make_output;
+using detail::tent;
+using detail::view_of;
 using detail::border_index;
 using detail::ceil_div;
 using detail::floor_div;
 using detail::kOutside;
 using OIIO::Strutil::fmt::format;
 
-namespace {
-
-constexpr double kPi = 3.14159265358979323846;
-
-// --- 1-D kernels, t in filter units ---------------------------------------------------
+namespace detail {
 
 double tent(double t)
 {
     t = std::abs(t);
     return t < 1.0 ? 1.0 - t : 0.0;
-}
-
-// Keys (1981) cubic convolution with a = -0.5 (Catmull-Rom).
-double catmull_rom(double t)
-{
-    t = std::abs(t);
-    if (t < 1.0)
-        return (1.5 * t - 2.5) * t * t + 1.0;
-    if (t < 2.0)
-        return ((-0.5 * t + 2.5) * t - 4.0) * t + 2.0;
-    return 0.0;
 }
 
 // Uniform cubic B-spline (Mitchell & Netravali 1988, B = 1, C = 0).
@@ -89,6 +82,110 @@ double bspline(double t)
     }
     return 0.0;
 }
+
+bool check_planes(const ConstPlaneView& src, const PlaneView& dst, std::string& err)
+{
+    if (!src.data || !dst.data || src.width <= 0 || src.height <= 0 || dst.width <= 0
+        || dst.height <= 0) {
+        err = "empty plane";
+        return false;
+    }
+    if (src.nchannels != dst.nchannels || src.nchannels <= 0) {
+        err = format("channel counts differ ({} vs {})", src.nchannels, dst.nchannels);
+        return false;
+    }
+    return true;
+}
+
+bool check_map(const AxisMap& m, std::string& err)
+{
+    if (!(m.src_size > 0.0 && m.dst_size > 0.0 && std::isfinite(m.src_size / m.dst_size)
+          && std::isfinite(m.dst_origin) && std::isfinite(m.src_origin))) {
+        err = "bad axis map (sizes must be finite and > 0)";
+        return false;
+    }
+    return true;
+}
+
+bool check_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* what)
+{
+    if (!src.initialized()) {
+        dst.errorfmt("{}: the source image is empty", what);
+        return false;
+    }
+    if (src.deep()) {
+        dst.errorfmt("{}: deep images cannot be resampled; flatten them first", what);
+        return false;
+    }
+    if (src.spec().depth > 1) {
+        dst.errorfmt("{}: volume images are not supported", what);
+        return false;
+    }
+    return true;
+}
+
+// A float copy with contiguous local pixels, unless `src` is one.
+const OIIO::ImageBuf& contiguous_float(const OIIO::ImageBuf& src, OIIO::ImageBuf& holder)
+{
+    const OIIO::ImageBuf& f = detail::float_source(src, holder);
+    const auto px = OIIO::stride_t(sizeof(float)) * f.nchannels();
+    if (f.pixel_stride() == px && f.scanline_stride() == px * f.spec().width)
+        return f;
+    holder.copy(src, OIIO::TypeFloat);
+    return holder;
+}
+
+ConstPlaneView view_of(const OIIO::ImageBuf& f)
+{
+    const OIIO::ROI r = f.roi();
+    return ConstPlaneView(static_cast<const float*>(f.pixeladdr(r.xbegin, r.ybegin, r.zbegin)),
+                          r.width(), r.height(), f.nchannels(),
+                          size_t(r.width()) * size_t(f.nchannels()));
+}
+
+// `dst` = a float image like `like` over `data`, display window `full`; its pixels as a plane.
+PlaneView make_output(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const OIIO::ROI& data,
+                      const OIIO::ROI& full)
+{
+    OIIO::ImageSpec spec = like;
+    spec.set_format(OIIO::TypeFloat);
+    spec.channelformats.clear();
+    spec.x = data.xbegin, spec.y = data.ybegin;
+    spec.width = data.width(), spec.height = data.height();
+    spec.full_x = full.xbegin, spec.full_y = full.ybegin;
+    spec.full_width = full.width(), spec.full_height = full.height();
+    // A tiled source's tile size may not suit the new size; the writer picks its own.
+    spec.tile_width = spec.tile_height = 0;
+    detail::reset_uninitialised(dst, spec);
+    PlaneView p;
+    p.data       = static_cast<float*>(dst.pixeladdr(data.xbegin, data.ybegin));
+    p.width      = data.width();
+    p.height     = data.height();
+    p.nchannels  = spec.nchannels;
+    p.row_stride = size_t(p.width) * size_t(p.nchannels);
+    return p;
+}
+
+}  // namespace detail
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// --- 1-D kernels, t in filter units ---------------------------------------------------
+
+
+// Keys (1981) cubic convolution with a = -0.5 (Catmull-Rom).
+double catmull_rom(double t)
+{
+    t = std::abs(t);
+    if (t < 1.0)
+        return (1.5 * t - 2.5) * t * t + 1.0;
+    if (t < 2.0)
+        return ((-0.5 * t + 2.5) * t - 4.0) * t + 2.0;
+    return 0.0;
+}
+
 
 // Lanczos window of `a` lobes: sinc(t) sinc(t / a). Exactly 1 at 0 and 0 at the other
 // integers, so that it interpolates bit for bit (sin(pi n) is not exactly 0 in floating
@@ -643,29 +740,7 @@ void run_axes(const ConstPlaneView& src, const PlaneView& dst, const AxisTaps& a
     }
 }
 
-bool check_planes(const ConstPlaneView& src, const PlaneView& dst, std::string& err)
-{
-    if (!src.data || !dst.data || src.width <= 0 || src.height <= 0 || dst.width <= 0
-        || dst.height <= 0) {
-        err = "empty plane";
-        return false;
-    }
-    if (src.nchannels != dst.nchannels || src.nchannels <= 0) {
-        err = format("channel counts differ ({} vs {})", src.nchannels, dst.nchannels);
-        return false;
-    }
-    return true;
-}
 
-bool check_map(const AxisMap& m, std::string& err)
-{
-    if (!(m.src_size > 0.0 && m.dst_size > 0.0 && std::isfinite(m.src_size / m.dst_size)
-          && std::isfinite(m.dst_origin) && std::isfinite(m.src_origin))) {
-        err = "bad axis map (sizes must be finite and > 0)";
-        return false;
-    }
-    return true;
-}
 
 bool check_options(const ResampleOptions& o, std::string& err)
 {
@@ -843,180 +918,14 @@ bool reduce_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisMap
     return true;
 }
 
-bool enlarge_depth_aware_plane(const ConstPlaneView& low, int low_depth_channel,
-                               const ConstPlaneView& full_depth, const PlaneView& dst,
-                               const AxisMap& mx, const AxisMap& my,
-                               const DepthAwareOptions& opts, std::string& err, int nthreads)
-{
-    if (!check_planes(low, dst, err) || !check_map(mx, err) || !check_map(my, err))
-        return false;
-    if (low_depth_channel < 0 || low_depth_channel >= low.nchannels) {
-        err = "the low-resolution layer has no depth channel (Z)";
-        return false;
-    }
-    if (!full_depth.data || full_depth.nchannels != 1 || full_depth.width != dst.width
-        || full_depth.height != dst.height) {
-        err = "the full-resolution depth must be one channel of the destination's size";
-        return false;
-    }
-    if (!(opts.depth_tolerance >= 0.0f && opts.depth_tolerance <= 10.0f)
-        || !(opts.sigma_depth > 0.0f && opts.sigma_depth <= 10.0f)) {
-        err = format("depth_tolerance {} must be within 0..10 and sigma_depth {} within (0, 10]",
-                     opts.depth_tolerance, opts.sigma_depth);
-        return false;
-    }
-    const int nc = low.nchannels, zc = low_depth_channel;
-    const bool pcf = opts.method == DepthAwareMethod::PCF;
-    const int reach = pcf ? 2 : 4;  // footprint texels per axis
-    // Per output column and row: the footprint's first texel and weights (bilinear for
-    // PCF, cubic B-spline for joint bilateral), indices clamped at the layer's edges.
-    struct Footprint {
-        int idx[4];
-        double w[4];
-    };
-    auto footprints = [&](int n_dst, int n_src, const AxisMap& m) {
-        std::vector<Footprint> f(static_cast<size_t>(n_dst));
-        for (int i = 0; i < n_dst; ++i) {
-            const double u = m.source(i);
-            const int base = int(std::floor(u)) - (pcf ? 0 : 1);
-            for (int k = 0; k < reach; ++k) {
-                const int n   = base + k;
-                f[size_t(i)].idx[k] = std::clamp(n, 0, n_src - 1);
-                f[size_t(i)].w[k]   = pcf ? tent(n - u) : bspline(n - u);
-            }
-        }
-        return f;
-    };
-    const std::vector<Footprint> fx = footprints(dst.width, low.width, mx);
-    const std::vector<Footprint> fy = footprints(dst.height, low.height, my);
-    const double tol = opts.depth_tolerance, sz = opts.sigma_depth;
-
-    parallel_for_chunks(0, dst.height, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        std::vector<double> acc(static_cast<size_t>(nc));
-        for (int y = int(y0); y < int(y1); ++y) {
-            const Footprint& ry = fy[size_t(y)];
-            for (int x = 0; x < dst.width; ++x) {
-                const Footprint& rx = fx[size_t(x)];
-                float* o        = dst.row(y) + size_t(x) * size_t(nc);
-                const double zf = full_depth.row(y)[x];
-                std::fill(acc.begin(), acc.end(), 0.0);
-                if (std::isnan(zf)) {
-                    std::fill_n(o, nc, 0.0f);
-                    continue;
-                }
-                double total = 0.0, spatial = 0.0, best_dz = std::numeric_limits<double>::infinity();
-                const float* best = nullptr;
-                for (int b = 0; b < reach; ++b) {
-                    if (ry.w[b] == 0.0)
-                        continue;
-                    const float* row = low.row(ry.idx[b]);
-                    for (int a = 0; a < reach; ++a) {
-                        const double ws = rx.w[a] * ry.w[b];
-                        if (ws == 0.0)
-                            continue;
-                        const float* p  = row + size_t(rx.idx[a]) * size_t(nc);
-                        const double zl = p[zc];
-                        double w        = 0.0;
-                        if (pcf) {
-                            // The depth test, as a shadow map's: the texel is in front of
-                            // (or at) the pixel's surface.
-                            w = zl <= zf + tol * std::abs(zf) ? ws : 0.0;
-                        } else {
-                            const double dz = zl == zf ? 0.0 : std::abs(zl - zf);
-                            const double d  = dz / (sz * std::max(std::abs(zf), 1e-12));
-                            w               = std::isfinite(d) ? ws * std::exp(-0.5 * d * d) : 0.0;
-                            spatial += ws;
-                            if (dz < best_dz) {
-                                best_dz = dz;
-                                best    = p;
-                            }
-                        }
-                        if (w == 0.0)
-                            continue;
-                        total += w;
-                        for (int c = 0; c < nc; ++c)
-                            acc[size_t(c)] += w * double(p[c]);
-                    }
-                }
-                if (pcf) {
-                    for (int c = 0; c < nc; ++c)
-                        o[c] = float(acc[size_t(c)]);
-                } else if (total > 1e-6 * spatial && total > 0.0) {
-                    for (int c = 0; c < nc; ++c)
-                        o[c] = float(acc[size_t(c)] / total);
-                } else if (best) {
-                    std::copy_n(best, nc, o);
-                } else {
-                    std::fill_n(o, nc, 0.0f);
-                }
-            }
-        }
-    });
-    return true;
-}
 
 // --- ImageBuf ---------------------------------------------------------------------------
 
 namespace {
 
-bool check_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* what)
-{
-    if (!src.initialized()) {
-        dst.errorfmt("{}: the source image is empty", what);
-        return false;
-    }
-    if (src.deep()) {
-        dst.errorfmt("{}: deep images cannot be resampled; flatten them first", what);
-        return false;
-    }
-    if (src.spec().depth > 1) {
-        dst.errorfmt("{}: volume images are not supported", what);
-        return false;
-    }
-    return true;
-}
 
-// A float copy with contiguous local pixels, unless `src` is one.
-const OIIO::ImageBuf& contiguous_float(const OIIO::ImageBuf& src, OIIO::ImageBuf& holder)
-{
-    const OIIO::ImageBuf& f = detail::float_source(src, holder);
-    const auto px = OIIO::stride_t(sizeof(float)) * f.nchannels();
-    if (f.pixel_stride() == px && f.scanline_stride() == px * f.spec().width)
-        return f;
-    holder.copy(src, OIIO::TypeFloat);
-    return holder;
-}
 
-ConstPlaneView view_of(const OIIO::ImageBuf& f)
-{
-    const OIIO::ROI r = f.roi();
-    return ConstPlaneView(static_cast<const float*>(f.pixeladdr(r.xbegin, r.ybegin, r.zbegin)),
-                          r.width(), r.height(), f.nchannels(),
-                          size_t(r.width()) * size_t(f.nchannels()));
-}
 
-// `dst` = a float image like `like` over `data`, display window `full`; its pixels as a plane.
-PlaneView make_output(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const OIIO::ROI& data,
-                      const OIIO::ROI& full)
-{
-    OIIO::ImageSpec spec = like;
-    spec.set_format(OIIO::TypeFloat);
-    spec.channelformats.clear();
-    spec.x = data.xbegin, spec.y = data.ybegin;
-    spec.width = data.width(), spec.height = data.height();
-    spec.full_x = full.xbegin, spec.full_y = full.ybegin;
-    spec.full_width = full.width(), spec.full_height = full.height();
-    // A tiled source's tile size may not suit the new size; the writer picks its own.
-    spec.tile_width = spec.tile_height = 0;
-    detail::reset_uninitialised(dst, spec);
-    PlaneView p;
-    p.data       = static_cast<float*>(dst.pixeladdr(data.xbegin, data.ybegin));
-    p.width      = data.width();
-    p.height     = data.height();
-    p.nchannels  = spec.nchannels;
-    p.row_stride = size_t(p.width) * size_t(p.nchannels);
-    return p;
-}
 
 // Pixels [begin, end) scaled by k about 0: the pixels the scaled interval touches.
 std::pair<int, int> scaled(int begin, int end, double k)
@@ -1226,48 +1135,5 @@ bool resample(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int width, int hei
                            });
 }
 
-bool enlarge_depth_aware(OIIO::ImageBuf& dst, const OIIO::ImageBuf& low,
-                         const OIIO::ImageBuf& full_depth, double factor,
-                         const DepthAwareOptions& opts, int nthreads)
-{
-    const char* what = "enlarge_depth_aware";
-    if (!check_image(dst, low, what) || !check_image(dst, full_depth, what))
-        return false;
-    if (!(factor >= 1.0 && factor <= 256.0)) {
-        dst.errorfmt("{}: factor {} is outside 1..256", what, factor);
-        return false;
-    }
-    const int zc = find_channels(low.spec()).z;
-    if (zc < 0) {
-        dst.errorfmt("{}: the low-resolution layer has no depth channel (Z)", what);
-        return false;
-    }
-    const int fz = full_depth.nchannels() == 1 ? 0 : find_channels(full_depth.spec()).z;
-    if (fz < 0) {
-        dst.errorfmt("{}: the full-resolution image has no depth channel (Z)", what);
-        return false;
-    }
-    OIIO::ImageBuf holder;
-    const OIIO::ImageBuf& in = contiguous_float(low, holder);
-    const OIIO::ROI data     = full_depth.roi();
-    // The full-resolution depth as one contiguous plane.
-    std::vector<float> depth(size_t(data.width()) * size_t(data.height()));
-    full_depth.get_pixels(OIIO::ROI(data.xbegin, data.xend, data.ybegin, data.yend, data.zbegin,
-                                    data.zbegin + 1, fz, fz + 1),
-                          OIIO::TypeFloat, depth.data());
-    const ConstPlaneView zplane(depth.data(), data.width(), data.height(), 1, size_t(data.width()));
-    const OIIO::ImageSpec like = in.spec();
-    const PlaneView out        = make_output(dst, like, data, full_depth.roi_full());
-    std::string err;
-    if (!enlarge_depth_aware_plane(view_of(in), zc, zplane, out,
-                                   AxisMap::factor(factor, data.xbegin, like.x),
-                                   AxisMap::factor(factor, data.ybegin, like.y), opts, err,
-                                   nthreads)) {
-        dst.reset();
-        dst.errorfmt("{}: {}", what, err);
-        return false;
-    }
-    return true;
-}
 
 }  // namespace bokeh
