@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Whole-process time of --defocus over a frame sequence against oiiotool copying the same
-# sequence (read + write), 2 threads, runs interleaved so the machine's drift falls on all
+# sequence (read + write), 2 threads, wall and CPU seconds, runs interleaved so the machine's drift falls on all
 # of them alike; prints each run and the medians (docs/io.md, "Sequences at I/O speed").
 #
 #   tools/bokeh-bench/sequence_vs_oiiotool.sh [BOKEHTOOL] [DIR] [REPS] [FRAMES]
@@ -23,14 +23,16 @@ if [[ ! -e in.$(printf %04d "$frames").exr ]]; then
   echo "making $frames frames in $dir"
   "$bokehtool" --frames "1-$frames" --scene "lights:seed=#" -o:compression=zip in.#.exr
 fi
-declare -A times
-run() {  # name command...
+declare -A times cpus
+run() {  # name command...: wall and CPU (user + sys) seconds of the whole process
   local name=$1; shift
-  local t0 t1
-  t0=$(date +%s.%N); "$@"; t1=$(date +%s.%N)
-  local t; t=$(echo "$t1 - $t0" | bc)
+  local out; out=$(mktemp)
+  /usr/bin/time -f '%e %U %S' -o "$out" "$@"
+  local t c
+  read -r t c < <(awk '{print $1, $2 + $3}' "$out"); rm -f "$out"
   times[$name]+="$t "
-  printf '%-10s %6.2f s   (load %s)\n' "$name" "$t" "$(cut -d' ' -f1 /proc/loadavg)"
+  cpus[$name]+="$c "
+  printf '%-10s %6.2f s wall %6.2f s CPU   (load %s)\n' "$name" "$t" "$c" "$(cut -d' ' -f1 /proc/loadavg)"
 }
 for rep in $(seq "$reps"); do
   run oiiotool  oiiotool --threads 2 --frames "1-$frames" in.#.exr -o copy/out.#.exr
@@ -45,3 +47,7 @@ o=$(printf %.2f "$(echo "${times[oiiotool]}" | median)")
 d=$(printf %.2f "$(echo "${times[defocus]}" | median)")
 p=$(printf %.2f "$(echo "${times[parallel]}" | median)")
 echo "medians of $reps: oiiotool copy $o s; --defocus $d s ($(echo "scale=2; $d / $o" | bc)x); --defocus --parallel-frames $p s ($(echo "scale=2; $p / $o" | bc)x)"
+oc=$(printf %.2f "$(echo "${cpus[oiiotool]}" | median)")
+dc=$(printf %.2f "$(echo "${cpus[defocus]}" | median)")
+pc=$(printf %.2f "$(echo "${cpus[parallel]}" | median)")
+echo "CPU medians: oiiotool copy $oc s; --defocus $dc s ($(echo "scale=2; $dc / $oc" | bc)x); --defocus --parallel-frames $pc s ($(echo "scale=2; $pc / $oc" | bc)x)"
