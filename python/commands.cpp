@@ -179,8 +179,13 @@ std::vector<std::shared_ptr<OIIO::ImageBuf>> run_command(const std::string& func
             ctx.error = "failed with an unknown exception";
         }
     }
-    for (const std::string& m : messages)
-        warn(function + ": " + std::string(OIIO::Strutil::strip(m)));
+    // The warnings among the command's messages (bokehtool -v prints them all); the rest
+    // (what was made, how long it took) is for the command line's verbose mode.
+    for (const std::string& m : messages) {
+        const std::string text(OIIO::Strutil::strip(m));
+        if (OIIO::Strutil::starts_with(text, "warning:"))
+            warn(function + ": " + text);
+    }
     if (!ok)
         throw std::runtime_error(error_text(function, ctx.error.empty() ? "failed (no reason given)"
                                                                         : ctx.error));

@@ -254,8 +254,9 @@ PYBIND11_MODULE(openbokeh, m)
                 throw py::value_error(error_text("defocus", err));
             if (!bokeh::defocus_options_from(values, in[0].buf->spec(), opts, err))
                 throw py::value_error(error_text("defocus", err));
-            if (values.get_string("output") != "image") {
-                // The diagnostics (coc, focalplane, layers): the command makes them.
+            if (values.get_string("output") != "image" || values.get_string("method") == "truth") {
+                // The diagnostics (coc, focalplane, layers) and the thin-lens truth of a deep
+                // image (truth.h): the command makes them.
                 auto out = run_command("defocus", cmd, in, {}, std::move(values), threads);
                 return py::make_tuple(result_of(out.at(0), in), py::none());
             }
@@ -285,7 +286,8 @@ PYBIND11_MODULE(openbokeh, m)
                    "(A,) Z, as bokehtool --defocus:OPTIONS.\n\n"
                    "The focal length and film back come from the image's metadata (the scenes "
                    "record them) unless given. report: a DefocusReport (the method, its layers, "
-                   "the CoC range); None for the diagnostic outputs (output=coc|focalplane|layers). "
+                   "the CoC range); None for the diagnostic outputs (output=coc|focalplane|layers) and "
+                   "for method=truth (the thin-lens rays through a deep image, spp= rays a pixel). "
                    "The result holds R, G, B(, A) premultiplied over the grown data window.\n")
                    + kCommon)
             .c_str());
@@ -411,6 +413,27 @@ PYBIND11_MODULE(openbokeh, m)
                    + scenes)
             .c_str());
     m.def("scene_names", &bokeh::scene_names, "The names scene() takes.");
+
+    // --- optics (optics.h) ------------------------------------------------------------
+    m.def(
+        "bokeh",
+        [](const py::object& coc, int threads, const py::kwargs& kw) {
+            const bokeh::Command& cmd = Commands::get().find("--bokeh");
+            if (py::isinstance<py::bool_>(coc) || py::isinstance<py::str>(coc))
+                throw py::type_error("bokeh: coc must be a number (the signed CoC in pixels)");
+            bokeh::OptionValues values = options_from_kwargs("bokeh", cmd, kw);
+            auto out = run_command("bokeh", cmd, {}, { option_text("bokeh", "coc", coc) },
+                                   std::move(values), threads);
+            return result_of(out.at(0), {}, true);
+        },
+        py::arg("coc"), py::kw_only(), py::arg("threads") = 0,
+        doc_of("--bokeh",
+               "bokeh(coc, **options): the lens's point-spread function for a signed CoC in "
+               "pixels (negative: in front of focus), with the lens character options (lens=, "
+               "diffraction=, onion=, field=, ...), as bokehtool --bokeh:OPTIONS COC; sheet=True "
+               "draws defocus columns by field rows, map=True the beam map. Returns an "
+               "OpenImageIO.ImageBuf (to_array() makes it an array).")
+            .c_str());
 
     // --- metrics (metrics.h) -----------------------------------------------------------
     m.def(

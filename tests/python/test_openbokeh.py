@@ -476,3 +476,53 @@ def test_examples_run(tmp, example):
     assert written, "the example wrote nothing"
     for f in written:
         assert oiio.ImageBuf(os.path.join(out, f)).spec().width > 0
+
+
+# --- optics -----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("coc, options", [
+    (31, {}),
+    (-24.5, {"lens": "achromat", "diffraction": "exact"}),
+    (40, {"kernel": "polygon", "blades": 7, "lens": "uncorrected", "onion": 0.5}),
+    (30, {"lens": "achromat", "sheet": True}),
+])
+def test_bokeh_psf_matches_bokehtool(tmp, coc, options):
+    path = fresh(tmp, "psf.exr")
+    tool(f"--bokeh{modifiers(options)}", coc, "-o", path)
+    buf = ob.bokeh(coc, **options)
+    assert isinstance(buf, oiio.ImageBuf)
+    got = ob.to_array(buf)
+    want = pixels(path)
+    assert got.shape == want.shape
+    assert np.array_equal(got, want)
+    if not options.get("sheet"):
+        # A PSF holds unit energy in each colour channel (docs/optics.md).
+        assert np.allclose(got[..., :3].sum(axis=(0, 1)), 1.0, atol=1e-4)
+
+
+def test_bokeh_psf_refusals():
+    with pytest.raises(ValueError, match="bokeh"):
+        ob.bokeh(20, lens="nosuchlens")
+    with pytest.raises(ValueError, match="bokeh"):
+        ob.bokeh(20, kernal="disk")
+    with pytest.raises(TypeError):
+        ob.bokeh("20")
+
+
+def test_defocus_truth_of_a_deep_image_matches_bokehtool(tmp, scene_file):
+    path = fresh(tmp, "truth.exr")
+    tool(scene_file, "--deepen", "--defocus:method=truth:spp=8:focus=6:fstop=2", "-o", path)
+    deep = ob.deepen(ob.read_image(scene_file))
+    result, report = ob.defocus(deep, method="truth", spp=8, focus=6, fstop=2)
+    assert report is None
+    assert np.array_equal(ob.to_array(result), pixels(path))
+    with pytest.raises(RuntimeError, match="deep"):
+        ob.defocus(ob.read_image(scene_file), method="truth")
+
+
+def test_deep_defocus_matches_bokehtool(tmp, scene_file):
+    path = fresh(tmp, "deepdefocus.exr")
+    tool(scene_file, "--deepen", "--defocus:focus=6:fstop=2", "-o", path)
+    result, report = ob.defocus(ob.deepen(ob.read_image(scene_file)), focus=6, fstop=2)
+    assert report is not None and report.max_coc_px > 0
+    assert np.array_equal(ob.to_array(result), pixels(path))
