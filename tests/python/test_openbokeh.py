@@ -465,7 +465,7 @@ def test_calls_from_several_threads_at_once_give_each_its_own_result(scene_array
 
 # --- the examples ------------------------------------------------------------------------
 
-@pytest.mark.parametrize("example", ["defocus_scene.py", "deep_merge_flatten.py"])
+@pytest.mark.parametrize("example", ["defocus_scene.py", "deep_merge_flatten.py", "lens_bokeh.py"])
 def test_examples_run(tmp, example):
     src = os.path.join(os.environ["BOKEH_SOURCE_DIR"], "examples", "python", example)
     out = os.path.join(tmp, "example_" + example[:-3])
