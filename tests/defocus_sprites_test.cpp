@@ -506,6 +506,19 @@ TEST(DefocusSprites, DeepInputGetsSprites)
     OIIO::ImageBuf as_deep = run(deep, deep_out), flat;
     ASSERT_TRUE(flatten(flat, as_deep, {}));
     EXPECT_NEAR(channel_sum(flat, 0) / in, 1.0, 1e-4) << "the deep result's flatten";
+    // Pseudo-high resolution from deep input: twice the size, the same radiance (sum / 4);
+    // a deep result is not supersampled.
+    DefocusOptions fine = o;
+    fine.supersample    = 2;
+    const OIIO::ImageBuf big = run(deep, fine, &rep);
+    EXPECT_EQ(big.roi().width(), 2 * out.roi().width());
+    EXPECT_EQ(big.spec().full_width, 2 * deep.spec().full_width);
+    EXPECT_EQ(rep.sprites, 1);
+    EXPECT_NEAR(channel_sum(big, 0) / 4.0 / in, 1.0, 1e-4) << "supersample 2";
+    fine.deep_output = true;
+    OIIO::ImageBuf refused;
+    EXPECT_FALSE(defocus(refused, deep, fine));
+    EXPECT_NE(refused.geterror().find("supersample"), std::string::npos) << refused.geterror();
 }
 
 TEST(DefocusSprites, HybridAgainstTheScatterReference)
