@@ -89,13 +89,10 @@ Plane reduce_region(const OIIO::ROI& low, int gx, int gy, int s, int nc, int nth
     return p;
 }
 
-// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
-// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
-inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
-                   float out[4])
+// Bilinear read of plane `p` at (u, v) in its pixels (pixel centres at integers, clamped
+// to the plane); 4 channels into `out`. Exact (a copy) on a pixel centre.
+inline void bilinear(const Plane& p, float u, float v, float out[4])
 {
-    const float u  = (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin);
-    const float v  = (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin);
     const float fu = std::floor(u), fv = std::floor(v);
     const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
     const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
@@ -113,24 +110,22 @@ inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, 
     }
 }
 
-// Bilinear read of plane `p` as `sample`, at sub-pixel (sx, sy) of `up` x `up` in
-// full-resolution pixel (x, y): the enlargement of pseudo-high resolution.
+// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
+// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
+inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
+                   float out[4])
+{
+    bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), out);
+}
+
+// The same at the centre of sub-pixel (sx, sy) of `up` x `up` in full-resolution pixel
+// (x, y): the enlargement of pseudo-high resolution.
 inline void sample_sub(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y, int up,
                        int sx, int sy, float out[4])
 {
-    const float u  = (float(x - gx) + (float(sx) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.xbegin);
-    const float v  = (float(y - gy) + (float(sy) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.ybegin);
-    const float fu = std::floor(u), fv = std::floor(v);
-    const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
-    const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
-    const float tx = u - fu, ty = v - fv;
-    const size_t nc = size_t(p.nc);
-    const float *a = p.row(j0) + size_t(i0) * nc, *b = p.row(j0) + size_t(i1) * nc;
-    const float *c = p.row(j1) + size_t(i0) * nc, *d = p.row(j1) + size_t(i1) * nc;
-    for (int k = 0; k < 4; ++k) {
-        const float top = a[k] + (b[k] - a[k]) * tx, bottom = c[k] + (d[k] - c[k]) * tx;
-        out[k]          = top + (bottom - top) * ty;
-    }
+    bilinear(p, (float(x - gx) + (float(sx) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + (float(sy) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.ybegin), out);
 }
 
 // The aperture at diameter |coc_px| / s (and the aspect), as exact weights. In front of
