@@ -28,8 +28,9 @@ demo: build
 	@mkdir -p out
 	$(BOKEHTOOL) -v --scene lights -o out/sharp.exr --defocus:focus=6:fstop=2 -o out/demo.exr --ch R,G,B -o out/demo.png
 	$(BOKEHTOOL) out/sharp.exr --defocus:focus=6:fstop=2:output=focalplane -o out/focalplane.png
+	$(BOKEHTOOL) -v out/sharp.exr --defocus:focus=6:fstop=2:lens=achromat:diffraction=exact:onion=0.15 --ch R,G,B -o out/demo_lens.png
 	$(BOKEHTOOL) --bokeh:lens=achromat:fstop=1.4:diffraction=exact:onion=0.15:catseye=0.5:sheet=1 60 -o out/bokeh_sheet.png
-	@echo "demo: wrote out/sharp.exr (the scene, RGBA+Z), out/demo.exr + out/demo.png (its depth of field), out/focalplane.png, out/bokeh_sheet.png (an achromat's bokeh across defocus and field)"
+	@echo "demo: wrote out/sharp.exr (the scene, RGBA+Z), out/demo.exr + out/demo.png (its depth of field), out/demo_lens.png (the same with an achromat's lens character on the highlights), out/focalplane.png, out/bokeh_sheet.png (an achromat's bokeh across defocus and field)"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

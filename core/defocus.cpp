@@ -89,13 +89,10 @@ Plane reduce_region(const OIIO::ROI& low, int gx, int gy, int s, int nc, int nth
     return p;
 }
 
-// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
-// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
-inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
-                   float out[4])
+// Bilinear read of plane `p` at (u, v) in its pixels (pixel centres at integers, clamped
+// to the plane); 4 channels into `out`. Exact (a copy) on a pixel centre.
+inline void bilinear(const Plane& p, float u, float v, float out[4])
 {
-    const float u  = (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin);
-    const float v  = (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin);
     const float fu = std::floor(u), fv = std::floor(v);
     const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
     const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
@@ -111,6 +108,24 @@ inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, 
         const float top = a[k] + (b[k] - a[k]) * tx, bottom = c[k] + (d[k] - c[k]) * tx;
         out[k]          = top + (bottom - top) * ty;
     }
+}
+
+// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
+// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
+inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
+                   float out[4])
+{
+    bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), out);
+}
+
+// The same at the centre of sub-pixel (sx, sy) of `up` x `up` in full-resolution pixel
+// (x, y): the enlargement of pseudo-high resolution.
+inline void sample_sub(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y, int up,
+                       int sx, int sy, float out[4])
+{
+    bilinear(p, (float(x - gx) + (float(sx) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + (float(sy) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.ybegin), out);
 }
 
 // The aperture at diameter |coc_px| / s (and the aspect), as exact weights. In front of
@@ -377,6 +392,7 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     std::vector<int> cols;
     const std::vector<std::vector<uint8_t>> tiles = layer_tiles(f, m, o, cols);
     const int gx = f.out.xbegin, gy = f.out.ybegin;
+    const int up = f.up;  // `out` is over f.out scaled by up (per-layer planes: up is 1)
     for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
         const float c = m.coc_px[size_t(k)];
         const int s   = m.reduction[size_t(k)], t = kTile * s;
@@ -417,16 +433,34 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
                 divide_by_visibility(layer);
             from_iris_space(layer, f.iris);
             Plane& target = per_layer ? (*per_layer)[size_t(k)] : out;
-            for (int y = draw.ybegin; y < draw.yend; ++y) {
-                float* dst = target.row(y - gy) + size_t(draw.xbegin - gx) * 4;
-                for (int x = draw.xbegin; x < draw.xend; ++x, dst += 4) {
-                    float l[4];
-                    sample(layer, need, gx, gy, s, x, y, l);
-                    const float behind = 1.0f - l[3];
-                    for (int c4 = 0; c4 < 4; ++c4)
-                        dst[c4] = l[c4] + behind * dst[c4];
+            if (up == 1) {
+                for (int y = draw.ybegin; y < draw.yend; ++y) {
+                    float* dst = target.row(y - gy) + size_t(draw.xbegin - gx) * 4;
+                    for (int x = draw.xbegin; x < draw.xend; ++x, dst += 4) {
+                        float l[4];
+                        sample(layer, need, gx, gy, s, x, y, l);
+                        const float behind = 1.0f - l[3];
+                        for (int c4 = 0; c4 < 4; ++c4)
+                            dst[c4] = l[c4] + behind * dst[c4];
+                    }
                 }
+                return;
             }
+            // Pseudo-high resolution: the up x up output pixels of each pixel, each its own
+            // bilinear read (the layer is zero past `need`'s margin, so `draw` still holds
+            // every output pixel the layer touches).
+            for (int y = draw.ybegin; y < draw.yend; ++y)
+                for (int sy = 0; sy < up; ++sy) {
+                    float* dst = target.row((y - gy) * up + sy) + size_t(draw.xbegin - gx) * size_t(up) * 4;
+                    for (int x = draw.xbegin; x < draw.xend; ++x)
+                        for (int sx = 0; sx < up; ++sx, dst += 4) {
+                            float l[4];
+                            sample_sub(layer, need, gx, gy, s, x, y, up, sx, sy, l);
+                            const float behind = 1.0f - l[3];
+                            for (int c4 = 0; c4 < 4; ++c4)
+                                dst[c4] = l[c4] + behind * dst[c4];
+                        }
+                }
         });
         // Lens character: the layer's highlights, before any nearer layer hides them.
         if (f.sprites)
@@ -571,7 +605,7 @@ void fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads
         for (int y = int(y0); y < int(y1); ++y) {
             float* d = out.row(y);
             for (int x = 0; x < out.w; ++x, d += 4) {
-                const int64_t i = f.source(f.out.xbegin + x, f.out.ybegin + y);
+                const int64_t i = f.source(f.out.xbegin + x / f.up, f.out.ybegin + y / f.up);
                 // Only pixels with something behind them in depth can have lost it.
                 if (i < 0 || f.coc[size_t(i)] >= farthest)
                     continue;
@@ -872,6 +906,19 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
         err = format("reference step {} px is outside 1/64..8", o.reference_step_px);
         return false;
     }
+    if (o.supersample != 1 && o.supersample != 2) {
+        err = format("supersample {} is not 1 or 2", o.supersample);
+        return false;
+    }
+    if (o.supersample > 1 && o.method == DefocusMethod::Gather) {
+        err = "supersample enlarges layers as they are composited; the gather method has none (use "
+              "method=layers, auto or reference)";
+        return false;
+    }
+    if (o.supersample > 1 && o.deep_output) {
+        err = "supersample gives a flat image; a deep result is not supersampled";
+        return false;
+    }
     return check_sprite_options(o, err);
 }
 
@@ -929,6 +976,7 @@ bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, Defoc
     });
     f.data   = f.img.roi;
     f.border = o.border;
+    f.up     = o.supersample;
     if (o.depth_dilate_px > 0)
         dilate_nearest(f.coc, f.data.width(), f.data.height(), o.depth_dilate_px, nthreads);
     if (o.bloom_gain != 1.0f)
@@ -1047,12 +1095,15 @@ namespace {
 void write_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Plane& out, int nthreads)
 {
     const int nc = f.img.has_alpha ? 4 : 3;
-    reset_uninitialised(dst, derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
-                                               : std::vector<std::string>{ "R", "G", "B" },
-                           f.out));
+    const OIIO::ROI region = scaled_roi(f.out, f.up);
+    OIIO::ImageSpec spec   = derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
+                                                              : std::vector<std::string>{ "R", "G", "B" },
+                                          region);
+    scale_display_window(spec, src.spec(), f.up);
+    reset_uninitialised(dst, spec);
     parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
         for (int y = int(y0); y < int(y1); ++y) {
-            float* d       = static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y));
+            float* d       = static_cast<float*>(dst.pixeladdr(region.xbegin, region.ybegin + y));
             const float* s = out.row(y);
             for (int x = 0; x < out.w; ++x)
                 for (int c = 0; c < nc; ++c)
@@ -1080,7 +1131,7 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         return false;
     }
     rep.method = opts.method == DefocusMethod::Auto ? DefocusMethod::Layers : opts.method;
-    Plane out(f.out.width(), f.out.height(), 4);
+    Plane out(f.out.width() * f.up, f.out.height() * f.up, 4);
     std::fill_n(out.px.get(), out.size(), 0.0f);
     switch (rep.method) {
     case DefocusMethod::Gather:
@@ -1114,8 +1165,8 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         fill_disocclusions(out, f, rep.max_coc_px, nthreads);
     report_sprites(rep, f.sprites.get());
     rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}", method_name(rep.method),
-                         rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width(),
-                         f.out.height(),
+                         rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width() * f.up,
+                         f.out.height() * f.up,
                          rep.nonfinite.total() ? format(", {} non-finite values replaced",
                                                         rep.nonfinite.total())
                                                : std::string(),
@@ -1133,6 +1184,7 @@ bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, c
     DefocusOptions o  = opts;
     o.lens_character  = false;  // every pixel is scattered here; none is taken out
     o.method          = DefocusMethod::Reference;
+    o.supersample     = 1;      // at the frame's resolution
     DefocusReport rep;
     Frame f;
     std::string err;

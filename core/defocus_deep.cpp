@@ -175,6 +175,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     f.data     = tidy.roi();
     f.img.roi  = f.data;
     f.border   = o.border;
+    f.up       = o.supersample;
     f.layer_rgba.assign(K, std::vector<float>(size_t(npx) * 4, 0.0f));
     f.layer_vis.assign(K, std::vector<float>(size_t(npx), 1.0f));
     std::vector<double> rung_depth(K, 0.0);
@@ -284,6 +285,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                         sp.at     = size_t(p);
                         sp.layer  = int(k);
                         sp.coc_px = pc.coc;
+                        sp.counted = side == 0 || !(1.0f - upper > 0.0f);  // the piece once
                         for (int c = 0; c < 3; ++c)
                             sp.rgb[c] = T[k] * w * share * pc.rgba[c];
                         found.push_back(sp);
@@ -338,7 +340,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         }
         set->sprites = std::move(highlights);
         PsfCache cache(lens, nthreads);
-        if (!fetch_sprite_psfs(*set, cache, FieldFrame(src.spec(), lens), nthreads, err))
+        if (!fetch_sprite_psfs(*set, cache, FieldFrame(src.spec(), lens), o.supersample, nthreads, err))
             return fail(err);
         set->seconds     = std::chrono::duration<double>(Clock::now() - t0).count();
         sprite_extent_px = set->extent_px;
@@ -351,17 +353,19 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     rep.layer_reduction = m.reduction;
 
     if (!o.deep_output) {
-        Plane out(f.out.width(), f.out.height(), 4);
+        const OIIO::ROI region = scaled_roi(f.out, f.up);
+        Plane out(region.width(), region.height(), 4);
         std::fill_n(out.px.get(), out.size(), 0.0f);
         composite_layers(out, f, m, o, nthreads);
-        OIIO::ImageSpec fs = derived_spec(src.spec(), { "R", "G", "B", "A" }, f.out);
+        OIIO::ImageSpec fs = derived_spec(src.spec(), { "R", "G", "B", "A" }, region);
+        scale_display_window(fs, src.spec(), f.up);
         fs.deep            = false;
         fs.channelformats.clear();
         reset_uninitialised(dst, fs);
         parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
             for (int y = int(y0); y < int(y1); ++y)
                 std::copy_n(out.row(y), size_t(out.w) * 4,
-                            static_cast<float*>(dst.pixeladdr(f.out.xbegin, f.out.ybegin + y)));
+                            static_cast<float*>(dst.pixeladdr(region.xbegin, region.ybegin + y)));
         });
     } else {
         std::vector<Plane> layers;
@@ -414,7 +418,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     }
     report_sprites(rep, f.sprites.get());
     rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}{}", method_name(rep.method),
-                         rep.min_coc_px, rep.max_coc_px, K, f.out.width(), f.out.height(),
+                         rep.min_coc_px, rep.max_coc_px, K, f.out.width() * f.up, f.out.height() * f.up,
                          o.deep_output ? ", deep" : "",
                          repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string(),
                          sprite_summary(rep));

@@ -28,6 +28,8 @@ struct Sprite {
     int x = 0, y = 0;             // the pixel, full-resolution coordinates
     size_t at = 0;                // its index in the data window (flat frames)
     int layer = -1;               // deep frames: the layer it is drawn in (flat: by membership)
+    bool counted = true;          // deep frames: false for the second layer's part of a piece
+                                  // split between two (the report counts the piece once)
     float coc_px = 0.0f;
     float rgb[3] = { 0, 0, 0 };   // premultiplied colour taken from the pixel
     std::shared_ptr<const Psf> psf[2];
@@ -38,9 +40,10 @@ struct Sprite {
 struct SpriteSet {
     std::vector<Sprite> sprites;
     int64_t candidates = 0;
-    float extent_px   = 0.0f;  // the largest half-size of a sprite's PSFs, px
+    float extent_px   = 0.0f;  // the largest half-size of a sprite's PSFs, frame px
     size_t psfs       = 0;
-    int64_t drawn     = 0;     // sprites drawn, after merging those of a block (per layer)
+    int64_t drawn     = 0;     // sprites drawn, after merging those of a block (one shared
+                               // between two layers counted once)
     double seconds    = 0.0;   // selection, PSFs and (added as they are drawn) scatter
 };
 
@@ -72,6 +75,8 @@ struct Frame {
     std::vector<std::vector<float>> layer_vis;
     // Lens character: the highlights taken out of img (null: off).
     std::shared_ptr<SpriteSet> sprites;
+    // Pseudo-high resolution: the result plane is over `out` scaled by this (1 or 2).
+    int up = 1;
 
     bool deep() const { return !layer_rgba.empty(); }
 
@@ -97,6 +102,22 @@ struct Membership {
     std::vector<uint16_t> lower;   // per data-window pixel (flat frames)
     std::vector<float> upper;
 };
+
+/// `r` with its bounds times `up` (pseudo-high resolution's output region).
+inline OIIO::ROI scaled_roi(OIIO::ROI r, int up)
+{
+    r.xbegin *= up, r.xend *= up, r.ybegin *= up, r.yend *= up;
+    return r;
+}
+
+/// The display window of `spec` set to `like`'s times `up`.
+inline void scale_display_window(OIIO::ImageSpec& spec, const OIIO::ImageSpec& like, int up)
+{
+    spec.full_x      = like.full_x * up;
+    spec.full_y      = like.full_y * up;
+    spec.full_width  = like.full_width * up;
+    spec.full_height = like.full_height * up;
+}
 
 /// Check the options that do not depend on the image. False + `err` naming the option.
 bool check_defocus_options(const DefocusOptions& o, std::string& err);
@@ -152,7 +173,8 @@ bool select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& sp
                     std::string& err);
 
 /// Fetch both PSFs of every sprite from `cache` and set the set's extent. False + `err`.
-bool fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int nthreads,
+/// `up` is the output's resolution over the frame's (2: PSFs at twice the CoC, box-folded).
+bool fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int up, int nthreads,
                        std::string& err);
 
 /// Add the sprites of layer k (share by `m` for flat frames, their own layer for deep

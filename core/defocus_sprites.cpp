@@ -19,8 +19,11 @@
 //   exactly the sprite added into the layer's premultiplied colour (with zero alpha: the
 //   light of a pixel whose coverage the layer already holds); nearer layers then hide it
 //   as they hide the layer. A pixel shared between two layers shares its sprite alike.
+// * Pseudo-high resolution (supersample 2): the sprites are drawn on the output's pixels,
+//   half the frame's, with the lens PSF at the output's CoC and pixel pitch, box-folded
+//   (box_folded) so each sits centred on its frame pixel; the layers are enlarged.
 // Limits: the sprite is drawn pixel by pixel over its PSFs' full squares (no span or
-// running-sum interior, no 2x2 source decimation, no supersampled output); field bins are
+// running-sum interior); field bins are
 // not interpolated (a sprite moving across a 1/8 field bin changes shape at once); the
 // `max_sprites` cut is hard; past the data window (clamp, mirror) the layers repeat the
 // highlight-less pixels, so highlights are not repeated there.
@@ -79,26 +82,47 @@ void bins_around(float c, double& c0, double& c1, double& t)
     t  = l - b0;
 }
 
-// Add `scale` * psf (per channel: rgb[c]) centred on (cx, cy) into rows [y0, y1) of
-// `target` (RGBA over `out`).
-void add_psf(Plane& target, const OIIO::ROI& out, const Psf& psf, int cx, int cy, const float rgb[3],
-             float scale, int y0, int y1)
+// Add `scale` * psf (per channel: rgb[c]) with its top-left pixel at (x0, y0) into rows
+// [band0, band1) of `target` (RGBA over `out`).
+void add_psf(Plane& target, const OIIO::ROI& out, const Psf& psf, int x0, int y0, const float rgb[3],
+             float scale, int band0, int band1)
 {
-    const int hw = psf.width / 2, hh = psf.height / 2;
-    const int top = std::max(cy - hh, y0), bottom = std::min(cy + hh + 1, y1);
-    const int left = std::max(cx - hw, out.xbegin), right = std::min(cx + hw + 1, out.xend);
+    const int top = std::max(y0, band0), bottom = std::min(y0 + psf.height, band1);
+    const int left = std::max(x0, out.xbegin), right = std::min(x0 + psf.width, out.xend);
     if (left >= right)
         return;
     const float k[3] = { rgb[0] * scale, rgb[1] * scale, rgb[2] * scale };
     for (int y = top; y < bottom; ++y) {
         float* d       = target.row(y - out.ybegin) + size_t(left - out.xbegin) * 4;
-        const float* p = psf.rgb.data() + (size_t(y - (cy - hh)) * size_t(psf.width) + size_t(left - (cx - hw))) * 3;
+        const float* p = psf.rgb.data() + (size_t(y - y0) * size_t(psf.width) + size_t(left - x0)) * 3;
         for (int x = left; x < right; ++x, d += 4, p += 3) {
             d[0] += k[0] * p[0];
             d[1] += k[1] * p[1];
             d[2] += k[2] * p[2];
         }
     }
+}
+
+// Pseudo-high resolution at 2x: `psf` convolved with a 2 x 2 box, (width + 1) x (height
+// + 1), its centre on the corner between its pixels (hw, hh) and (hw + 1, hh + 1). A frame
+// pixel covers 2 x 2 output pixels and its centre is their common corner, so a sprite is
+// this drawn with pixel (hw, hh) on the frame pixel's top-left output pixel: centred
+// exactly, each channel still summing to 1.
+std::shared_ptr<const Psf> box_folded(const Psf& psf)
+{
+    auto out    = std::make_shared<Psf>();
+    out->width  = psf.width + 1;
+    out->height = psf.height + 1;
+    out->rgb.assign(size_t(out->width) * size_t(out->height) * 3, 0.0f);
+    for (int y = 0; y < psf.height; ++y)
+        for (int x = 0; x < psf.width; ++x)
+            for (int c = 0; c < 3; ++c) {
+                const float v = 0.25f * psf.at(x, y, c);
+                for (int dy = 0; dy < 2; ++dy)
+                    for (int dx = 0; dx < 2; ++dx)
+                        out->rgb[(size_t(y + dy) * size_t(out->width) + size_t(x + dx)) * 3 + size_t(c)] += v;
+            }
+    return out;
 }
 
 }  // namespace
@@ -145,7 +169,8 @@ bool detail::defocus_lens(const DefocusOptions& o, const OIIO::ImageSpec& spec, 
     lens.aspect         = o.aspect;
     lens.fstop          = o.coc.lens.fstop;
     lens.focal_mm       = o.coc.lens.focal_mm;
-    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / std::max(1, width_px);
+    // At pseudo-high resolution the sprites are drawn on the output's finer pixels.
+    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / std::max(1, width_px * o.supersample);
     if (!validate_lens(lens, err)) {
         err = "lens character: " + err;
         return false;
@@ -183,7 +208,7 @@ float detail::sprite_share(const float* rgb, float threshold, float& luminance)
     return smoothstep01(0.5f * (std::log2(luminance / threshold) + 1.0f));
 }
 
-bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int nthreads,
+bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int up, int nthreads,
                                std::string& err)
 {
     // Each sprite's two requests, at their bins' centres (FieldFrame::at snaps the field to
@@ -195,7 +220,7 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
     for (size_t i = 0; i < set.sprites.size(); ++i) {
         Sprite& s = set.sprites[i];
         double c0, c1, t;
-        bins_around(s.coc_px, c0, c1, t);
+        bins_around(s.coc_px * float(up), c0, c1, t);  // the CoC in output pixels
         s.weight[0]    = float(1.0 - t);
         s.weight[1]    = float(t);
         requests[i][0] = field.at(s.x, s.y, c0);
@@ -219,6 +244,11 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
             err = errors[i];
             return false;
         }
+    if (up == 2)  // each PSF once with its 2 x 2 box (box_folded), in parallel
+        parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t b, int64_t e) {
+            for (int64_t i = b; i < e; ++i)
+                todo[size_t(i)]->second = box_folded(*todo[size_t(i)]->second);
+        });
     std::map<const Psf*, int> ids;
     for (size_t i = 0; i < set.sprites.size(); ++i) {
         Sprite& s = set.sprites[i];
@@ -227,7 +257,8 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
                 continue;
             const PsfRequest& r = requests[i][size_t(j)];
             s.psf[j]            = wanted.at(Key(r.coc_px, r.field_x, r.field_y));
-            set.extent_px = std::max(set.extent_px, float(std::max(s.psf[j]->width, s.psf[j]->height) / 2));
+            const int side      = std::max(s.psf[j]->width, s.psf[j]->height);
+            set.extent_px = std::max(set.extent_px, up == 1 ? float(side / 2) : std::ceil(0.5f * float(side) / float(up)));
             s.psf_id[j]   = ids.emplace(s.psf[j].get(), int(ids.size())).first->second;
         }
     }
@@ -280,7 +311,7 @@ bool detail::select_sprites(Frame& f, const DefocusOptions& o, const OIIO::Image
         set->sprites.push_back(s);
     }
     PsfCache cache(lens, nthreads);
-    if (!fetch_sprite_psfs(*set, cache, FieldFrame(spec, lens), nthreads, err))
+    if (!fetch_sprite_psfs(*set, cache, FieldFrame(spec, lens), o.supersample, nthreads, err))
         return false;
     set->seconds = seconds_since(t0);
     f.sprites    = std::move(set);
@@ -299,26 +330,31 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         const Psf* psf[2];
         int id[2];
         float rgb[2][3];
+        bool counted;
     };
     std::vector<Drawn> list;
     for (const Sprite& s : f.sprites->sprites) {
         float share;
-        if (s.layer >= 0)
+        bool first;  // the first layer the sprite is drawn in: where the report counts it
+        if (s.layer >= 0) {
             share = s.layer == k ? 1.0f : 0.0f;
-        else {
+            first = s.counted;
+        } else {
             const int lo   = m.lower[s.at];
             const float up = m.upper[s.at];
             share          = lo == k ? 1.0f - up : lo + 1 == k ? up : 0.0f;
+            first          = lo == k || !(1.0f - up > 0.0f);
         }
         if (!(share > 0.0f))
             continue;
         Drawn d;
         d.x = s.x, d.y = s.y;
+        d.counted = first;
         // The seed's decimation (SEEDS.md section 11): sources of a large PSF are drawn once
         // per block of b x b pixels, b the largest power of two up to its width / 32 (at
         // most 8), at the block's brightest-weighted pixel: a shift of at most b / 2 px, a
         // 1/64 of the PSF's width.
-        const int width = s.psf[0]->width;
+        const int width = s.psf[0]->width / f.up;  // in frame pixels
         int b           = 1;
         while (b < 8 && 2 * b * 32 <= width)
             b *= 2;
@@ -352,6 +388,7 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
                                    + 0.0722 * (o.rgb[0][2] + o.rgb[1][2]);
                 const double wgt = std::max(lum, 1e-30);
                 sx += wgt * o.x, sy += wgt * o.y, sw += wgt;
+                d.counted = d.counted || o.counted;
                 if (j > i)
                     for (int p = 0; p < 2; ++p)
                         for (int c = 0; c < 3; ++c)
@@ -364,19 +401,28 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         i = e;
     }
     std::stable_sort(merged.begin(), merged.end(), [](const Drawn& a, const Drawn& b) { return a.y < b.y; });
-    const int reach = int(std::ceil(f.sprites->extent_px));
-    constexpr int kBand = 16;
-    parallel_for_chunks(f.out.ybegin, f.out.yend, kBand, nthreads, [&](int64_t b, int64_t e) {
+    // Drawn in output pixels (f.out scaled by f.up): a PSF's pixel (hw, hh) on the sprite's
+    // pixel (up 1: its centre), or on its top-left output pixel (up 2: box_folded).
+    const int up             = f.up;
+    const OIIO::ROI region   = scaled_roi(f.out, up);
+    const int reach          = int(std::ceil(f.sprites->extent_px)) + 1;  // frame pixels
+    const float scale        = float(up * up);  // radiance: a frame pixel is up^2 output pixels
+    constexpr int kBand      = 16;
+    parallel_for_chunks(region.ybegin, region.yend, kBand, nthreads, [&](int64_t b, int64_t e) {
         const int y0 = int(b), y1 = int(e);
         // Sprites are sorted by y: those within reach of the band.
-        auto first = std::lower_bound(merged.begin(), merged.end(), y0 - reach,
+        auto first = std::lower_bound(merged.begin(), merged.end(), floor_div(y0, up) - reach,
                                       [](const Drawn& d, int y) { return d.y < y; });
-        for (auto it = first; it != merged.end() && it->y < y1 + reach; ++it)
+        for (auto it = first; it != merged.end() && it->y < floor_div(y1, up) + reach + 1; ++it)
             for (int j = 0; j < 2; ++j)
-                if (it->psf[j])
-                    add_psf(target, f.out, *it->psf[j], it->x, it->y, it->rgb[j], 1.0f, y0, y1);
+                if (it->psf[j]) {
+                    const Psf& psf = *it->psf[j];
+                    const int hw = (psf.width - (up - 1)) / 2, hh = (psf.height - (up - 1)) / 2;
+                    add_psf(target, region, psf, it->x * up - hw, it->y * up - hh, it->rgb[j], scale, y0, y1);
+                }
     });
-    f.sprites->drawn += int64_t(merged.size());
+    // A sprite shared between two layers is drawn in both but counted once, in the first.
+    f.sprites->drawn += std::count_if(merged.begin(), merged.end(), [](const Drawn& d) { return d.counted; });
     f.sprites->seconds += seconds_since(t0);
 }
 
@@ -385,7 +431,7 @@ void detail::report_sprites(DefocusReport& rep, const SpriteSet* set)
     rep.lens_character = set != nullptr;
     if (!set)
         return;
-    rep.sprites           = int64_t(set->sprites.size());
+    rep.sprites = std::count_if(set->sprites.begin(), set->sprites.end(), [](const Sprite& s) { return s.counted; });
     rep.sprite_candidates = set->candidates;
     rep.sprites_drawn     = set->drawn;
     rep.sprite_seconds    = set->seconds;
@@ -473,7 +519,7 @@ bool detail::scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, co
                 const Psf& psf  = *psfs.at(it->key);
                 const float* px = f.img.rgba.data() + it->at * 4;
                 // Colour with its channel's PSF, alpha with their mean.
-                add_psf(layer, f.out, psf, it->x, it->y, px, 1.0f, int(y0), int(y1));
+                add_psf(layer, f.out, psf, it->x - psf.width / 2, it->y - psf.height / 2, px, 1.0f, int(y0), int(y1));
                 const int hw = psf.width / 2, hh = psf.height / 2;
                 for (int y = std::max(it->y - hh, int(y0)); y < std::min(it->y + hh + 1, int(y1)); ++y)
                     for (int x = std::max(it->x - hw, f.out.xbegin); x < std::min(it->x + hw + 1, f.out.xend); ++x) {

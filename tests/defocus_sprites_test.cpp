@@ -315,6 +315,139 @@ TEST(DefocusSprites, ExposureRampDoesNotPop)
     EXPECT_LE(hi, 1.33) << "popping";
 }
 
+TEST(DefocusSprites, FocusPullDoesNotPop)
+{
+    // DefocusTemporal.FocusPullDoesNotPop (tests/defocus_test.cpp) with lens character on:
+    // its 160 x 90 textured slanted plane (1 / Z linear in x from 1 m to 10 m; 85 mm f/1.4
+    // on 36 mm; focus 1.5 m -> 6 m in 24 frames, evenly in 1 / distance), plus 12 lights
+    // in two columns at x = 2 and 6 (1.0 m: in front of the focus all the pull, CoC -8 ..
+    // -19 px, as lights crossing the focus make even the reference jump), of luminance 0.7
+    // .. 7 against a highlights threshold of 2: part sprites (the band is 1 .. 4) and whole
+    // ones; the plane (luminance up to 0.9) has none. The lens is one whose sprites differ
+    // strongly from the layers' disk (uncorrected, onion rings 0.8), so a sprite changing
+    // shape at once (a CoC bin, a layer boundary) would show. The measure is the existing test's: d_i = RMSE of frame
+    // i+1 against frame i (linear), and a pop is a step |d_{i+1} - d_i| above 0.5 of the
+    // mean d (the reference's steps stay under 0.1 of it on the plane alone).
+    const OIIO::ImageBuf src = image(160, 90, [](int x, int y) {
+        Px p;
+        const float inv  = 1.0f + (0.1f - 1.0f) * float(x) / 159.0f;
+        p.z              = 1.0f / inv;
+        const bool check = ((x / 6) + (y / 6)) % 2 == 0;
+        p.r              = check ? 0.9f : 0.1f;
+        p.g              = 0.5f + 0.4f * std::sin(0.5f * float(y));
+        p.b              = 0.3f + 0.6f * hash01(x / 3, y / 3);
+        if ((x == 2 || x == 6) && y % 15 == 7) {
+            const float v = 0.8f * std::pow(10.0f, float(y / 15 + 6 * (x == 6)) / 11.0f);
+            p.r = v, p.g = 0.9f * v, p.b = 0.7f * v;
+        }
+        return p;
+    });
+    for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+        for (bool character : { false, true }) {
+            SCOPED_TRACE(std::string(method_name(m)) + (character ? " lens character" : " plain"));
+            DefocusOptions o;
+            o.method                   = m;
+            o.coc.mode                 = DepthMode::Depth;
+            o.coc.lens.focal_mm        = 85.0;
+            o.coc.lens.fstop           = 1.4;
+            o.coc.lens.sensor_width_mm = 36.0;
+            if (character) {
+                o = with_lens(o, LensPreset::Uncorrected);
+                o.lens.onion          = 0.8;
+                o.highlight_threshold = 2.0f;
+            }
+            std::vector<OIIO::ImageBuf> frames;
+            int64_t sprites = 0;
+            for (int i = 0; i < 24; ++i) {
+                o.coc.lens.focus_distance = 1.0 / (1.0 / 1.5 + (1.0 / 6.0 - 1.0 / 1.5) * i / 23.0);
+                DefocusReport rep;
+                frames.push_back(run(src, o, &rep));
+                sprites = std::max(sprites, rep.sprites);
+            }
+            // The whole frame (the existing test's d_i), and the lights' strip alone (x < 20:
+            // their bokeh, radius up to 10 px, where a sprite's pop is not diluted by the
+            // plane).
+            for (int strip : { 0, 1 }) {
+                std::vector<double> d;
+                for (int i = 0; i + 1 < 24; ++i) {
+                    const OIIO::ROI r = frames[size_t(i)].roi();
+                    double sq = 0.0;
+                    int64_t n = 0;
+                    for (int y = r.ybegin; y < r.yend; ++y)
+                        for (int x = r.xbegin; x < (strip ? 20 : r.xend); ++x, ++n)
+                            for (int c = 0; c < 3; ++c) {
+                                const double u = at(frames[size_t(i) + 1], x, y, c) - at(frames[size_t(i)], x, y, c);
+                                sq += u * u;
+                            }
+                    d.push_back(std::sqrt(sq / (3.0 * double(n))));
+                }
+                double mean = 0.0, jump = 0.0;
+                std::string list;
+                for (size_t i = 0; i < d.size(); ++i) {
+                    mean += d[i] / double(d.size());
+                    if (i + 1 < d.size())
+                        jump = std::max(jump, std::abs(d[i + 1] - d[i]));
+                    char buf[32];
+                    std::snprintf(buf, sizeof buf, " %.4f", d[i]);
+                    list += buf;
+                }
+                std::printf("[ figures  ] focus pull %-9s %-14s %-12s (%lld sprites): d_i =%s\n[ figures  ]   mean "
+                            "%.4f, largest step %.4f (%.2f of the mean)\n",
+                            method_name(m), character ? "lens character" : "plain", strip ? "lights' strip" : "frame",
+                            static_cast<long long>(sprites), list.c_str(), mean, jump, jump / mean);
+                EXPECT_GT(mean, 1e-3) << "the focus pull changes the image";
+                EXPECT_LE(jump, 0.5 * mean) << "popping: step " << jump << " vs mean " << mean;
+            }
+            if (character) {
+                int in_band = 0;  // lights above half the threshold (luminance 0.907 v)
+                for (int i = 0; i < 12; ++i)
+                    in_band += 0.907f * 0.8f * std::pow(10.0f, float(i) / 11.0f) > 1.0f;
+                EXPECT_EQ(sprites, in_band) << "each light above the band's foot is a sprite";
+            }
+        }
+    }
+}
+
+TEST(DefocusSprites, ReportCountsASpriteSharedBetweenLayersOnce)
+{
+    // Four layers for CoCs -12 .. +24: most of the 12 lights fall between two rungs and are
+    // drawn in both, but each is one sprite, and none is merged (their PSFs are under 64 px
+    // wide), so the report's drawn count is the sprite count. Deep input: a piece between
+    // two rungs is one sprite too.
+    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    o.layers         = 4;
+    DefocusReport rep;
+    run(lights_scene(), o, &rep);
+    int shared = 0;
+    for (int i = 0; i < 12; ++i) {
+        const float coc = -12.0f + 32.0f * float(i) / 11.0f;
+        shared += std::none_of(rep.layer_coc_px.begin(), rep.layer_coc_px.end(),
+                               [&](float r) { return std::abs(r - coc) < 1e-3f; });
+    }
+    std::printf("[ figures  ] 4 layers: %d of 12 lights between two rungs; %lld sprites, %lld drawn\n", shared,
+                static_cast<long long>(rep.sprites), static_cast<long long>(rep.sprites_drawn));
+    EXPECT_GE(shared, 6) << "the scene shares lights between layers";
+    EXPECT_EQ(rep.sprites, 12);
+    EXPECT_EQ(rep.sprites_drawn, 12);
+
+    std::vector<bokeh_test::DeepPixel> px(48 * 48);
+    for (int i = 0; i < 48 * 48; ++i)
+        px[size_t(i)] = { { 0.1, 0.1, 0.1, 0.5, 1.0, 1.0 } };
+    px[24 * 48 + 24].push_back({ 50.0, 50.0, 50.0, 1.0, 5.0, 5.0 });  // between the rungs at 1 and 12
+    px[0].push_back({ 0.1, 0.1, 0.1, 1.0, 12.0, 12.0 });
+    const OIIO::ImageBuf deep = bokeh_test::make_deep(48, 48, px);
+    DefocusOptions d = with_lens(direct(DefocusMethod::Layers, Border::Clamp), LensPreset::Achromat);
+    d.layers         = 3;
+    run(deep, d, &rep);
+    std::printf("[ figures  ] deep, 3 layers (%.1f, %.1f, %.1f px): %lld sprites, %lld drawn\n",
+                rep.layer_coc_px.at(0), rep.layer_coc_px.at(1), rep.layer_coc_px.at(2),
+                static_cast<long long>(rep.sprites), static_cast<long long>(rep.sprites_drawn));
+    EXPECT_TRUE(std::none_of(rep.layer_coc_px.begin(), rep.layer_coc_px.end(), [](float r) { return r == 5.0f; }))
+        << "the light lies between two rungs";
+    EXPECT_EQ(rep.sprites, 1);
+    EXPECT_EQ(rep.sprites_drawn, 1);
+}
+
 TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
 {
     // A 1e4 light at CoC 24 behind a sharp (CoC 0) opaque grey 0.3 card over x >= 40: the
@@ -373,6 +506,19 @@ TEST(DefocusSprites, DeepInputGetsSprites)
     OIIO::ImageBuf as_deep = run(deep, deep_out), flat;
     ASSERT_TRUE(flatten(flat, as_deep, {}));
     EXPECT_NEAR(channel_sum(flat, 0) / in, 1.0, 1e-4) << "the deep result's flatten";
+    // Pseudo-high resolution from deep input: twice the size, the same radiance (sum / 4);
+    // a deep result is not supersampled.
+    DefocusOptions fine = o;
+    fine.supersample    = 2;
+    const OIIO::ImageBuf big = run(deep, fine, &rep);
+    EXPECT_EQ(big.roi().width(), 2 * out.roi().width());
+    EXPECT_EQ(big.spec().full_width, 2 * deep.spec().full_width);
+    EXPECT_EQ(rep.sprites, 1);
+    EXPECT_NEAR(channel_sum(big, 0) / 4.0 / in, 1.0, 1e-4) << "supersample 2";
+    fine.deep_output = true;
+    OIIO::ImageBuf refused;
+    EXPECT_FALSE(defocus(refused, deep, fine));
+    EXPECT_NE(refused.geterror().find("supersample"), std::string::npos) << refused.geterror();
 }
 
 TEST(DefocusSprites, HybridAgainstTheScatterReference)
@@ -398,6 +544,145 @@ TEST(DefocusSprites, HybridAgainstTheScatterReference)
     }
 }
 
+namespace {
+
+// The 2 x 2 box mean of a supersampled result, over the frame's pixels (for comparing
+// it with the plain resolution's).
+OIIO::ImageBuf box_reduced(const OIIO::ImageBuf& big)
+{
+    const OIIO::ROI r = big.roi();
+    return image(r.width() / 2, r.height() / 2, [&](int x, int y) {
+        float v[3] = { 0, 0, 0 };
+        for (int dy = 0; dy < 2; ++dy)
+            for (int dx = 0; dx < 2; ++dx)
+                for (int c = 0; c < 3; ++c)
+                    v[c] += 0.25f * at(big, r.xbegin + 2 * x + dx, r.ybegin + 2 * y + dy, c);
+        Px p;
+        p.r = v[0], p.g = v[1], p.b = v[2];
+        return p;
+    });
+}
+
+}  // namespace
+
+TEST(DefocusSprites, SupersampleDoublesTheOutputAndKeepsEnergy)
+{
+    // supersample=2 on the lights scene: the data and display windows are twice the plain
+    // result's, each output pixel radiance (the sum is 4 times the input's, each channel
+    // within 1e-4: the plain one's conservation), for lens off, achromat and uncorrected.
+    const OIIO::ImageBuf src = lights_scene();
+    for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat, LensPreset::Uncorrected }) {
+        SCOPED_TRACE(lens_preset_name(preset));
+        DefocusOptions o = with_lens(direct(), preset);
+        const OIIO::ImageBuf plain = run(src, o);
+        o.supersample = 2;
+        DefocusReport rep;
+        const OIIO::ImageBuf big = run(src, o, &rep);
+        const OIIO::ROI p = plain.roi(), b = big.roi();
+        EXPECT_EQ(b.xbegin, 2 * p.xbegin);
+        EXPECT_EQ(b.xend, 2 * p.xend);
+        EXPECT_EQ(b.ybegin, 2 * p.ybegin);
+        EXPECT_EQ(b.yend, 2 * p.yend);
+        EXPECT_EQ(big.spec().full_x, 2 * src.spec().full_x);
+        EXPECT_EQ(big.spec().full_width, 2 * src.spec().full_width);
+        EXPECT_EQ(big.spec().full_height, 2 * src.spec().full_height);
+        EXPECT_EQ(rep.sprites, 12);
+        for (int c = 0; c < 3; ++c) {
+            const double in = channel_sum(src, c), out = channel_sum(big, c) / 4.0;
+            std::printf("[ figures  ] supersample 2, %-11s channel %d: in %.6g, out / 4 %.6g (%.2e)\n",
+                        lens_preset_name(preset), c, in, out, out / in - 1.0);
+            EXPECT_NEAR(out / in, 1.0, 1e-4);
+        }
+        // Sane against the plain resolution: its 2 x 2 means are the plain result but for
+        // the layers' bilinear enlargement and the sprites' finer sampling.
+        ImageError e;
+        std::string err;
+        ASSERT_TRUE(compare(e, box_reduced(big), image(p.width(), p.height(), [&](int x, int y) {
+                                Px q;
+                                q.r = at(plain, p.xbegin + x, p.ybegin + y, 0);
+                                q.g = at(plain, p.xbegin + x, p.ybegin + y, 1);
+                                q.b = at(plain, p.xbegin + x, p.ybegin + y, 2);
+                                return q;
+                            }),
+                            err))
+            << err;
+        std::printf("[ figures  ] supersample 2, %-11s: its 2x2 means vs the plain resolution: PSNR %.1f dB\n",
+                    lens_preset_name(preset), e.psnr_db);
+        EXPECT_GT(e.psnr_db, 35.0);
+    }
+}
+
+TEST(DefocusSprites, SupersampledLonePixelIsTheFinerPsf)
+{
+    // The lone 1e6 pixel at CoC 32 px with supersample=2: one sprite, the lens PSF at CoC
+    // 64 output px (the output's pixel pitch, half the frame's), box-folded so that it is
+    // centred on the frame pixel's centre (the corner of its 2 x 2 output pixels): each
+    // output pixel within 1e-5 of the peak, each channel's sum 4e6 (1e-5).
+    const OIIO::ROI display(-48, 113, -48, 113);
+    const OIIO::ImageBuf src = image(
+        65, 65,
+        [](int x, int y) {
+            Px p;
+            p.a = 0.0f;
+            p.z = 32.0f;
+            if (x == 32 && y == 32)
+                p.r = p.g = p.b = 1e6f, p.a = 1.0f;
+            return p;
+        },
+        display);
+    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    o.lens.diffraction = DiffractionModel::EdgeLaw;
+    o.supersample      = 2;
+    DefocusReport rep;
+    const OIIO::ImageBuf out = run(src, o, &rep);
+    EXPECT_EQ(rep.sprites, 1);
+
+    LensCharacter lens = o.lens;
+    lens.fstop          = o.coc.lens.fstop;
+    lens.focal_mm       = o.coc.lens.focal_mm;
+    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / (2 * display.width());
+    PsfRequest req;
+    req.coc_px = 64.0;
+    Psf psf;
+    std::string err;
+    ASSERT_TRUE(lens_psf(psf, lens, req, err)) << err;
+    float peak = 0.0f;
+    for (float v : psf.rgb)
+        peak = std::max(peak, v);
+    // Output pixel (X, Y) covers [X/2, X/2 + 1/2) in frame units; the frame pixel 32's
+    // centre is output coordinate 65, the corner of output pixels 64 and 65.
+    auto folded = [&](int X, int Y, int c) {
+        double v = 0.0;
+        for (int dy = 0; dy < 2; ++dy)
+            for (int dx = 0; dx < 2; ++dx) {
+                const int px = X - dx - 64 + psf.width / 2, py = Y - dy - 64 + psf.height / 2;
+                if (px >= 0 && px < psf.width && py >= 0 && py < psf.height)
+                    v += 0.25 * psf.at(px, py, c);
+            }
+        return v;
+    };
+    double worst = 0.0;
+    for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(channel_sum(out, c) / 4e6, 1.0, 1e-5) << "channel " << c;
+        for (int y = 2 * -48; y < 2 * 113; ++y)
+            for (int x = 2 * -48; x < 2 * 113; ++x)
+                worst = std::max(worst, std::abs(at(out, x, y, c) - 4e6 * folded(x, y, c)) / (4e6 * peak));
+    }
+    std::printf("[ figures  ] supersampled lone pixel: PSF %dx%d at CoC 64, largest difference %.2e of the peak\n",
+                psf.width, psf.height, worst);
+    EXPECT_LT(worst, 1e-5);
+    // Centred: the light's centroid is the frame pixel's centre, output coordinate 65.
+    double sx = 0.0, sy = 0.0, sw = 0.0;
+    const OIIO::ROI r = out.roi();
+    for (int y = r.ybegin; y < r.yend; ++y)
+        for (int x = r.xbegin; x < r.xend; ++x) {
+            const double v = at(out, x, y, 1);
+            sx += v * (x + 0.5), sy += v * (y + 0.5), sw += v;
+        }
+    EXPECT_NEAR(sx / sw, 65.0, 1e-3);
+    EXPECT_NEAR(sy / sw, 65.0, 1e-3);
+}
+
 TEST(DefocusSprites, BadOptionsRefusedByName)
 {
     const OIIO::ImageBuf src = lights_scene();
@@ -416,4 +701,11 @@ TEST(DefocusSprites, BadOptionsRefusedByName)
     o = with_lens(direct(), LensPreset::Achromat);
     o.lens.onion = 2.0;
     refused(o, "onion");
+    o = with_lens(direct(), LensPreset::Achromat);
+    o.supersample = 3;
+    refused(o, "supersample");
+    o.supersample = 2;
+    o.method      = DefocusMethod::Gather;
+    o.lens_character = false;
+    refused(o, "gather");
 }

@@ -85,6 +85,15 @@ struct DefocusOptions {
     /// At most this many sprites, the brightest (by the sprite's luminance); the rest stay
     /// in the layers. A cost guard: a pixel crossing the cut does pop.
     int max_sprites = 20000;
+    /// Pseudo-high resolution (SEEDS.md section 11): the output at this many times the
+    /// input's resolution (1 or 2; its data and display windows scaled alike). The layers
+    /// are built from the frame's own pixels as at 1 and enlarged bilinearly as they are
+    /// composited; the sprites are drawn at the output's resolution (the lens PSF at the
+    /// output's CoC and pixel pitch), so highlights keep their rims and fringes sharp.
+    /// Each output pixel holds radiance as the input's did (a flat area keeps its value;
+    /// the sum over the output is supersample^2 times the input's). Not for the gather
+    /// method nor deep output.
+    int supersample = 1;
 };
 
 /// What a defocus decided and found, for `-v` and for tests.
@@ -99,7 +108,9 @@ struct DefocusReport {
     bool lens_character = false;
     int64_t sprites = 0;
     int64_t sprite_candidates = 0;  ///< pixels with a sprite share before the max_sprites cut
-    int64_t sprites_drawn = 0;      ///< sprites drawn: large ones merged by source blocks
+    /// Sprites drawn: large ones merged by source blocks; one shared between two layers is
+    /// drawn in both and counted once (so sprites_drawn <= sprites)
+    int64_t sprites_drawn = 0;
     float sprite_min_coc_px = 0.0f, sprite_max_coc_px = 0.0f;
     double sprite_seconds = 0.0;
     size_t sprite_psfs = 0;

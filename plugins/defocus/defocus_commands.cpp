@@ -42,6 +42,8 @@ bool defocus_command(CommandContext& c)
     for (const char* name : { "spp", "seed" })
         if (c.options.given(name) && method != "truth")
             return c.fail(format("{}= is for method=truth", name));
+    if (o.supersample > 1 && what != "image" && what != "deep")
+        return c.fail(format("supersample= gives a finer image; output={} is a map of the frame's pixels", what));
     bool ok;
     if (method == "truth") {
         // The thin-lens rays through the scene a deep image encodes (truth.h).

@@ -153,8 +153,8 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
     o.reference_step_px = float(v.get_float("step"));
 
     // Lens character: on when any of its options (lens_option_specs, highlights=,
-    // sprites=) is given.
-    bool character = v.given("highlights") || v.given("sprites");
+    // sprites=, supersample=) is given.
+    bool character = v.given("highlights") || v.given("sprites") || v.given("supersample");
     for (const OptionSpec& spec : lens_option_specs())
         character = character || v.given(spec.name);
     o.lens_character = character;
@@ -163,6 +163,7 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
             return false;
         o.highlight_threshold = float(v.get_float("highlights"));
         o.max_sprites         = v.get_int("sprites");
+        o.supersample         = v.get_int("supersample");
     }
     return true;
 }
@@ -175,6 +176,9 @@ std::vector<OptionSpec> defocus_sprite_option_specs()
                                       "(a smooth share from half to twice it)"));
     specs.push_back(OptionSpec::Int("sprites", 20000, 0, 10000000,
                                     "lens character: at most this many sprites, the brightest"));
+    specs.push_back(OptionSpec::Int("supersample", 1, 1, 2,
+                                    "lens character: output at this many times the resolution, the "
+                                    "sprites drawn at it, the layers enlarged (pseudo-high resolution)"));
     return specs;
 }
 

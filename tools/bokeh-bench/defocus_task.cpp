@@ -4,7 +4,8 @@
 //
 // Each scene is defocused with the lens its metadata suggests (bokeh:focus_m, bokeh:fstop)
 // or, for the files, the lens stated below; times are in-process medians, errors are
-// bokeh::compare's (RMSE linear, PSNR after x/(1+x)).
+// bokeh::compare's (RMSE linear, PSNR after x/(1+x)). With --images it writes the picture
+// sheet: previews of each shot, and lens-character columns on lights and giant.
 
 #include "defocus_task.h"
 #include "bench_common.h"
@@ -124,6 +125,62 @@ void write_preview(const OIIO::ImageBuf& img, const std::string& path, int threa
         std::fprintf(stderr, "bokeh-bench: cannot write %s: %s\n", path.c_str(), srgb.geterror().c_str());
 }
 
+// A 1:1 crop (480 x 270 of the display window, within it) centred on (cx, cy), as an sRGB
+// JPEG: the lens character's rims, fringes and rings at the frame's own pixels.
+void write_crop(const OIIO::ImageBuf& img, int cx, int cy, const std::string& path, int threads)
+{
+    const OIIO::ImageSpec& s = img.spec();
+    const int w = std::min(480, s.full_width), h = std::min(270, s.full_height);
+    const int x0 = std::clamp(cx - w / 2, s.full_x, s.full_x + s.full_width - w);
+    const int y0 = std::clamp(cy - h / 2, s.full_y, s.full_y + s.full_height - h);
+    OIIO::ImageBuf rgb  = IBA::channels(img, 3, { 0, 1, 2 });
+    OIIO::ImageBuf crop = IBA::cut(rgb, OIIO::ROI(x0, x0 + w, y0, y0 + h, 0, 1, 0, 3));
+    OIIO::ImageBuf srgb = IBA::colorconvert(crop, "linear", "sRGB", true, "", "", nullptr, {}, threads);
+    srgb.specmod().attribute("Compression", "jpeg:90");
+    if (!srgb.write(path, OIIO::TypeUInt8))
+        std::fprintf(stderr, "bokeh-bench: cannot write %s: %s\n", path.c_str(), srgb.geterror().c_str());
+}
+
+// The picture sheet's lens-character columns (lights and giant): the default method with
+// lens character on, an uncorrected singlet, an achromat and an apochromat, each with rim
+// fringes (the Fresnel edge law) and onion rings (contrast 0.15), as 640-px previews and
+// 1:1 crops, and the plain default's crop beside them. The crop is centred on the
+// brightest pixel of the sharp input (a highlight the lens shapes).
+void write_lens_sheet(const Shot& shot, const OIIO::ImageBuf& plain, const std::string& dir, int threads)
+{
+    const OIIO::ImageBuf& sharp = shot.image;
+    int cx = 0, cy = 0;
+    float best = -1.0f;
+    const OIIO::ROI look = sharp.roi();
+    for (int y = look.ybegin; y < look.yend; ++y)
+        for (int x = look.xbegin; x < look.xend; ++x) {
+            float p[3];
+            sharp.getpixel(x, y, p, 3);
+            const float l = 0.2126f * p[0] + 0.7152f * p[1] + 0.0722f * p[2];
+            if (l > best)
+                best = l, cx = x, cy = y;
+        }
+    const std::string stem = dir + "/defocus_" + shot.name + "_lens_";
+    write_crop(plain, cx, cy, stem + "off_crop.jpg", threads);
+    const std::pair<bokeh::LensPreset, const char*> lenses[] = { { bokeh::LensPreset::Uncorrected, "uncorrected" },
+                                                                 { bokeh::LensPreset::Achromat, "achromat" },
+                                                                 { bokeh::LensPreset::Apochromat, "apochromat" } };
+    for (const auto& [preset, name] : lenses) {
+        bokeh::DefocusOptions o = shot.base;
+        o.lens_character        = true;
+        o.lens.preset           = preset;
+        o.lens.diffraction      = bokeh::DiffractionModel::EdgeLaw;
+        o.lens.onion            = 0.15;
+        OIIO::ImageBuf out;
+        if (!bokeh::defocus(out, shot.image, o, nullptr, threads)) {
+            std::fprintf(stderr, "bokeh-bench: %s, %s: %s\n", shot.name.c_str(), name, out.geterror().c_str());
+            continue;
+        }
+        write_preview(out, stem + name + ".jpg", threads);
+        write_crop(out, cx, cy, stem + name + "_crop.jpg", threads);
+    }
+}
+
 }  // namespace
 
 bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
@@ -200,6 +257,9 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
                                        + (v.name.find("gather") != std::string::npos ? "gather" : "layers")
                                        + ".jpg",
                               a.threads);
+            if (!a.images_dir.empty() && v.name.find("default") != std::string::npos
+                && (shot.name == "lights" || shot.name == "giant"))
+                write_lens_sheet(shot, out, a.images_dir, a.threads);
         }
     }
     return true;
