@@ -153,6 +153,12 @@ const std::vector<OptionSpec>& scene_options()
                          "(default: the scene's)";
             else if (o.name == "fstop")
                 o.help = "truth: f-number (default: the scene's)";
+            else if (o.name == "focal")
+                o.help = "truth: focal length mm the CoC is computed with (default: the scene's 50; "
+                         "the frame stays the scene's)";
+            else if (o.name == "sensor")
+                o.help = "truth: film back width in mm or a preset (ff, super35, alexa-lf, ...) the "
+                         "CoC is computed with (default: the scene's 36)";
             else
                 o.help = "truth: " + o.help;
             v.push_back(std::move(o));
