@@ -200,10 +200,14 @@ public:
 
     void intersect(const SceneRay& r, const std::vector<const Light*>& lights, HitList& out) const override
     {
-        // The floor ends at the wall; every other surface is in front of it.
-        out.add(kWallZ, Wall);
-        double t;
-        if (r.dir.y < 0.0 && (t = (kFloorY - r.origin.y) / r.dir.y) < kWallZ)
+        // The floor ends at the wall, the wall at the floor (below it no ray could see it,
+        // and a deep image would hold it as a hidden surface); every other surface is in
+        // front of the wall.
+        double t       = kInf;
+        const bool floor = r.dir.y < 0.0 && (t = (kFloorY - r.origin.y) / r.dir.y) < kWallZ;
+        if (!floor || r.origin.y + r.dir.y * kWallZ >= kFloorY)
+            out.add(kWallZ, Wall);
+        if (floor)
             out.add(t, Floor);
         if (ray_sphere(r, kSphereCentre, kSphereRadius, t))
             out.add(t, Sphere);

@@ -87,7 +87,8 @@ bool same_bits(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b)
 // The deep scene flattens to the sharp scene: layer 1's alphas weigh each surface by its
 // share of the rays and end at 1, so what lies behind cannot show. Measured largest
 // difference, relative to max(1, |value|), over the three scenes at 240 x 135: see the
-// output (float rounding of alpha and premultiplied colour); Z is the nearest ray's, equal.
+// output (measured 1.1e-7: float rounding of alpha and premultiplied colour); Z is the
+// nearest ray's, equal.
 TEST(SceneDeep, FlattenIsTheSharpScene)
 {
     for (const std::string& name : scene_names()) {
@@ -144,7 +145,7 @@ TEST(SceneTruth, TinyApertureIsThePinholeScene)
         const ImageError e = rgba_error(truth, sharp);
         std::cout << name << ": f/10000 truth vs the pinhole scene (aa 16): " << e.psnr_db << " dB, RMS "
                   << e.rmse_linear << "; truth noise " << rep.noise_psnr_db << " dB\n";
-        EXPECT_GE(e.psnr_db, 45.0) << name;
+        EXPECT_GE(e.psnr_db, 42.0) << name;  // measured: lights 45.2, edges 49.8, giant 50.3 dB
     }
 }
 
