@@ -49,7 +49,6 @@ using OIIO::Strutil::fmt::format;
 
 namespace {
 
-double tone(double v) { return v / (1.0 + std::abs(v)); }
 
 bool check_lens(const SceneTruthOptions& o, std::string& err)
 {
@@ -113,18 +112,15 @@ bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneO
     const double tan_px = scene->tangent_per_px(), lens_tan = tan_px * K;
     const int n_first = (lo.spp + 1) / 2, n_second = lo.spp / 2;
     const double inv_n   = 1.0 / lo.spp;
-    const double noise_w = double(n_first) * double(n_second) * inv_n * inv_n;  // as truth.cpp
     const int width = opts.width, height = opts.height;
 
     struct Part {
-        double sq = 0.0, sq_tone = 0.0;
+        detail::HalvesNoise noise;
         int64_t rays = 0;
         double zmin = std::numeric_limits<double>::infinity(), zmax = 0.0;
     };
     const int64_t row_chunk = 2, nchunks = (height + row_chunk - 1) / row_chunk;
-    std::atomic<int64_t> done{ 0 };
-    std::mutex progress_lock;
-    int64_t reported = 0;
+    detail::ChunkProgress progress(lo.progress, nchunks);
     const Part total = parallel_reduce_chunks(
         0, height, row_chunk, nthreads, Part{},
         [&](int64_t y0, int64_t y1) {
@@ -162,27 +158,16 @@ bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneO
                     }
                     for (int c = 0; c < 4; ++c) {
                         row[size_t(x) * 4 + size_t(c)] = float((sum[0][c] + sum[1][c]) * inv_n);
-                        if (n_second > 0) {
-                            const double a = sum[0][c] / n_first, b = sum[1][c] / n_second;
-                            part.sq += (a - b) * (a - b);
-                            part.sq_tone += (tone(a) - tone(b)) * (tone(a) - tone(b));
-                        }
+                        if (n_second > 0)
+                            part.noise.add(sum[0][c] / n_first, sum[1][c] / n_second);
                     }
                 }
             }
-            if (lo.progress) {
-                const int64_t now = ++done;
-                std::lock_guard<std::mutex> lock(progress_lock);
-                if (now > reported) {  // in rising order, whichever thread finishes
-                    reported = now;
-                    lo.progress(float(double(now) / double(nchunks)));
-                }
-            }
+            progress.chunk_done();
             return part;
         },
         [](Part& acc, const Part& p) {
-            acc.sq += p.sq;
-            acc.sq_tone += p.sq_tone;
+            acc.noise.merge(p.noise);
             acc.rays += p.rays;
             acc.zmin = std::min(acc.zmin, p.zmin);
             acc.zmax = std::max(acc.zmax, p.zmax);
@@ -193,11 +178,7 @@ bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneO
     rep.min_coc_px      = float(coc_of(total.zmin));
     rep.max_coc_px      = float(coc_of(total.zmax));
     const double values = double(width) * double(height) * 4.0;
-    if (n_second > 0) {
-        rep.noise_rmse      = std::sqrt(total.sq * noise_w / values);
-        const double mse_tm = total.sq_tone * noise_w / values;
-        rep.noise_psnr_db   = mse_tm > 0.0 ? 10.0 * std::log10(1.0 / mse_tm) : 999.0;
-    }
+    total.noise.figures(n_first, n_second, values, rep.noise_rmse, rep.noise_psnr_db);
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     rep.summary = format("scene truth: {} {}x{}, CoC {:.1f} .. {:.1f} px, {} spp, {} rays, noise RMS {:.3g} "
                          "({:.1f} dB), {:.2f} s",

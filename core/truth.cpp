@@ -400,7 +400,6 @@ bool check_options(const TruthOptions& o, std::string& err)
     return true;
 }
 
-double tone(double v) { return v / (1.0 + std::abs(v)); }
 
 }  // namespace
 
@@ -547,19 +546,14 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     const detail::SobolTable& table = detail::sobol_table();
     const int n_first = (opt.spp + 1) / 2, n_second = opt.spp / 2;
     const double inv_n = 1.0 / opt.spp;
-    // Noise weight: the output (n1 A + n2 B) / n has variance E[(A - B)^2] n1 n2 / n^2
-    // when each half's variance falls as 1 / n_half.
-    const double noise_w = double(n_first) * double(n_second) * inv_n * inv_n;
 
     struct Part {
-        double sq = 0.0, sq_tone = 0.0;
+        detail::HalvesNoise noise;
         int64_t cells = 0, rays = 0;
     };
     const int64_t rows = out.height(), row_chunk = 2;
     const int64_t nchunks = (rows + row_chunk - 1) / row_chunk;
-    std::atomic<int64_t> done{ 0 };
-    std::mutex progress_lock;
-    int64_t reported = 0;
+    detail::ChunkProgress progress(opt.progress, nchunks);
     const Part total = parallel_reduce_chunks(
         0, rows, row_chunk, nthreads, Part{},
         [&](int64_t y0, int64_t y1) {
@@ -589,28 +583,17 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                     }
                     for (int c = 0; c < 4; ++c) {
                         row[size_t(x - out.xbegin) * 4 + size_t(c)] = float((sum[0][c] + sum[1][c]) * inv_n);
-                        if (n_second > 0) {
-                            const double a = sum[0][c] / n_first, b = sum[1][c] / n_second;
-                            part.sq += (a - b) * (a - b);
-                            part.sq_tone += (tone(a) - tone(b)) * (tone(a) - tone(b));
-                        }
+                        if (n_second > 0)
+                            part.noise.add(sum[0][c] / n_first, sum[1][c] / n_second);
                     }
                 }
             }
             part.cells = ray.cells;
-            if (opt.progress) {
-                const int64_t now = ++done;
-                std::lock_guard<std::mutex> lock(progress_lock);
-                if (now > reported) {  // in rising order, whichever thread finishes
-                    reported = now;
-                    opt.progress(float(double(now) / double(nchunks)));
-                }
-            }
+            progress.chunk_done();
             return part;
         },
         [](Part& acc, const Part& p) {
-            acc.sq += p.sq;
-            acc.sq_tone += p.sq_tone;
+            acc.noise.merge(p.noise);
             acc.cells += p.cells;
             acc.rays += p.rays;
         });
@@ -618,11 +601,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     rep.rays          = total.rays;
     rep.cells_visited = total.cells;
     const double values = double(out.npixels()) * 4.0;
-    if (n_second > 0 && values > 0) {
-        rep.noise_rmse       = std::sqrt(total.sq * noise_w / values);
-        const double mse_tm  = total.sq_tone * noise_w / values;
-        rep.noise_psnr_db    = mse_tm > 0.0 ? 10.0 * std::log10(1.0 / mse_tm) : 999.0;
-    }
+    total.noise.figures(n_first, n_second, values, rep.noise_rmse, rep.noise_psnr_db);
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     rep.summary = format("truth: CoC {:.1f} .. {:.1f} px, {} spp, {} rays, {:.1f} cells a ray, noise RMS {:.3g} "
                          "({:.1f} dB), output {}x{}, {:.2f} s{}",

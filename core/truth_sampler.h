@@ -8,9 +8,15 @@
 // Scrambling" (JCGT 9(4), 2020: the Laine-Karras style hash with his constants, applied to
 // the bit-reversed value). Ours: the per-pixel and per-half seeds (pixel_seed, half_seed).
 // Dimensions 0 and 1 place the ray on the aperture (ApertureSampler), 2 and 3 in the pixel.
+// Also what both do with the rays: the noise estimate from two half renders, and the
+// progress of their row chunks.
 #pragma once
 
+#include <atomic>
+#include <cmath>
 #include <cstdint>
+#include <functional>
+#include <mutex>
 
 namespace bokeh::detail {
 
@@ -123,5 +129,60 @@ inline uint32_t pixel_seed(uint32_t seed, int x, int y)
 /// The seed of one of a pixel's two half renders (0 or 1): the halves' difference is the
 /// truths' noise estimate.
 inline uint32_t half_seed(uint32_t px_seed, int half) { return hash_combine(px_seed, uint32_t(half)); }
+
+/// The noise of a render made of two halves of n1 and n2 rays a pixel (truth.h's
+/// TruthReport): add() each output value's two half means; figures() gives the RMS of
+/// the full render's noise and its PSNR after metrics.h's tone map x / (1 + |x|), peak 1.
+struct HalvesNoise {
+    double sq = 0.0, sq_tone = 0.0;
+    static double tone(double v) { return v / (1.0 + std::abs(v)); }
+    void add(double a, double b)
+    {
+        sq += (a - b) * (a - b);
+        sq_tone += (tone(a) - tone(b)) * (tone(a) - tone(b));
+    }
+    void merge(const HalvesNoise& o)
+    {
+        sq += o.sq;
+        sq_tone += o.sq_tone;
+    }
+    /// Over `values` output values; rmse and psnr_db stay as they are for n2 = 0 (spp 1).
+    /// The output (n1 A + n2 B) / n has variance E[(A - B)^2] n1 n2 / n^2 when each half's
+    /// variance falls as 1 / n_half.
+    void figures(int n1, int n2, double values, double& rmse, double& psnr_db) const
+    {
+        if (n2 <= 0 || values <= 0.0)
+            return;
+        const double n = double(n1) + double(n2), w = double(n1) * double(n2) / (n * n);
+        rmse                = std::sqrt(sq * w / values);
+        const double mse_tm = sq_tone * w / values;
+        psnr_db             = mse_tm > 0.0 ? 10.0 * std::log10(1.0 / mse_tm) : 999.0;
+    }
+};
+
+/// Reports the fraction of row chunks done, from one thread at a time, in rising order,
+/// whichever thread finishes a chunk.
+class ChunkProgress {
+public:
+    ChunkProgress(const std::function<void(float)>& fn, int64_t chunks) : m_fn(fn), m_chunks(chunks) {}
+    void chunk_done()
+    {
+        if (!m_fn)
+            return;
+        const int64_t now = ++m_done;
+        std::lock_guard<std::mutex> lock(m_lock);
+        if (now > m_reported) {
+            m_reported = now;
+            m_fn(float(double(now) / double(m_chunks)));
+        }
+    }
+
+private:
+    const std::function<void(float)>& m_fn;
+    int64_t m_chunks;
+    std::atomic<int64_t> m_done{ 0 };
+    std::mutex m_lock;
+    int64_t m_reported = 0;
+};
 
 }  // namespace bokeh::detail
