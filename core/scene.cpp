@@ -23,11 +23,17 @@
 // Colour is averaged over aa x aa stratified samples per pixel; depth (Z, camera-space
 // distance along the optical axis, metres) is the nearest of those samples, as renderers'
 // "closest" depth filter gives. Known limit: alpha is 1 everywhere (nothing is empty).
+//
+// Each scene is its geometry (scene_geometry.h: the surfaces a ray from any point of the
+// lens plane meets, and their colours), so the same scene also gives its thin-lens truth
+// (scene_truth.cpp) and its deep image (scene_deep.cpp); the pinhole rays test the
+// surfaces in the order they always have, so the sharp pixels are those of before.
 
 #include <bokeh/parallel.h>
 #include <bokeh/scene.h>
 
 #include "plane.h"
+#include "scene_geometry.h"
 
 #include <algorithm>
 #include <cmath>
@@ -37,6 +43,13 @@
 #include <OpenImageIO/strutil.h>
 
 namespace bokeh {
+
+using detail::HitList;
+using detail::Light;
+using detail::SceneGeometry;
+using detail::SceneHit;
+using detail::SceneRandom;
+using detail::SceneRay;
 
 namespace {
 
@@ -79,19 +92,6 @@ const SceneInfo* find_scene(const std::string& name)
             return &s;
     return nullptr;
 }
-
-// Small deterministic generator (SplitMix64), so scenes are identical everywhere.
-struct Random {
-    uint64_t state;
-    double uniform()
-    {
-        uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-        z          = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-        z          = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-        return double((z ^ (z >> 31)) >> 11) * (1.0 / 9007199254740992.0);
-    }
-    double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
-};
 
 // Value noise on an integer lattice, smoothly interpolated; fbm sums three octaves.
 double lattice(int x, int y, uint32_t seed)
@@ -138,12 +138,12 @@ bool print_ink(double x, double y, double glyph, uint32_t seed)
     return lattice(int(cl) * 4 + stroke, int(ln) * 8 + row, seed + 1) < 0.5;
 }
 
-// Ray (origin at the camera) against an axis-aligned box; t is the entry parameter.
-bool ray_box(const glm::dvec3& d, const glm::dvec3& lo, const glm::dvec3& hi, double& t)
+// Ray against an axis-aligned box; t is the entry depth.
+bool ray_box(const SceneRay& r, const glm::dvec3& lo, const glm::dvec3& hi, double& t)
 {
     double tmin = 0.0, tmax = kInf;
     for (int a = 0; a < 3; ++a) {
-        const double t0 = lo[a] / d[a], t1 = hi[a] / d[a];
+        const double t0 = (lo[a] - r.origin[a]) / r.dir[a], t1 = (hi[a] - r.origin[a]) / r.dir[a];
         tmin = std::max(tmin, std::min(t0, t1));
         tmax = std::min(tmax, std::max(t0, t1));
     }
@@ -151,10 +151,12 @@ bool ray_box(const glm::dvec3& d, const glm::dvec3& lo, const glm::dvec3& hi, do
     return tmin <= tmax;
 }
 
-// Ray (origin at the camera) against a sphere; t is the nearer hit.
-bool ray_sphere(const glm::dvec3& d, const glm::dvec3& c, double r, double& t)
+// Ray against a sphere; t is the nearer hit's depth.
+bool ray_sphere(const SceneRay& r, const glm::dvec3& centre, double radius, double& t)
 {
-    const double a = glm::dot(d, d), b = glm::dot(d, c), k = glm::dot(c, c) - r * r;
+    const glm::dvec3 c = centre - r.origin;
+    const glm::dvec3& d = r.dir;
+    const double a = glm::dot(d, d), b = glm::dot(d, c), k = glm::dot(c, c) - radius * radius;
     const double disc = b * b - a * k;
     if (disc < 0.0)
         return false;
@@ -162,91 +164,21 @@ bool ray_sphere(const glm::dvec3& d, const glm::dvec3& c, double r, double& t)
     return t > 0.0;
 }
 
-// An emissive sphere, or ("edges") a disc lying on the wall at centre.z.
-struct Light {
-    glm::dvec3 centre;
-    double radius;
-    glm::dvec3 emission;  // linear RGB radiance
-    int ybegin, yend;     // rows its image may touch
-};
+// Where a ray at depth z is, in ray tangents (image-plane units): a plane facing the
+// camera has there the shape it has in the image.
+glm::dvec2 tangent_at(const SceneRay& r, double z)
+{
+    return { r.dir.x + r.origin.x / z, r.dir.y + r.origin.y / z };
+}
 
-struct Surface {
-    double z = kInf;
-    glm::dvec3 colour{ 0.0 };
-};
-
-// What the scenes share: the pinhole camera, and lights that each know the image rows
-// they can touch, so a row tests only its own few. A scene adds shade(px, py, lights).
-class Scene {
-public:
-    explicit Scene(const SceneOptions& o)
-        : m_opts(o)
-        , m_half_w(0.5 * kSensorWidthMm / kFocalMm)
-        , m_half_h(m_half_w * double(o.height) / double(o.width))
-    {
-    }
-
-    const std::vector<Light>& lights() const { return m_lights; }
-
-protected:
-    // Ray through image position (px, py); z = 1, so a ray's parameter is its depth and
-    // (x, y) are the tangents of its angles, the same scale horizontally and vertically.
-    glm::dvec3 ray(double px, double py) const
-    {
-        const double u = (2.0 * px / m_opts.width - 1.0) * m_half_w;
-        const double v = (1.0 - 2.0 * py / m_opts.height) * m_half_h;
-        return { u, v, 1.0 };
-    }
-
-    // Image row of a ray slope dy/dz (row 0 at the top).
-    double row_of(double slope) const
-    {
-        return (1.0 - slope / m_half_h) * 0.5 * double(m_opts.height);
-    }
-
-    // A light seen at frame position (sx, sy) in -1..1 (right, up) at depth z; its radius
-    // is `size` of the half frame width, give or take 30%. Draws radius, brightness, hue,
-    // in that order (see LightsScene).
-    Light& add_light(Random& rng, double sx, double sy, double z, double size,
-                     double emission_lo, double emission_hi)
-    {
-        static const glm::dvec3 palette[] = { { 1.0, 0.78, 0.45 }, { 1.0, 0.25, 0.15 },
-                                              { 0.3, 1.0, 0.35 },  { 0.3, 0.45, 1.0 },
-                                              { 1.0, 0.55, 0.1 },  { 1.0, 1.0, 1.0 } };
-        Light l;
-        l.centre   = { sx * z * m_half_w, sy * z * m_half_h, z };
-        l.radius   = size * z * m_half_w * rng.uniform(0.7, 1.3);
-        const double brightness = rng.uniform(emission_lo, emission_hi);
-        l.emission = palette[size_t(rng.uniform() * 5.999)] * brightness;
-        m_lights.push_back(l);
-        return m_lights.back();
-    }
-
-    // Rows each light's image can reach (its bounding sphere, projected, padded); call
-    // once every light is in place.
-    void find_light_rows()
-    {
-        for (Light& l : m_lights) {
-            const double zc = std::max(l.centre.z - l.radius, 1e-3);
-            const double y0 = (l.centre.y - l.radius) / zc, y1 = (l.centre.y + l.radius) / zc;
-            l.ybegin = std::max(0, int(std::floor(row_of(std::max(y0, y1)))) - 1);
-            l.yend   = std::min(m_opts.height, int(std::ceil(row_of(std::min(y0, y1)))) + 2);
-        }
-    }
-
-    SceneOptions m_opts;
-    double m_half_w, m_half_h;  // tangent of the half field of view
-    std::vector<Light> m_lights;
-};
-
-class LightsScene : public Scene {
+class LightsScene : public SceneGeometry {
 public:
     explicit LightsScene(const SceneOptions& o)
-        : Scene(o)
+        : SceneGeometry(o)
     {
         // The draws are sequenced in the order GCC happened to evaluate them when this scene
         // was first written (z, y, x; brightness before hue), so its pixels have not changed.
-        Random rng{ o.seed };
+        SceneRandom rng{ o.seed };
         // A string receding from near-left to far-right, sagging between its ends.
         for (int i = 0; i < 28; ++i) {
             const double t = (i + 0.5) / 28.0;
@@ -264,68 +196,60 @@ public:
         find_light_rows();
     }
 
-    Surface shade(double px, double py, const std::vector<const Light*>& lights) const
+    enum Surfaces { Wall, Floor, Sphere, Post, Lit };
+
+    void intersect(const SceneRay& r, const std::vector<const Light*>& lights, HitList& out) const override
     {
-        const glm::dvec3 d = ray(px, py);
-        // Find the nearest surface first, then texture only that one.
-        enum class What { Wall, Floor, Sphere, Post, Light } what = What::Wall;
-        double z = kWallZ, t;
-        const Light* lit = nullptr;
-        if (d.y < 0.0 && kFloorY / d.y < z) {
-            z    = kFloorY / d.y;
-            what = What::Floor;
-        }
-        if (ray_sphere(d, kSphereCentre, kSphereRadius, t) && t < z) {
-            z    = t;
-            what = What::Sphere;
-        }
-        if (ray_box(d, kPostLo, kPostHi, t) && t < z) {
-            z    = t;
-            what = What::Post;
-        }
+        // The floor ends at the wall, the wall at the floor (below it no ray could see it,
+        // and a deep image would hold it as a hidden surface); every other surface is in
+        // front of the wall.
+        double t       = kInf;
+        const bool floor = r.dir.y < 0.0 && (t = (kFloorY - r.origin.y) / r.dir.y) < kWallZ;
+        if (!floor || r.origin.y + r.dir.y * kWallZ >= kFloorY)
+            out.add(kWallZ, Wall);
+        if (floor)
+            out.add(t, Floor);
+        if (ray_sphere(r, kSphereCentre, kSphereRadius, t))
+            out.add(t, Sphere);
+        if (ray_box(r, kPostLo, kPostHi, t))
+            out.add(t, Post);
         for (const Light* l : lights)
-            if (ray_sphere(d, l->centre, l->radius, t) && t < z) {
-                z    = t;
-                what = What::Light;
-                lit  = l;
-            }
-        Surface s;
-        s.z                = z;
-        const glm::dvec3 p = d * z;
-        switch (what) {
-        case What::Wall: {
+            if (ray_sphere(r, l->centre, l->radius, t))
+                out.add(t, Lit, l);
+    }
+
+    glm::dvec3 colour(const SceneRay& r, const SceneHit& h, const std::vector<const Light*>&) const override
+    {
+        const glm::dvec3 p = r.origin + r.dir * h.z;
+        switch (h.surface) {
+        case Wall: {
             const double mortar = (std::fmod(std::abs(p.y) * 2.5, 1.0) < 0.08) ? 0.55 : 1.0;
             const double tex    = fbm(p.x * 1.5, p.y * 1.5, m_opts.seed + 10);
-            s.colour = glm::dvec3(0.16, 0.13, 0.12) * (0.6 + 0.8 * tex) * mortar
-                       + glm::dvec3(0.02, 0.03, 0.06) * std::max(0.0, p.y * 0.2);
-            break;
+            return glm::dvec3(0.16, 0.13, 0.12) * (0.6 + 0.8 * tex) * mortar
+                   + glm::dvec3(0.02, 0.03, 0.06) * std::max(0.0, p.y * 0.2);
         }
-        case What::Floor: {
+        case Floor: {
             const bool dark    = (int(std::floor(p.x)) + int(std::floor(p.z))) & 1;
             const double grout = (p.x - std::floor(p.x) < 0.04 || p.z - std::floor(p.z) < 0.04)
                                      ? 0.4 : 1.0;
             const double tex = fbm(p.x * 3.0, p.z * 3.0, m_opts.seed + 20);
-            s.colour = (dark ? glm::dvec3(0.10, 0.09, 0.08) : glm::dvec3(0.32, 0.30, 0.27))
-                       * (0.7 + 0.6 * tex) * grout;
-            break;
+            return (dark ? glm::dvec3(0.10, 0.09, 0.08) : glm::dvec3(0.32, 0.30, 0.27))
+                   * (0.7 + 0.6 * tex) * grout;
         }
-        case What::Sphere: {
+        case Sphere: {
             const glm::dvec3 n = glm::normalize(p - kSphereCentre);
             const double lambert =
                 std::max(0.0, glm::dot(n, glm::normalize(glm::dvec3(-0.5, 0.7, -0.5))));
             const double stripes = 0.5 + 0.5 * std::sin(n.y * 18.0 + 3.0 * n.x);
-            s.colour = glm::mix(glm::dvec3(0.6, 0.08, 0.05), glm::dvec3(0.55, 0.5, 0.42), stripes)
-                       * (0.06 + 0.9 * lambert);
-            break;
+            return glm::mix(glm::dvec3(0.6, 0.08, 0.05), glm::dvec3(0.55, 0.5, 0.42), stripes)
+                   * (0.06 + 0.9 * lambert);
         }
-        case What::Post: {
+        case Post: {
             const double grain = fbm(p.x * 60.0, p.y * 4.0, m_opts.seed + 30);
-            s.colour           = glm::dvec3(0.09, 0.05, 0.03) * (0.6 + 0.8 * grain);
-            break;
+            return glm::dvec3(0.09, 0.05, 0.03) * (0.6 + 0.8 * grain);
         }
-        case What::Light: s.colour = lit->emission; break;
+        default: return h.light->emission;
         }
-        return s;
     }
 
 private:
@@ -339,20 +263,20 @@ private:
 
 // The panels and walls are tested in ray-tangent space (the ray's x, y), where a plane
 // facing the camera has the shape it has in the image, edges and angles included.
-class EdgesScene : public Scene {
+class EdgesScene : public SceneGeometry {
 public:
     static constexpr double kFocusZ = 3.0;  // left panel and right wall, in focus
     static constexpr double kFarZ   = 30.0;
     static constexpr double kNearZ  = 1.2;
 
     explicit EdgesScene(const SceneOptions& o)
-        : Scene(o)
+        : SceneGeometry(o)
         , m_edge_u(-0.1 * m_half_w)
         , m_corner_v(0.3 * m_half_h)
         , m_slant(std::tan(20.0 * kPi / 180.0))
         , m_near_u(0.5 * m_half_w)
     {
-        Random rng{ o.seed };
+        SceneRandom rng{ o.seed };
         // A grid of discs over the far wall's half; it goes on behind the panel.
         for (int j = 0; j < 10; ++j)
             for (int i = 0; i < 10; ++i)
@@ -384,66 +308,64 @@ public:
         find_light_rows();
     }
 
-    Surface shade(double px, double py, const std::vector<const Light*>& lights) const
+    enum Surfaces { FarWall, FocusWall, Panel, NearPanel };
+
+    void intersect(const SceneRay& r, const std::vector<const Light*>&, HitList& out) const override
     {
-        const glm::dvec3 d = ray(px, py);
-        enum class What { FarWall, FocusWall, Panel, NearPanel } what;
-        double z;
-        if (d.x >= m_near_u) {
-            z    = kNearZ;
-            what = What::NearPanel;
-        } else if (d.x >= 0.0) {
-            z    = kFocusZ;
-            what = What::FocusWall;
-        } else if (d.x <= m_edge_u && d.y <= m_corner_v + m_slant * (d.x - m_edge_u)) {
-            z    = kFocusZ;
-            what = What::Panel;
-        } else {
-            z    = kFarZ;
-            what = What::FarWall;
-        }
-        Surface s;
-        s.z                 = z;
-        const glm::dvec3 p  = d * z;
+        out.add(kFarZ, FarWall);
+        const glm::dvec2 focus = tangent_at(r, kFocusZ);
+        if (focus.x >= 0.0)
+            out.add(kFocusZ, FocusWall);
+        else if (focus.x <= m_edge_u && focus.y <= m_corner_v + m_slant * (focus.x - m_edge_u))
+            out.add(kFocusZ, Panel);
+        if (tangent_at(r, kNearZ).x >= m_near_u)
+            out.add(kNearZ, NearPanel);
+    }
+
+    glm::dvec3 colour(const SceneRay& r, const SceneHit& h, const std::vector<const Light*>& lights) const override
+    {
+        const double z      = h.z;
+        const glm::dvec3 p  = r.origin + r.dir * z;
         const uint32_t seed = m_opts.seed;
-        switch (what) {
-        case What::FarWall: {  // dim, so the discs' bokeh stand out
+        glm::dvec3 colour;
+        switch (h.surface) {
+        case FarWall: {  // dim, so the discs' bokeh stand out
             const double tex = fbm(p.x * 0.5, p.y * 0.5, seed + 40);
-            s.colour         = glm::dvec3(0.030, 0.032, 0.040) * (0.5 + tex);
+            colour           = glm::dvec3(0.030, 0.032, 0.040) * (0.5 + tex);
             break;
         }
-        case What::FocusWall: {  // checker (2.5 cm) above, print (1.2 cm glyphs) below
+        case FocusWall: {  // checker (2.5 cm) above, print (1.2 cm glyphs) below
             bool ink;
             if (p.y >= 0.0)
                 ink = (int(std::floor(p.x / 0.025)) + int(std::floor(p.y / 0.025))) & 1;
             else
                 ink = print_ink(p.x - 0.01, p.y + 0.02, 0.012, seed + 41);
-            s.colour = (ink ? glm::dvec3(0.03, 0.03, 0.035) : glm::dvec3(0.85, 0.83, 0.78))
-                       * (0.85 + 0.3 * fbm(p.x * 20.0, p.y * 20.0, seed + 42));
+            colour = (ink ? glm::dvec3(0.03, 0.03, 0.035) : glm::dvec3(0.85, 0.83, 0.78))
+                     * (0.85 + 0.3 * fbm(p.x * 20.0, p.y * 20.0, seed + 42));
             break;
         }
-        case What::Panel: {  // painted board with graph-paper lines every 5 cm
+        case Panel: {  // painted board with graph-paper lines every 5 cm
             const double fx = p.x / 0.05 - std::floor(p.x / 0.05);
             const double fy = p.y / 0.05 - std::floor(p.y / 0.05);
             const double line = (fx < 0.04 || fy < 0.04) ? 0.35 : 1.0;
             const double tex  = fbm(p.x * 40.0, p.y * 40.0, seed + 43);
-            s.colour          = glm::dvec3(0.30, 0.42, 0.46) * (0.6 + 0.8 * tex) * line;
+            colour            = glm::dvec3(0.30, 0.42, 0.46) * (0.6 + 0.8 * tex) * line;
             break;
         }
-        case What::NearPanel: {  // saturated orange, ribbed every centimetre
+        default: {  // the near panel: saturated orange, ribbed every centimetre
             const double ribs = 0.85 + 0.15 * std::sin(p.x * (2.0 * kPi / 0.01));
-            s.colour = glm::dvec3(0.95, 0.30, 0.02) * ribs
-                       * (0.75 + 0.5 * fbm(p.x * 30.0, p.y * 8.0, seed + 44));
+            colour = glm::dvec3(0.95, 0.30, 0.02) * ribs
+                     * (0.75 + 0.5 * fbm(p.x * 30.0, p.y * 8.0, seed + 44));
             break;
         }
         }
-        if (what == What::FarWall || what == What::FocusWall)
+        if (h.surface == FarWall || h.surface == FocusWall)
             for (const Light* l : lights) {
                 const double dx = p.x - l->centre.x, dy = p.y - l->centre.y;
                 if (l->centre.z == z && dx * dx + dy * dy < l->radius * l->radius)
-                    s.colour = l->emission;
+                    colour = l->emission;
             }
-        return s;
+        return colour;
     }
 
 private:
@@ -453,18 +375,18 @@ private:
     double m_near_u;    // the near panel's edge
 };
 
-class GiantScene : public Scene {
+class GiantScene : public SceneGeometry {
 public:
     static constexpr double kCardZ = 0.5;  // in focus
     static constexpr double kWallZ = 60.0;
 
     explicit GiantScene(const SceneOptions& o)
-        : Scene(o)
+        : SceneGeometry(o)
         , m_card_half_u(m_half_w / 3.0)
         , m_card_bottom_v(-0.7 * m_half_h)
         , m_card_top_v(0.6 * m_half_h)
     {
-        Random rng{ o.seed };
+        SceneRandom rng{ o.seed };
         // Near lights placed by hand so their huge bokeh stay mostly inside the frame.
         const glm::dvec3 near_lights[] = { { -0.72, 0.5, 0.15 }, { 0.6, -0.45, 0.18 },
                                     { 0.12, 0.62, 0.2 },  { -0.25, -0.7, 0.22 },
@@ -480,52 +402,48 @@ public:
         find_light_rows();
     }
 
-    Surface shade(double px, double py, const std::vector<const Light*>& lights) const
+    enum Surfaces { Wall, Card, Lit };
+
+    void intersect(const SceneRay& r, const std::vector<const Light*>& lights, HitList& out) const override
     {
-        const glm::dvec3 d = ray(px, py);
-        enum class What { Wall, Card, Light } what = What::Wall;
-        double z = kWallZ, t;
-        const Light* lit = nullptr;
-        if (std::abs(d.x) <= m_card_half_u && d.y >= m_card_bottom_v && d.y <= m_card_top_v) {
-            z    = kCardZ;
-            what = What::Card;
-        }
+        out.add(kWallZ, Wall);
+        const glm::dvec2 card = tangent_at(r, kCardZ);
+        if (std::abs(card.x) <= m_card_half_u && card.y >= m_card_bottom_v && card.y <= m_card_top_v)
+            out.add(kCardZ, Card);
+        double t;
         for (const Light* l : lights)
-            if (ray_sphere(d, l->centre, l->radius, t) && t < z) {
-                z    = t;
-                what = What::Light;
-                lit  = l;
-            }
-        Surface s;
-        s.z                 = z;
-        const glm::dvec3 p  = d * z;
+            if (ray_sphere(r, l->centre, l->radius, t))
+                out.add(t, Lit, l);
+    }
+
+    glm::dvec3 colour(const SceneRay& r, const SceneHit& h, const std::vector<const Light*>&) const override
+    {
+        const glm::dvec3 p  = r.origin + r.dir * h.z;
         const uint32_t seed = m_opts.seed;
-        switch (what) {
-        case What::Wall: {
+        switch (h.surface) {
+        case Wall: {
             const double tex = fbm(p.x * 0.4, p.y * 0.4, seed + 60);
-            s.colour         = glm::dvec3(0.010, 0.012, 0.018) * (0.5 + tex);
-            break;
+            return glm::dvec3(0.010, 0.012, 0.018) * (0.5 + tex);
         }
-        case What::Card: {  // paper, a picture band at the top, print (3.5 mm glyphs) below
+        case Card: {  // paper, a picture band at the top, print (3.5 mm glyphs) below
             const double margin = 0.006, half_x = m_card_half_u * kCardZ - margin;
             const double top = m_card_top_v * kCardZ - margin;
             const double grain = fbm(p.x * 400.0, p.y * 400.0, seed + 61);
-            s.colour           = glm::dvec3(0.80, 0.76, 0.66) * (0.9 + 0.2 * grain);
+            glm::dvec3 colour  = glm::dvec3(0.80, 0.76, 0.66) * (0.9 + 0.2 * grain);
             if (std::abs(p.x) < half_x && p.y > top - 0.03 && p.y < top) {
                 const double hue = fbm(p.x * 60.0, p.y * 60.0, seed + 62);
                 const double tex = fbm(p.x * 300.0, p.y * 300.0, seed + 63);
-                s.colour = glm::mix(glm::dvec3(0.70, 0.15, 0.10), glm::dvec3(0.10, 0.35, 0.60), hue)
-                           * (0.6 + 0.5 * tex);
+                colour = glm::mix(glm::dvec3(0.70, 0.15, 0.10), glm::dvec3(0.10, 0.35, 0.60), hue)
+                         * (0.6 + 0.5 * tex);
             } else if (std::abs(p.x) < half_x && p.y < top - 0.036
                        && p.y > m_card_bottom_v * kCardZ + margin
                        && print_ink(p.x + half_x, p.y - (top - 0.036), 0.0035, seed + 64)) {
-                s.colour = glm::dvec3(0.05, 0.05, 0.06);
+                colour = glm::dvec3(0.05, 0.05, 0.06);
             }
-            break;
+            return colour;
         }
-        case What::Light: s.colour = lit->emission; break;
+        default: return h.light->emission;
         }
-        return s;
     }
 
 private:
@@ -534,27 +452,25 @@ private:
 
 // Colour: the mean of aa x aa stratified samples; Z: the nearest sample. Rows are
 // independent, so the result does not depend on the thread count.
-template<class SceneType>
-void render(OIIO::ImageBuf& buf, const SceneType& scene, int aa, int nthreads)
+void render(OIIO::ImageBuf& buf, const SceneGeometry& scene, int aa, int nthreads)
 {
     const int width = buf.spec().width;
     parallel_rows(buf.roi(), nthreads, [&](int y0, int y1) {
         std::vector<const Light*> row_lights;
+        HitList hits;
         for (int y = y0; y < y1; ++y) {
-            row_lights.clear();
-            for (const Light& l : scene.lights())
-                if (y >= l.ybegin && y < l.yend)
-                    row_lights.push_back(&l);
+            scene.lights_of_row(y, row_lights);
             float* out = static_cast<float*>(buf.pixeladdr(0, y));
             for (int x = 0; x < width; ++x, out += 5) {
                 glm::dvec3 sum(0.0);
                 double zmin = kInf;
                 for (int j = 0; j < aa; ++j)
                     for (int i = 0; i < aa; ++i) {
-                        const Surface s = scene.shade(x + (i + 0.5) / aa, y + (j + 0.5) / aa,
-                                                      row_lights);
-                        sum += s.colour;
-                        zmin = std::min(zmin, s.z);
+                        const SceneRay r = scene.ray(x + (i + 0.5) / aa, y + (j + 0.5) / aa);
+                        hits.reset(false);
+                        scene.intersect(r, row_lights, hits);
+                        sum += scene.colour(r, hits.nearest, row_lights);
+                        zmin = std::min(zmin, hits.nearest.z);
                     }
                 sum /= double(aa * aa);
                 out[0] = float(sum.r);
@@ -568,6 +484,120 @@ void render(OIIO::ImageBuf& buf, const SceneType& scene, int aa, int nthreads)
 }
 
 }  // namespace
+
+// --- what the scenes share -----------------------------------------------------------
+
+namespace detail {
+
+SceneGeometry::SceneGeometry(const SceneOptions& o)
+    : m_opts(o)
+    , m_half_w(0.5 * kSensorWidthMm / kFocalMm)
+    , m_half_h(m_half_w * double(o.height) / double(o.width))
+{
+}
+
+// z = 1, so a ray's parameter is its depth and (x, y) are the tangents of its angles, the
+// same scale horizontally and vertically.
+SceneRay SceneGeometry::ray(double px, double py) const
+{
+    SceneRay r;
+    r.dir = { (2.0 * px / m_opts.width - 1.0) * m_half_w, (1.0 - 2.0 * py / m_opts.height) * m_half_h, 1.0 };
+    return r;
+}
+
+double SceneGeometry::row_of(double slope) const
+{
+    return (1.0 - slope / m_half_h) * 0.5 * double(m_opts.height);
+}
+
+Light& SceneGeometry::add_light(SceneRandom& rng, double sx, double sy, double z, double size,
+                                double emission_lo, double emission_hi)
+{
+    static const glm::dvec3 palette[] = { { 1.0, 0.78, 0.45 }, { 1.0, 0.25, 0.15 },
+                                          { 0.3, 1.0, 0.35 },  { 0.3, 0.45, 1.0 },
+                                          { 1.0, 0.55, 0.1 },  { 1.0, 1.0, 1.0 } };
+    Light l;
+    l.centre   = { sx * z * m_half_w, sy * z * m_half_h, z };
+    l.radius   = size * z * m_half_w * rng.uniform(0.7, 1.3);
+    const double brightness = rng.uniform(emission_lo, emission_hi);
+    l.emission = palette[size_t(rng.uniform() * 5.999)] * brightness;
+    m_lights.push_back(l);
+    return m_lights.back();
+}
+
+void SceneGeometry::find_light_rows()
+{
+    for (Light& l : m_lights) {
+        const double zc = std::max(l.centre.z - l.radius, 1e-3);
+        const double y0 = (l.centre.y - l.radius) / zc, y1 = (l.centre.y + l.radius) / zc;
+        l.ybegin = std::max(0, int(std::floor(row_of(std::max(y0, y1)))) - 1);
+        l.yend   = std::min(m_opts.height, int(std::ceil(row_of(std::min(y0, y1)))) + 2);
+    }
+}
+
+void SceneGeometry::widen_light_rows(const std::function<double(const Light&)>& extra)
+{
+    for (Light& l : m_lights) {
+        const int rows = int(std::ceil(extra(l)));
+        l.ybegin       = std::max(0, l.ybegin - rows);
+        l.yend         = std::min(m_opts.height, l.yend + rows);
+    }
+}
+
+void SceneGeometry::lights_of_row(int y, std::vector<const Light*>& out) const
+{
+    out.clear();
+    for (const Light& l : m_lights)
+        if (y >= l.ybegin && y < l.yend)
+            out.push_back(&l);
+}
+
+std::unique_ptr<SceneGeometry> make_scene_geometry(const std::string& name, const SceneOptions& o)
+{
+    if (name == "lights")
+        return std::make_unique<LightsScene>(o);
+    if (name == "edges")
+        return std::make_unique<EdgesScene>(o);
+    if (name == "giant")
+        return std::make_unique<GiantScene>(o);
+    return nullptr;
+}
+
+bool scene_spec(const std::string& name, const SceneOptions& opts, const std::vector<std::string>& channels,
+                OIIO::ImageSpec& spec, std::string& err)
+{
+    const SceneInfo* info = find_scene(name);
+    if (!info) {
+        err = OIIO::Strutil::fmt::format("unknown scene '{}' (known: {})", name,
+                                         OIIO::Strutil::join(scene_names(), ", "));
+        return false;
+    }
+    if (opts.width < 1 || opts.height < 1 || opts.width > 32768 || opts.height > 32768) {
+        err = OIIO::Strutil::fmt::format("scene size {}x{} is outside 1x1 .. 32768x32768", opts.width,
+                                         opts.height);
+        return false;
+    }
+    if (opts.aa < 1 || opts.aa > 16) {
+        err = OIIO::Strutil::fmt::format("scene aa={} is outside 1..16", opts.aa);
+        return false;
+    }
+    spec = OIIO::ImageSpec(opts.width, opts.height, int(channels.size()), OIIO::TypeFloat);
+    spec.channelnames  = channels;
+    spec.alpha_channel = 3;
+    spec.z_channel     = channels.size() > 4 ? 4 : -1;
+    spec.attribute("bokeh:scene", name);
+    spec.attribute("bokeh:focal_mm", float(kFocalMm));
+    spec.attribute("bokeh:sensor_width_mm", float(kSensorWidthMm));
+    spec.attribute("bokeh:depth_unit", "m");
+    spec.attribute("bokeh:focus_m", float(info->focus_m));
+    spec.attribute("bokeh:fstop", float(info->fstop));
+    spec.attribute("oiio:ColorSpace", "lin_rec709");
+    return true;
+}
+
+}  // namespace detail
+
+// --- the public entry points ---------------------------------------------------------
 
 std::vector<std::string> scene_names()
 {
@@ -586,43 +616,30 @@ std::string scene_description(const std::string& name)
                                       s->description, s->focus_m, s->fstop);
 }
 
+bool scene_camera(const std::string& name, SceneCamera& camera)
+{
+    const SceneInfo* s = find_scene(name);
+    if (!s)
+        return false;
+    camera.focal_mm        = kFocalMm;
+    camera.sensor_width_mm = kSensorWidthMm;
+    camera.focus_m         = s->focus_m;
+    camera.fstop           = s->fstop;
+    return true;
+}
+
 bool make_scene(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions& opts,
                 int nthreads)
 {
-    const SceneInfo* info = find_scene(name);
-    if (!info) {
-        dst.errorfmt("unknown scene '{}' (known: {})", name,
-                     OIIO::Strutil::join(scene_names(), ", "));
+    OIIO::ImageSpec spec;
+    std::string err;
+    if (!detail::scene_spec(name, opts, { "R", "G", "B", "A", "Z" }, spec, err)) {
+        dst.errorfmt("{}", err);
         return false;
     }
-    if (opts.width < 1 || opts.height < 1 || opts.width > 32768 || opts.height > 32768) {
-        dst.errorfmt("scene size {}x{} is outside 1x1 .. 32768x32768", opts.width, opts.height);
-        return false;
-    }
-    if (opts.aa < 1 || opts.aa > 16) {
-        dst.errorfmt("scene aa={} is outside 1..16", opts.aa);
-        return false;
-    }
-    OIIO::ImageSpec spec(opts.width, opts.height, 5, OIIO::TypeFloat);
-    spec.channelnames  = { "R", "G", "B", "A", "Z" };
-    spec.alpha_channel = 3;
-    spec.z_channel     = 4;
-    spec.attribute("bokeh:scene", name);
-    spec.attribute("bokeh:focal_mm", float(kFocalMm));
-    spec.attribute("bokeh:sensor_width_mm", float(kSensorWidthMm));
-    spec.attribute("bokeh:depth_unit", "m");
-    spec.attribute("bokeh:focus_m", float(info->focus_m));
-    spec.attribute("bokeh:fstop", float(info->fstop));
-    spec.attribute("oiio:ColorSpace", "lin_rec709");
     OIIO::ImageBuf buf(spec);
     detail::require_pixels(buf);
-
-    if (name == "lights")
-        render(buf, LightsScene(opts), opts.aa, nthreads);
-    else if (name == "edges")
-        render(buf, EdgesScene(opts), opts.aa, nthreads);
-    else
-        render(buf, GiantScene(opts), opts.aa, nthreads);
+    render(buf, *detail::make_scene_geometry(name, opts), opts.aa, nthreads);
     dst = std::move(buf);
     return true;
 }

@@ -5,25 +5,25 @@
 // image"), with the flat defocus's orientation (core/defocus.cpp, aperture_weights); the
 // cell walk is Amanatides and Woo's grid traversal ("A Fast Voxel Traversal Algorithm",
 // 1987) run over the CoC instead of a ray length; the volume split and "over" are the
-// OpenEXR deep rules (deep.h); the sampler is a 4-D Sobol' sequence (direction numbers of
-// Joe and Kuo, "Constructing Sobol sequences with better two-dimensional projections",
-// 2008: the first four dimensions) with the hash-based nested uniform (Owen) scramble of
-// Burley, "Practical Hash-based Owen Scrambling" (JCGT 9(4), 2020: the Laine-Karras style
-// hash with his constants, applied to the bit-reversed value).
+// OpenEXR deep rules (deep.h); the sampler (Owen-scrambled Sobol', truth_sampler.h) is
+// shared with the built-in scenes' geometric truth (scene_truth.cpp), so both draw the
+// same rays for a pixel and seed.
 //
 // Ours: the CoC interval bookkeeping (a sample belongs to the cell where the ray is when
 // the CoC is the sample's; half-open intervals, the first and last open-ended so a
 // zero-size aperture composites exactly the pixel's own samples, in the order and
-// arithmetic of flatten), the two half renders for the noise estimate, the per-pixel
-// seeds, and the blocks: each 16 x 16 block of cells keeps its samples' CoC range, and a
-// pixel's rays walk only the range of the blocks they can reach (on the merged
-// LowResLeftView passes, 2.6 cells a ray instead of 15.3, the same pixels:
-// build/bin/truth_measure, docs/methods/truth.md). Limits as truth.h says; cost is rays x
-// cells crossed, the cells growing with the CoC range, stopping at the first opaque
-// surface; about 200 ns a ray on one core, mostly the sampler and the walk's set-up.
+// arithmetic of flatten), the two half renders for the noise estimate, and the blocks:
+// each 16 x 16 block of cells keeps its samples' CoC range, and a pixel's rays walk only
+// the range of the blocks they can reach (on the merged LowResLeftView passes, 2.6 cells
+// a ray instead of 15.3, the same pixels: build/bin/truth_measure, docs/methods/truth.md).
+// Limits as truth.h says; cost is rays x cells crossed, the cells growing with the CoC
+// range, stopping at the first opaque surface; about 200 ns a ray on one core, mostly the
+// sampler and the walk's set-up.
 
 #include <bokeh/parallel.h>
 #include <bokeh/truth.h>
+
+#include "truth_sampler.h"
 
 #include <algorithm>
 #include <atomic>
@@ -49,108 +49,6 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kOpaqueTransmittance = 1.0 / 33554432.0;
 // The inverse CDF of a polygon sector's angle is tabulated at this many steps.
 constexpr int kAngleSteps = 4096;
-
-// --- the sampler ---------------------------------------------------------------------
-
-uint32_t reverse_bits(uint32_t x)
-{
-    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
-    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
-    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
-    return (x >> 16) | (x << 16);
-}
-
-// Burley (2020), section 3: an Owen scramble of the bits of x, most significant first,
-// as a hash of the reversed bits in which each bit only affects higher ones.
-uint32_t owen_scramble(uint32_t x, uint32_t seed)
-{
-    x = reverse_bits(x);
-    x += seed;
-    x ^= x * 0x6c50b47cu;
-    x ^= x * 0xb82f1e52u;
-    x ^= x * 0xc7afe638u;
-    x ^= x * 0x8d22f6e6u;
-    return reverse_bits(x);
-}
-
-// A 32-bit integer hash (a finaliser of the murmur / splitmix family) for seeds.
-uint32_t hash32(uint32_t x)
-{
-    x ^= x >> 16;
-    x *= 0x7feb352du;
-    x ^= x >> 15;
-    x *= 0x846ca68bu;
-    x ^= x >> 16;
-    return x;
-}
-uint32_t hash_combine(uint32_t a, uint32_t b) { return hash32(a ^ (hash32(b) + 0x9e3779b9u + (a << 6) + (a >> 2))); }
-
-// Direction numbers of the first four Sobol' dimensions, 32 bits each. Dimension 0 is van
-// der Corput's (all m = 1); the others from Joe and Kuo's table: (s, a, m_1..m_s) =
-// (1, 0, 1), (2, 1, 1 3), (3, 1, 1 3 1), extended by the recurrence
-// m_k = 2 a_1 m_{k-1} ^ 4 a_2 m_{k-2} ^ ... ^ 2^s m_{k-s} ^ m_{k-s}.
-struct SobolTable {
-    uint32_t v[4][32];
-    SobolTable()
-    {
-        struct Poly {
-            int s;
-            uint32_t a;
-            uint32_t m[3];
-        };
-        const Poly polys[3] = { { 1, 0, { 1, 0, 0 } }, { 2, 1, { 1, 3, 0 } }, { 3, 1, { 1, 3, 1 } } };
-        for (int k = 0; k < 32; ++k)
-            v[0][k] = 1u << (31 - k);
-        for (int d = 1; d < 4; ++d) {
-            const Poly& p = polys[d - 1];
-            uint32_t m[33];
-            for (int k = 1; k <= p.s; ++k)
-                m[k] = p.m[k - 1];
-            for (int k = p.s + 1; k <= 32; ++k) {
-                uint32_t mk = m[k - p.s] ^ (m[k - p.s] << p.s);
-                for (int j = 1; j < p.s; ++j)
-                    if ((p.a >> (p.s - 1 - j)) & 1u)
-                        mk ^= m[k - j] << j;
-                m[k] = mk;
-            }
-            for (int k = 1; k <= 32; ++k)
-                v[d][k - 1] = m[k] << (32 - k);
-        }
-    }
-};
-const SobolTable& sobol_table()
-{
-    static const SobolTable t;
-    return t;
-}
-
-// The points of one pixel's half render: Sobol' points in Gray-code order (the first 2^m
-// are the sequence's first 2^m), each dimension Owen-scrambled with its own seed.
-struct PixelSequence {
-    const SobolTable& t;
-    uint32_t seed[4];
-    uint32_t x[4] = { 0, 0, 0, 0 };
-    uint32_t i    = 0;
-
-    PixelSequence(const SobolTable& table, uint32_t s) : t(table)
-    {
-        for (int d = 0; d < 4; ++d)
-            seed[d] = hash_combine(s, uint32_t(d) + 1u);
-    }
-    // The next point, each coordinate in (0, 1).
-    void next(double u[4])
-    {
-        if (i > 0) {
-            const int bit = __builtin_ctz(i);
-            for (int d = 0; d < 4; ++d)
-                x[d] ^= t.v[d][bit];
-        }
-        ++i;
-        for (int d = 0; d < 4; ++d)
-            u[d] = (double(owen_scramble(x[d], seed[d])) + 0.5) * (1.0 / 4294967296.0);
-    }
-};
 
 // --- the scene -----------------------------------------------------------------------
 
@@ -502,7 +400,6 @@ bool check_options(const TruthOptions& o, std::string& err)
     return true;
 }
 
-double tone(double v) { return v / (1.0 + std::abs(v)); }
 
 }  // namespace
 
@@ -646,22 +543,17 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     // How far from its pixel a ray can go: half the largest CoC (the aperture's offsets are
     // within 1/2 px per px of CoC, times the aspect in y), plus the pixel.
     const int reach_x = int(std::ceil(0.5f * extreme)) + 1, reach_y = int(std::ceil(0.5f * extreme * opt.aspect)) + 1;
-    const SobolTable& table = sobol_table();
+    const detail::SobolTable& table = detail::sobol_table();
     const int n_first = (opt.spp + 1) / 2, n_second = opt.spp / 2;
     const double inv_n = 1.0 / opt.spp;
-    // Noise weight: the output (n1 A + n2 B) / n has variance E[(A - B)^2] n1 n2 / n^2
-    // when each half's variance falls as 1 / n_half.
-    const double noise_w = double(n_first) * double(n_second) * inv_n * inv_n;
 
     struct Part {
-        double sq = 0.0, sq_tone = 0.0;
+        detail::HalvesNoise noise;
         int64_t cells = 0, rays = 0;
     };
     const int64_t rows = out.height(), row_chunk = 2;
     const int64_t nchunks = (rows + row_chunk - 1) / row_chunk;
-    std::atomic<int64_t> done{ 0 };
-    std::mutex progress_lock;
-    int64_t reported = 0;
+    detail::ChunkProgress progress(opt.progress, nchunks);
     const Part total = parallel_reduce_chunks(
         0, rows, row_chunk, nthreads, Part{},
         [&](int64_t y0, int64_t y1) {
@@ -672,12 +564,12 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                 const int y = out.ybegin + int(yy);
                 float* row  = static_cast<float*>(result.pixeladdr(out.xbegin, y));
                 for (int x = out.xbegin; x < out.xend; ++x) {
-                    const uint32_t px_seed = hash_combine(hash_combine(opt.seed, uint32_t(x)), uint32_t(y));
+                    const uint32_t px_seed = detail::pixel_seed(opt.seed, x, y);
                     double sum[2][4]       = {};
                     float lo, hi;
                     sc.range_near(x - reach_x, x + reach_x, y - reach_y, y + reach_y, lo, hi);
                     for (int half = 0; half < 2 && lo <= hi; ++half) {
-                        PixelSequence seq(table, hash_combine(px_seed, uint32_t(half)));
+                        detail::PixelSequence seq(table, detail::half_seed(px_seed, half));
                         const int n = half == 0 ? n_first : n_second;
                         for (int i = 0; i < n; ++i) {
                             seq.next(u);
@@ -691,28 +583,17 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                     }
                     for (int c = 0; c < 4; ++c) {
                         row[size_t(x - out.xbegin) * 4 + size_t(c)] = float((sum[0][c] + sum[1][c]) * inv_n);
-                        if (n_second > 0) {
-                            const double a = sum[0][c] / n_first, b = sum[1][c] / n_second;
-                            part.sq += (a - b) * (a - b);
-                            part.sq_tone += (tone(a) - tone(b)) * (tone(a) - tone(b));
-                        }
+                        if (n_second > 0)
+                            part.noise.add(sum[0][c] / n_first, sum[1][c] / n_second);
                     }
                 }
             }
             part.cells = ray.cells;
-            if (opt.progress) {
-                const int64_t now = ++done;
-                std::lock_guard<std::mutex> lock(progress_lock);
-                if (now > reported) {  // in rising order, whichever thread finishes
-                    reported = now;
-                    opt.progress(float(double(now) / double(nchunks)));
-                }
-            }
+            progress.chunk_done();
             return part;
         },
         [](Part& acc, const Part& p) {
-            acc.sq += p.sq;
-            acc.sq_tone += p.sq_tone;
+            acc.noise.merge(p.noise);
             acc.cells += p.cells;
             acc.rays += p.rays;
         });
@@ -720,11 +601,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     rep.rays          = total.rays;
     rep.cells_visited = total.cells;
     const double values = double(out.npixels()) * 4.0;
-    if (n_second > 0 && values > 0) {
-        rep.noise_rmse       = std::sqrt(total.sq * noise_w / values);
-        const double mse_tm  = total.sq_tone * noise_w / values;
-        rep.noise_psnr_db    = mse_tm > 0.0 ? 10.0 * std::log10(1.0 / mse_tm) : 999.0;
-    }
+    total.noise.figures(n_first, n_second, values, rep.noise_rmse, rep.noise_psnr_db);
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     rep.summary = format("truth: CoC {:.1f} .. {:.1f} px, {} spp, {} rays, {:.1f} cells a ray, noise RMS {:.3g} "
                          "({:.1f} dB), output {}x{}, {:.2f} s{}",

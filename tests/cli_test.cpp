@@ -1,6 +1,8 @@
 // bokehtool as a user runs it: grammar, I/O fidelity, sequences, plugins, bad input.
 #include <gtest/gtest.h>
 
+#include <bokeh/scene.h>
+
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -90,6 +92,49 @@ TEST(Cli, SceneToExrAndPng)
     ASSERT_EQ(r.status, 0) << r.err;
     OIIO::ImageBuf t(dir + "/t.exr");
     EXPECT_EQ(t.spec().width, 20);
+}
+
+// output=truth (the geometric thin-lens truth) and output=deep (the deep scene) from the
+// command line: the truth equals the library's for the same lens, the deep image flattens
+// to the sharp scene.
+TEST(Cli, SceneTruthAndDeep)
+{
+    const std::string dir = fresh_dir("cli_scene_truth");
+    RunResult r = bokehtool(format("-v --scene giant:width=48:height=27:output=truth:fstop=4:kernel=polygon:blades=5:"
+                                   "spp=8 -o {0}/t.exr --scene giant:width=48:height=27:output=deep -o {0}/d.exr "
+                                   "--flatten -o {0}/f.exr --scene giant:width=48:height=27 -o {0}/s.exr",
+                                   dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("scene truth: giant 48x27"), std::string::npos) << r.out;
+    OIIO::ImageBuf t(dir + "/t.exr"), d(dir + "/d.exr"), f(dir + "/f.exr"), sharp(dir + "/s.exr");
+    ASSERT_TRUE(t.read(0, 0, true, OIIO::TypeFloat));
+    ASSERT_TRUE(d.read(0, 0, true, OIIO::TypeFloat));
+    ASSERT_TRUE(f.read(0, 0, true, OIIO::TypeFloat));
+    ASSERT_TRUE(sharp.read(0, 0, true, OIIO::TypeFloat));
+    EXPECT_EQ(t.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A" }));
+    EXPECT_TRUE(d.deep());
+    bokeh::SceneOptions so;
+    so.width  = 48;
+    so.height = 27;
+    bokeh::SceneTruthOptions lens;
+    lens.lens.focal_mm        = 50.0;
+    lens.lens.sensor_width_mm = 36.0;
+    lens.lens.focus_distance  = 0.5;  // the scene's
+    lens.lens.fstop           = 4.0;
+    lens.lens.depth_unit_mm   = 1000.0;
+    lens.aperture.shape       = bokeh::KernelShape::Polygon;
+    lens.aperture.blades      = 5;
+    lens.spp                  = 8;
+    OIIO::ImageBuf lib;
+    ASSERT_TRUE(bokeh::make_scene_truth(lib, "giant", so, lens));
+    EXPECT_EQ(max_difference(t, lib), 0.0);
+    double worst = 0.0;
+    for (int y = 0; y < 27; ++y)
+        for (int x = 0; x < 48; ++x)
+            for (int c = 0; c < 4; ++c)
+                worst = std::max(worst, std::abs(double(f.getchannel(x, y, 0, c)) - sharp.getchannel(x, y, 0, c))
+                                            / std::max(1.0, std::abs(double(sharp.getchannel(x, y, 0, c)))));
+    EXPECT_LE(worst, 2e-6);
 }
 
 TEST(Cli, KeepsTypesWindowsMetadataAndInput)
@@ -423,6 +468,18 @@ TEST(Cli, BadInput)
         { "--scene:aa=99 lights -o " + out, "out of range [1, 16]" },
         { "--scene:width=100 lights:width=200 -o " + out, "option 'width' is given twice" },
         { "--scene nosuchscene -o " + out, "--scene: unknown scene 'nosuchscene'" },
+        { "--scene lights:fstop=2 -o " + out, "--scene: fstop= is for output=truth" },
+        { "--scene lights:output=deep:spp=4 -o " + out, "--scene: spp= is for output=truth" },
+        { "--scene lights:output=fuzzy -o " + out, "--scene: option 'output'" },
+        { "--scene lights:width=16:height=9:output=truth:focus=0.01 -o " + out,
+          "--scene: scene truth: focus 0.01 m must be finite and beyond the focal length (50 mm)" },
+        { "--scene lights:width=16:height=9:output=truth:focus=far -o " + out,
+          "--scene: focus 'far' is neither a distance nor a pixel x,y" },
+        { "--scene lights:width=16:height=9:output=truth:focus=99,2 -o " + out, "--scene: focus pixel 99,2 is outside the data window" },
+        { "--scene lights:width=16:height=9:output=truth:kernel=disk:blades=5 -o " + out,
+          "--scene: blades does not apply to kernel=disk" },
+        { "--scene lights:width=16:height=9:output=truth:spp=0 -o " + out, "--scene: option 'spp' = 0 is out of range" },
+        { "--scene nosuch:output=truth -o " + out, "--scene: unknown scene 'nosuch'" },
         { "--threads many " + in + " -o " + out, "--threads: 'many' is not a thread count" },
         { in + " -d uint99 -o " + out, "-d: 'uint99' is not a pixel type" },
         { "--ch R,G,B -o " + out, "--ch: needs 1 image(s) on the stack but 0 are there" },

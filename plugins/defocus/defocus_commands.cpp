@@ -11,6 +11,8 @@
 
 #include "defocus_options.h"
 
+#include <algorithm>
+
 #include <OpenImageIO/strutil.h>
 
 namespace {
@@ -123,12 +125,6 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "image; deep (a deep input's result kept deep: a sample a layer); or a "
                            "diagnostic: signed CoC map, focal-plane view (near red, focus green, far "
                            "blue), layer map"),
-        OptionSpec::String("focus", "5", "focus distance in depth units, or a pixel x,y to sample"),
-        OptionSpec::Float("fstop", 2.8, 0.5, 1e4, "f-number"),
-        OptionSpec::Float("focal", 50.0, 0.1, 1e5, "focal length mm (default: image's bokeh:focal_mm, else 50)"),
-        OptionSpec::String("sensor", "36",
-                           "film back width in mm or a preset (ff, super35, alexa-lf, ...); "
-                           "default: image's bokeh:sensor_width_mm, else 36"),
         OptionSpec::Choice("unit", { "m", "cm", "mm", "in", "ft" }, "unit of the depth channel"),
         OptionSpec::Choice("math", { "depth", "far0", "far1", "direct" },
                            "depth channel holds: distance; 1/distance (far = 0); 1 - 1/distance "
@@ -142,12 +138,6 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("front", 1.0, 0.0, 1e3, "multiplies the CoC in front of focus"),
         OptionSpec::Float("back", 1.0, 0.0, 1e3, "multiplies the CoC behind focus"),
         OptionSpec::Float("maxcoc", 512.0, 0.0, 8192.0, "largest CoC diameter in px"),
-        OptionSpec::Choice("kernel", { "disk", "hex", "polygon" }, "aperture shape"),
-        OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
-        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon and hex: degrees"),
-        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
-        OptionSpec::Float("hole", 0.0, 0.0, 0.95, "catadioptric hole (radius fraction)"),
-        OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)"),
         OptionSpec::Int("layers", 0, 0, 1024, "layers: count (0: from the CoC range and budget)"),
         OptionSpec::Int("reduction", 16, 1, 16, "layers: coarsest buffer reduction (1, 2, 4, 8, 16)"),
         OptionSpec::String("budget", "40dB", "accuracy budget, PSNR against the reference"),
@@ -166,6 +156,14 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
         OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
     };
+    // The lens and the aperture in their shared spelling (--scene's geometric truth takes
+    // them too), at their places in the list: after output=, and after maxcoc=.
+    std::vector<OptionSpec> lens = bokeh::thin_lens_option_specs();
+    c.options.insert(c.options.begin() + 3, lens.begin(), lens.end());
+    const auto after_maxcoc = std::find_if(c.options.begin(), c.options.end(),
+                                           [](const OptionSpec& o) { return o.name == "maxcoc"; }) + 1;
+    std::vector<OptionSpec> aperture = bokeh::defocus_aperture_option_specs();
+    c.options.insert(after_maxcoc, aperture.begin(), aperture.end());
     // Lens character on the highlights (any of these switches it on).
     for (OptionSpec& spec : bokeh::defocus_sprite_option_specs())
         c.options.push_back(std::move(spec));

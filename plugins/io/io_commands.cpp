@@ -6,6 +6,9 @@
 #include <bokeh/plugin.h>
 #include <bokeh/scene.h>
 
+#include "aperture_options.h"
+#include "defocus_options.h"
+
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
 
@@ -128,16 +131,63 @@ bool convert_to(CommandContext& c, const std::string& from, const std::string& t
 }
 
 // The scene's options may ride on the command (--scene:width=64 lights) or, as the
-// scene name's own modifiers, on its argument (--scene lights:width=64).
+// scene name's own modifiers, on its argument (--scene lights:width=64). output=truth
+// takes the lens and aperture in --defocus's spelling (plugins/shared/).
 const std::vector<OptionSpec>& scene_options()
 {
-    static const std::vector<OptionSpec> specs = {
-        OptionSpec::Int("width", 1920, 1, 32768, "width in pixels"),
-        OptionSpec::Int("height", 1080, 1, 32768, "height in pixels"),
-        OptionSpec::Int("aa", 3, 1, 16, "colour supersamples per axis"),
-        OptionSpec::Int("seed", 1, 0, 2147483647, "texture and light placement"),
-    };
+    static const std::vector<OptionSpec> specs = [] {
+        std::vector<OptionSpec> v = {
+            OptionSpec::Int("width", 1920, 1, 32768, "width in pixels"),
+            OptionSpec::Int("height", 1080, 1, 32768, "height in pixels"),
+            OptionSpec::Int("aa", 3, 1, 16, "colour supersamples per axis (sharp and deep)"),
+            OptionSpec::Int("seed", 1, 0, 2147483647, "texture and light placement"),
+            OptionSpec::Choice("output", { "sharp", "truth", "deep" },
+                               "sharp: the pinhole image, RGBA+Z; truth: the thin-lens truth traced "
+                               "against the scene's geometry, RGBA (the lens options below, spp=); "
+                               "deep: a deep RGBA+Z image of every surface along each pixel's aa x aa "
+                               "rays, visible and hidden, alpha its share of the rays"),
+        };
+        for (OptionSpec& o : bokeh::thin_lens_option_specs()) {
+            if (o.name == "focus")
+                o.help = "truth: focus distance in metres, or a pixel x,y of the sharp scene "
+                         "(default: the scene's)";
+            else if (o.name == "fstop")
+                o.help = "truth: f-number (default: the scene's)";
+            else if (o.name == "focal")
+                o.help = "truth: focal length mm the CoC is computed with (default: the scene's 50; "
+                         "the frame stays the scene's)";
+            else if (o.name == "sensor")
+                o.help = "truth: film back width in mm or a preset (ff, super35, alexa-lf, ...) the "
+                         "CoC is computed with (default: the scene's 36)";
+            else
+                o.help = "truth: " + o.help;
+            v.push_back(std::move(o));
+        }
+        for (OptionSpec& o : bokeh::defocus_aperture_option_specs()) {
+            o.help = "truth: " + o.help;
+            v.push_back(std::move(o));
+        }
+        v.push_back(OptionSpec::Int("spp", 64, 1, 1048576,
+                                    "truth: rays a pixel (the noise falls as 1/sqrt(spp))"));
+        v.push_back(OptionSpec::Int("rayseed", 1, 0, 2147483647,
+                                    "truth: the sampling sequence's scramble (--defocus:method=truth's seed=)"));
+        return v;
+    }();
     return specs;
+}
+
+// The options only output=truth reads.
+bool is_truth_option(const std::string& name)
+{
+    if (name == "spp" || name == "rayseed")
+        return true;
+    for (const OptionSpec& o : bokeh::thin_lens_option_specs())
+        if (o.name == name)
+            return true;
+    for (const OptionSpec& o : bokeh::defocus_aperture_option_specs())
+        if (o.name == name)
+            return true;
+    return false;
 }
 
 bool scene(CommandContext& c)
@@ -154,7 +204,8 @@ bool scene(CommandContext& c)
                 // Both `--scene:width=100 lights:width=200`: one would be dropped unseen.
                 if (c.options.given(key))
                     return c.fail(format("option '{}' is given twice (--scene:{} and {})", key, key, c.args[0]));
-                c.options.values[key] = own.values[key];
+                c.options.values[key]           = own.values[key];
+                c.options.explicitly_given[key] = true;
             }
     }
     bokeh::SceneOptions o;
@@ -162,12 +213,58 @@ bool scene(CommandContext& c)
     o.height = c.options.get_int("height");
     o.aa     = c.options.get_int("aa");
     o.seed   = uint32_t(c.options.get_int("seed"));
+    const std::string& output = c.options.get_string("output");
+    if (output != "truth")
+        for (const auto& [key, given] : c.options.explicitly_given)
+            if (given && is_truth_option(key))
+                return c.fail(format("{}= is for output=truth", key));
     StackImage out;
     out.buf = std::make_shared<OIIO::ImageBuf>();
-    if (!bokeh::make_scene(*out.buf, name, o, c.nthreads))
+    if (output == "deep") {
+        if (!bokeh::make_deep_scene(*out.buf, name, o, c.nthreads))
+            return c.fail(out.buf->geterror());
+    } else if (output == "truth") {
+        bokeh::SceneCamera camera;
+        if (!bokeh::scene_camera(name, camera)) {
+            bokeh::make_scene(*out.buf, name, o);  // fails, naming the known scenes
+            return c.fail(out.buf->geterror());
+        }
+        OIIO::ImageSpec camera_spec;
+        camera_spec.attribute("bokeh:focal_mm", float(camera.focal_mm));
+        camera_spec.attribute("bokeh:sensor_width_mm", float(camera.sensor_width_mm));
+        bokeh::CocOptions coc;
+        std::string err;
+        if (!bokeh::thin_lens_from(c.options, camera_spec, coc, err))
+            return c.fail(err);
+        if (!c.options.given("fstop"))
+            coc.lens.fstop = camera.fstop;
+        if (!c.options.given("focus"))
+            coc.lens.focus_distance = camera.focus_m;
+        coc.lens.depth_unit_mm = 1000.0;
+        if (coc.focus_at_pixel) {  // the depth the sharp scene has there, as --defocus reads it
+            OIIO::ImageBuf sharp;
+            if (!bokeh::make_scene(sharp, name, o, c.nthreads))
+                return c.fail(sharp.geterror());
+            if (!bokeh::resolve_coc_options(coc, sharp, err))
+                return c.fail(err);
+        }
+        bokeh::SceneTruthOptions t;
+        t.lens = coc.lens;
+        if (!bokeh::aperture_kernel_from(c.options, t.aperture, err))
+            return c.fail(err);
+        t.aspect = float(c.options.get_float("aspect"));
+        t.spp    = c.options.get_int("spp");
+        t.seed   = uint32_t(c.options.get_int("rayseed"));
+        bokeh::SceneTruthReport report;
+        if (!bokeh::make_scene_truth(*out.buf, name, o, t, &report, c.nthreads))
+            return c.fail(out.buf->geterror());
+        if (c.verbosity >= 1)
+            c.message("  " + report.summary);
+    } else if (!bokeh::make_scene(*out.buf, name, o, c.nthreads)) {
         return c.fail(out.buf->geterror());
+    }
     out.colorspace = c.colors->scene_linear();
-    out.origin     = "--scene " + name;
+    out.origin     = "--scene " + name + (output == "sharp" ? std::string() : ":output=" + output);
     c.outputs.push_back(std::move(out));
     return true;
 }

@@ -68,10 +68,32 @@ bool with_named_depth(const OptionValues& v, const std::shared_ptr<OIIO::ImageBu
     return true;
 }
 
-bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
-                          std::string& err)
+std::vector<OptionSpec> thin_lens_option_specs()
 {
-    CocOptions& coc = o.coc;
+    return {
+        OptionSpec::String("focus", "5", "focus distance in depth units, or a pixel x,y to sample"),
+        OptionSpec::Float("fstop", 2.8, 0.5, 1e4, "f-number"),
+        OptionSpec::Float("focal", 50.0, 0.1, 1e5, "focal length mm (default: image's bokeh:focal_mm, else 50)"),
+        OptionSpec::String("sensor", "36",
+                           "film back width in mm or a preset (ff, super35, alexa-lf, ...); "
+                           "default: image's bokeh:sensor_width_mm, else 36"),
+    };
+}
+
+std::vector<OptionSpec> defocus_aperture_option_specs()
+{
+    return {
+        OptionSpec::Choice("kernel", { "disk", "hex", "polygon" }, "aperture shape"),
+        OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
+        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon and hex: degrees"),
+        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
+        OptionSpec::Float("hole", 0.0, 0.0, 0.95, "catadioptric hole (radius fraction)"),
+        OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)"),
+    };
+}
+
+bool thin_lens_from(const OptionValues& v, const OIIO::ImageSpec& spec, CocOptions& coc, std::string& err)
+{
     // Camera facts recorded in the image (our scenes write these) unless given.
     coc.lens.focal_mm = v.given("focal") ? v.get_float("focal")
                                          : spec.get_float_attribute("bokeh:focal_mm", 50.0f);
@@ -86,8 +108,6 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
             names += std::string(names.empty() ? "" : ", ") + b.name;
         return fail(err, format("sensor '{}' is neither a width in mm nor a film back ({})", sensor, names));
     }
-    if (!unit_mm(v.get_string("unit"), coc.lens.depth_unit_mm))
-        return fail(err, format("unit '{}' is not one of m, cm, mm, in, ft", v.get_string("unit")));
 
     const std::string& focus = v.get_string("focus");
     if (focus.find(',') != std::string::npos) {
@@ -103,6 +123,17 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
     } else if (!parse_number(focus, coc.lens.focus_distance)) {
         return fail(err, format("focus '{}' is neither a distance nor a pixel x,y", focus));
     }
+    return true;
+}
+
+bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
+                          std::string& err)
+{
+    CocOptions& coc = o.coc;
+    if (!thin_lens_from(v, spec, coc, err))
+        return false;
+    if (!unit_mm(v.get_string("unit"), coc.lens.depth_unit_mm))
+        return fail(err, format("unit '{}' is not one of m, cm, mm, in, ft", v.get_string("unit")));
     const std::string& math = v.get_string("math");
     coc.mode = math == "direct" ? DepthMode::Direct
                : math == "far0" ? DepthMode::InverseDepth

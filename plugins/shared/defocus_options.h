@@ -15,6 +15,20 @@
 
 namespace bokeh {
 
+/// The thin lens as --defocus spells it: focus (a distance or a pixel x,y), fstop, focal,
+/// sensor. Shared with --scene's geometric truth.
+std::vector<OptionSpec> thin_lens_option_specs();
+
+/// The aperture as --defocus spells it: kernel (disk, hex, polygon), blades, rotation,
+/// curvature, hole, aspect. Shared with --scene's geometric truth.
+std::vector<OptionSpec> defocus_aperture_option_specs();
+
+/// The lens of thin_lens_option_specs() from `v`: focal length and film back from the
+/// options, else the image's metadata ("bokeh:focal_mm", "bokeh:sensor_width_mm"), else
+/// 50 and 36 mm; f-number; the focus distance or pixel. The depth unit is left as it is.
+/// False + `err` naming the option.
+bool thin_lens_from(const OptionValues& v, const OIIO::ImageSpec& spec, CocOptions& coc, std::string& err);
+
 /// Fill `o` from `--defocus`'s option values `v` for an image with spec `spec`: its camera
 /// metadata ("bokeh:focal_mm", "bokeh:sensor_width_mm", as the built-in scenes write)
 /// gives the focal length and film back unless the options do. False + `err` naming the

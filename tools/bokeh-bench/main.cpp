@@ -18,9 +18,10 @@
 // --task diffraction times the fringe models of a bokeh's rim against the exact PSF
 // (diffraction_task.cpp; its own CSV columns, one thread); --task optics the lens PSFs
 // (optics_task.cpp); --task lens lens character's highlight sprites against the plain
-// defocus (lens_task.cpp).
+// defocus (lens_task.cpp); --task truth-chain every step from the built-in scenes' geometric
+// thin-lens truth to the fast methods (truth_chain_task.cpp; its own CSV columns).
 //
-//   bokeh-bench [--task blur|defocus|resample|iris|deep|lens] [--threads N] [--reps N] [--csv FILE] [--quick]
+//   bokeh-bench [--task blur|defocus|resample|iris|deep|lens|truth-chain] [--threads N] [--reps N] [--csv FILE] [--quick]
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
 
 #include "bench_common.h"
@@ -32,6 +33,7 @@
 #include "iris_task.h"
 #include "optics_task.h"
 #include "resample_task.h"
+#include "truth_chain_task.h"
 #include "timing.h"
 
 #include <bokeh/blur.h>
@@ -111,7 +113,8 @@ int main(int argc, char* argv[])
                                                    || std::string(argv[i + 1]) == "deep"
                                                    || std::string(argv[i + 1]) == "optics"
                                                    || std::string(argv[i + 1]) == "diffraction"
-                                                   || std::string(argv[i + 1]) == "lens"))
+                                                   || std::string(argv[i + 1]) == "lens"
+                                                   || std::string(argv[i + 1]) == "truth-chain"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -133,7 +136,7 @@ int main(int argc, char* argv[])
             quick = true;
         else {
             std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens] [--threads N] [--reps N] "
+                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens|truth-chain] [--threads N] [--reps N] "
                                  "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
                                  "[--scenes a,b] [--image FILE]...\n",
                          a.c_str());
@@ -153,6 +156,14 @@ int main(int argc, char* argv[])
     if (task == "diffraction") {  // radial profiles, one thread: its own columns
         rows.push_back(bokeh_bench::kDiffractionCsvHeader);
         if (!bokeh_bench::run_diffraction_task(reps, quick, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "truth-chain") {  // its own columns
+        rows.push_back(bokeh_bench::kTruthChainCsvHeader);
+        args.threads = threads;
+        args.reps    = reps;
+        if (!bokeh_bench::run_truth_chain_task(args, rows))
             return 1;
         return write_csv(csv, rows);
     }
