@@ -436,22 +436,64 @@ struct SpanLut {
     }
 };
 
-// A smooth value noise in the pupil (surface noise), fixed, zero mean, unit-ish amplitude.
+// A smooth value noise in the pupil (surface noise), fixed, zero mean, unit-ish amplitude:
+// three octaves of lattice values (a hash of the lattice point, -1..1) blended by
+// smoothstep. The lattice values the pupil (|x|, |y| <= 1) uses are hashed once into a
+// table (the hash's division was most of a sample's noise cost); points outside it
+// (none from lens_psf) hash as they go.
+double noise_lattice_hash(int i, int j)
+{
+    uint32_t h = uint32_t(i) * 374761393u + uint32_t(j) * 668265263u;
+    h          = (h ^ (h >> 13)) * 1274126177u;
+    return double(h ^ (h >> 16)) / 4294967295.0 * 2.0 - 1.0;
+}
+
+struct NoiseLattice {
+    static constexpr int kOctaves = 3;
+    static constexpr double kBaseFrequency = 6.0;
+    // Octave o (frequency f = 6 2^o) at lattice points 0 .. 3f + 1 per axis: (x + 2) f
+    // for |x| <= 1 and the next point.
+    std::array<std::vector<double>, kOctaves> value;
+    std::array<int, kOctaves> side{};
+    NoiseLattice()
+    {
+        double f = kBaseFrequency;
+        for (int o = 0; o < kOctaves; ++o, f *= 2.0) {
+            side[size_t(o)] = int(3.0 * f) + 2;
+            const int n     = side[size_t(o)];
+            value[size_t(o)].resize(size_t(n) * n);
+            for (int j = 0; j < n; ++j)
+                for (int i = 0; i < n; ++i)
+                    value[size_t(o)][size_t(j) * n + i] = noise_lattice_hash(i, j);
+        }
+    }
+};
+
 double pupil_noise(double x, double y)
 {
-    auto hash = [](int i, int j) {
-        uint32_t h = uint32_t(i) * 374761393u + uint32_t(j) * 668265263u;
-        h          = (h ^ (h >> 13)) * 1274126177u;
-        return double(h ^ (h >> 16)) / 4294967295.0 * 2.0 - 1.0;
-    };
-    double sum = 0.0, amp = 0.5, f = 6.0;
-    for (int octave = 0; octave < 3; ++octave, amp *= 0.5, f *= 2.0) {
+    static const NoiseLattice lattice;
+    double sum = 0.0, amp = 0.5, f = NoiseLattice::kBaseFrequency;
+    for (int octave = 0; octave < NoiseLattice::kOctaves; ++octave, amp *= 0.5, f *= 2.0) {
         const double u = (x + 2.0) * f, v = (y + 2.0) * f;
         const int i = int(std::floor(u)), j = int(std::floor(v));
         const double tu = u - i, tv = v - j;
         const double su = tu * tu * (3 - 2 * tu), sv = tv * tv * (3 - 2 * tv);
-        const double n0 = hash(i, j) + su * (hash(i + 1, j) - hash(i, j));
-        const double n1 = hash(i, j + 1) + su * (hash(i + 1, j + 1) - hash(i, j + 1));
+        const int n = lattice.side[size_t(octave)];
+        double h00, h10, h01, h11;
+        if (i >= 0 && j >= 0 && i + 1 < n && j + 1 < n) {
+            const double* row = &lattice.value[size_t(octave)][size_t(j) * n + i];
+            h00 = row[0];
+            h10 = row[1];
+            h01 = row[n];
+            h11 = row[n + 1];
+        } else {
+            h00 = noise_lattice_hash(i, j);
+            h10 = noise_lattice_hash(i + 1, j);
+            h01 = noise_lattice_hash(i, j + 1);
+            h11 = noise_lattice_hash(i + 1, j + 1);
+        }
+        const double n0 = h00 + su * (h10 - h00);
+        const double n1 = h01 + su * (h11 - h01);
         sum += amp * (n0 + sv * (n1 - n0));
     }
     return sum;
@@ -847,19 +889,24 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     for (const auto& s : chunk_sum)
         for (int c = 0; c < 3; ++c)
             total[size_t(c)] += s[size_t(c)];
+    // Nothing landed in the image (a size smaller than the PSF's offset, or a pupil cut
+    // away): that channel's energy goes to the centre pixel.
+    std::array<bool, 3> empty{};
+    std::array<double, 3> inv{};
     for (int c = 0; c < 3; ++c) {
-        if (!(total[size_t(c)] > 0.0)) {
-            // Nothing landed in the image (a size smaller than the PSF's offset, or a
-            // pupil cut away): the channel's energy goes to the centre pixel.
-            for (size_t i = 0; i < size_t(w) * h; ++i)
-                out.rgb[i * 3 + c] = 0.0f;
-            out.rgb[(size_t(cy) * w + cx) * 3 + c] = 1.0f;
-            continue;
-        }
-        const double inv = 1.0 / total[size_t(c)];
-        for (size_t i = 0; i < size_t(w) * h; ++i)
-            out.rgb[i * 3 + c] = float(out.rgb[i * 3 + c] * inv);
+        empty[size_t(c)] = !(total[size_t(c)] > 0.0);
+        inv[size_t(c)]   = empty[size_t(c)] ? 0.0 : 1.0 / total[size_t(c)];
     }
+    parallel_for_chunks(0, int64_t(w) * h, 16384, nthreads, [&](int64_t i0, int64_t i1) {
+        for (int64_t i = i0; i < i1; ++i)
+            for (int c = 0; c < 3; ++c) {
+                float& v = out.rgb[size_t(i) * 3 + size_t(c)];
+                v        = empty[size_t(c)] ? 0.0f : float(v * inv[size_t(c)]);
+            }
+    });
+    for (int c = 0; c < 3; ++c)
+        if (empty[size_t(c)])
+            out.rgb[(size_t(cy) * w + cx) * 3 + c] = 1.0f;
     return true;
 }
 
