@@ -416,7 +416,14 @@ struct SpanLut {
     bool lookup(double psi, double& l, double& h, double& c) const
     {
         double f = psi * (n / (2.0 * kPi));
-        f -= n * std::floor(f / n);
+        // Into [0, n): psi is within -pi .. 2 pi from the pixel loop, so one step does
+        // (the same value n floor(f / n) gives, without its division and floor).
+        if (f < 0.0)
+            f += n;
+        else if (f >= n)
+            f -= n;
+        if (!(f >= 0.0 && f < n))
+            f -= n * std::floor(f / n);
         const int i0 = std::min(int(f), n - 1);
         const double t = f - i0;
         const size_t a = size_t(i0), b = a + 1;
@@ -819,6 +826,9 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
                         continue;
                     if (d < table.d_in) {
                         table.fringe_at(rim, d, fringe);
+                        // Outside the rim past the fringes' reach: an exact zero.
+                        if (rim.gain >= 1.0 && fringe[0] == 0.0 && fringe[1] == 0.0 && fringe[2] == 0.0)
+                            continue;
                         if (R > rim.plateau)
                             Rs = branch * rim.plateau;
                     }
