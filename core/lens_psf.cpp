@@ -393,7 +393,7 @@ struct SpanLut {
     std::vector<uint8_t> ok;
     double ncos_min = 1.0;  // over the directions with a span (lookup interpolates between them)
 
-    SpanLut(const LensCharacter& lens, const Geometry& g, double r_max_px)
+    SpanLut(const LensCharacter& lens, const Geometry& g, double r_max_px, int nthreads)
     {
         n = 1024;
         while (n < 8.0 * r_max_px * kPi / 4.0 && n < 65536)
@@ -402,16 +402,20 @@ struct SpanLut {
         hi.resize(size_t(n) + 1);
         ncos.resize(size_t(n) + 1);
         ok.resize(size_t(n) + 1);
-        for (int i = 0; i <= n; ++i) {
-            const double psi = 2.0 * kPi * i / n;
-            double l = 0.0, h = 0.0;
-            ok[size_t(i)]   = pupil_span(lens, g, psi, l, h);
-            lo[size_t(i)]   = float(l);
-            hi[size_t(i)]   = float(h);
-            ncos[size_t(i)] = float(lens.aperture.edge_normal_cos(psi));
+        // Entries are independent (the aperture's edge and normal cost ~0.5 us each).
+        parallel_for_chunks(0, n + 1, 256, nthreads, [&](int64_t i0, int64_t i1) {
+            for (int64_t i = i0; i < i1; ++i) {
+                const double psi = 2.0 * kPi * double(i) / n;
+                double l = 0.0, h = 0.0;
+                ok[size_t(i)]   = pupil_span(lens, g, psi, l, h);
+                lo[size_t(i)]   = float(l);
+                hi[size_t(i)]   = float(h);
+                ncos[size_t(i)] = float(lens.aperture.edge_normal_cos(psi));
+            }
+        });
+        for (int i = 0; i <= n; ++i)
             if (ok[size_t(i)])
                 ncos_min = std::min(ncos_min, double(ncos[size_t(i)]));
-        }
     }
     bool lookup(double psi, double& l, double& h, double& c) const
     {
@@ -520,12 +524,18 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
                  const std::vector<SpectralSample>& spectrum, double na_per_pitch, int nthreads)
 {
     // The smallest outer pupil radius any direction uses.
-    double s_min = 1.0;
-    for (int i = 0; i < 720; ++i) {
-        double lo, hi;
-        if (pupil_span(lens, g, 2.0 * kPi * i / 720.0, lo, hi))
-            s_min = std::min(s_min, hi);
-    }
+    const double s_min = parallel_reduce_chunks(
+        0, 720, 90, nthreads, 1.0,
+        [&](int64_t i0, int64_t i1) {
+            double m = 1.0;
+            for (int64_t i = i0; i < i1; ++i) {
+                double lo, hi;
+                if (pupil_span(lens, g, 2.0 * kPi * double(i) / 720.0, lo, hi))
+                    m = std::min(m, hi);
+            }
+            return m;
+        },
+        [](double& acc, double part) { acc = std::min(acc, part); });
     t.s_lo = std::max(0.0, std::min(s_min - 1.0 / t.K, 1.0 - 1.0 / t.K));
     t.Kf   = std::clamp(int(std::ceil((1.0 - t.s_lo) * 32.0)), 1, 32);
     const SpectralSample& mid = spectrum[spectrum.size() / 2];
@@ -764,7 +774,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     out.rgb.assign(size_t(w) * h * 3, 0.0f);
     const int cx = w / 2, cy = h / 2;
 
-    const SpanLut spans(lens, g, r_max);
+    const SpanLut spans(lens, g, r_max, nthreads);
     // Past branch_reach_px a side adds nothing, so a sample beyond both sides' reach is
     // skipped before its trigonometry (the square's corners, and the side of the axis a
     // back or front bokeh's rays never reach). A fringed rim moves light out to its band's
