@@ -9,6 +9,9 @@
 //     covers, into bins 0.5 px wide; the bins' densities (mass over annulus area) are
 //     kept at K + 1 pupil radii s = k / K, cumulatively, so the PSF of any pupil span
 //     [lo, hi] along a direction is D(R, hi) - D(R, lo) (linear in s and R between).
+//     The table is built as increments (the few bins each s step's rays reach) summed
+//     over the wavelengths, then cumulated along s once; rows are built in parallel
+//     bands and summed in a fixed order, so the table is the same for any thread count.
 //  2. A pixel maps to the reference image by the field's linear map (squeeze,
 //     astigmatism, anamorphic focus: image = M p for pure defocus, so p = M^-1 X), then
 //     to polar (R, phi); pupil directions phi (rays landing at +R) and phi + pi (rays
@@ -22,10 +25,14 @@
 //     DiffractionModel::SeedMap puts the seed's pseudo-diffraction map in place of F: pi
 //     times its lookup at rho = 1 - d / (c_eff / 2), at the wavelength's own fringe width.
 //     Where the rim is not the outermost ray (a caustic), the law does not hold and the
-//     rim stays geometric. Pixels in the fringe band are averaged over 4 x 4 samples, so
-//     fringes finer than a pixel fade to their mean (the seed's Nyquist fade).
+//     rim stays geometric. The fringe factor is F's mean over a pixel-wide box (from F's
+//     tabulated integral), so fringes finer than a pixel fade to their mean (the seed's
+//     Nyquist fade).
 //  4. Onion rings and surface noise multiply the density by a pattern in the pupil
-//     (the pupil point a pixel comes from taken as s = R / |c/2|).
+//     (the pupil point a pixel comes from taken as s = R / |c/2|); the rings' cosine is
+//     tabulated per request against the distance from their centre.
+//  Samples past the light's reach on both sides of the axis are skipped before any
+//  lookup (the exact zero they would add).
 //  5. Each wavelength's PSF is normalised to unit energy and added with its RGB weights.
 // Limits: astigmatic and anamorphic PSFs carry the spherical aberration of the larger
 // axis' CoC scaled along the other; their fringes use the mean scale. The hole's inner
@@ -39,6 +46,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include <OpenImageIO/strutil.h>
 
@@ -55,28 +63,50 @@ constexpr double kFadeV = 6.0;   // from here to kBandV, F fades to its mean (1 
 
 // The edge law F(v) (core/wave_optics.cpp) tabulated over the band once, 1/256 apart in v
 // (a period is 2 / v: 32 entries at the band's edge), faded to its mean from kFadeV on,
-// so a pixel past the band gets F's mean without a step (the seed's Nyquist fade).
-double edge_law(double v)
-{
-    static const std::vector<float> table = [] {
-        const int n = int(2.0 * kBandV * 256.0) + 1;
-        std::vector<float> t(size_t(n) + 1);
+// so a pixel past the band gets F's mean without a step (the seed's Nyquist fade); F is
+// linear between entries. A pixel takes F's mean over its width, from F's integral G
+// (exact for the linear pieces): (G(v1) - G(v0)) / (v1 - v0).
+struct EdgeLawTable {
+    static constexpr double kPerV = 256.0;
+    std::vector<double> f, g;  // F and its integral from -kBandV at the entries
+
+    EdgeLawTable()
+    {
+        const int n = int(2.0 * kBandV * kPerV) + 1;
+        f.resize(size_t(n) + 1);
+        g.resize(size_t(n) + 1);
         for (int i = 0; i < n; ++i) {
-            const double x    = -kBandV + i / 256.0;
+            const double x    = -kBandV + i / kPerV;
             const double mean = x > 0.0 ? 1.0 : 0.0;
             const double fade = std::clamp((kBandV - std::abs(x)) / (kBandV - kFadeV), 0.0, 1.0);
-            t[size_t(i)] = float(mean + fade * (fresnel_edge_intensity(x) - mean));
+            f[size_t(i)]      = double(float(mean + fade * (fresnel_edge_intensity(x) - mean)));
         }
-        t[size_t(n)] = t[size_t(n) - 1];
-        return t;
-    }();
-    if (v <= -kBandV)
-        return 0.0;
-    if (v >= kBandV)
-        return 1.0;
-    const double f = (v + kBandV) * 256.0;
-    const int i    = int(f);
-    return table[size_t(i)] + (f - i) * (table[size_t(i) + 1] - table[size_t(i)]);
+        f[size_t(n)] = f[size_t(n) - 1];
+        g[0]         = 0.0;
+        for (int i = 1; i <= n; ++i)
+            g[size_t(i)] = g[size_t(i) - 1] + 0.5 * (f[size_t(i) - 1] + f[size_t(i)]) / kPerV;
+    }
+    // G(v) = integral of F from -kBandV to v (F = 0 below the band, 1 above).
+    double integral(double v) const
+    {
+        if (v <= -kBandV)
+            return 0.0;
+        if (v >= kBandV)
+            return g[g.size() - 2] + (v - kBandV);
+        const double x = (v + kBandV) * kPerV;
+        const int i    = int(x);
+        const double t = x - i;
+        const double f0 = f[size_t(i)], f1 = f[size_t(i) + 1];
+        return g[size_t(i)] + (f0 * t + 0.5 * (f1 - f0) * t * t) / kPerV;
+    }
+    // F's mean over [v0, v1], v0 < v1.
+    double mean(double v0, double v1) const { return (integral(v1) - integral(v0)) / (v1 - v0); }
+};
+
+const EdgeLawTable& edge_law_table()
+{
+    static const EdgeLawTable table;
+    return table;
 }
 
 // The landing radius of one wavelength, px: r(s) = s (c/2 - a(s, l)).
@@ -181,68 +211,91 @@ struct RgbTable {
     }
 };
 
-// Adds one wavelength's geometric densities, times its RGB weights, into `t`: rays at 8K
-// pupil radii, each ray's mass s ds spread over the R interval its step covers.
-void add_wavelength(RgbTable& t, const Landing& L, const std::array<double, 3>& w,
-                    std::vector<double>& mass, std::vector<double>& d)
+// Rays per snapshot step of the radial table (step 1 of the header).
+constexpr int kRaysPerRow = 8;
+
+// The landing radii r(i ds) of one wavelength's rays, i = 0 .. K kRaysPerRow, ds = 1 / (K
+// kRaysPerRow): the ray boundaries add_wavelength_rows spreads each ray's mass between.
+void landing_radii(std::vector<double>& r, const Landing& L, int K)
+{
+    const int n     = K * kRaysPerRow;
+    const double ds = 1.0 / (double(K) * kRaysPerRow);
+    r.resize(size_t(n) + 1);
+    r[0] = L.r(0.0);
+    for (int i = 0; i < n; ++i)
+        r[size_t(i) + 1] = L.r((i + 1) * ds);
+}
+
+// Adds one wavelength's increments, times its RGB weights, to rows [k_begin, k_end) of
+// `t`: row k gets the density the rays of step k (pupil radii (k - 1) / K .. k / K) add,
+// each ray's mass s ds spread over the R interval between its landing radii (`r`,
+// landing_radii), divided by the bins' annulus areas and pre-filtered along R by a
+// pixel-wide tent (1/4, 1/2, 1/4 of the half-pixel bins), each side of the axis alone: a
+// pixel-centre sample then weighs an edge about as the pixel's area does (the flat
+// kernels' anti-aliasing). A step's rays reach a few bins, so a row costs a few bins, not
+// every bin reached so far; cumulate_rows turns the increments into the cumulative table.
+void add_wavelength_increments(RgbTable& t, const std::vector<double>& r, const std::array<double, 3>& w,
+                               int k_begin, int k_end, std::vector<double>& mass)
 {
     const int K = t.K, nb = t.bins();
-    std::fill(mass.begin(), mass.end(), 0.0);
-    std::fill(d.begin(), d.end(), 0.0);
-    constexpr int kSub = 8;  // rays per snapshot step
-    const double ds    = 1.0 / (double(K) * kSub);
-    // Only the bins a ray has reached so far (and their neighbours, for the tent) are
-    // visited: the cumulative table's rows grow with s, and rays land on one side of the
-    // axis unless the beam crosses it.
-    int touched_lo = nb, touched_hi = -1;
-    auto snapshot = [&](int k) {
-        if (touched_hi < 0)
-            return;
-        const int v_lo = std::max(0, touched_lo - 1), v_hi = std::min(nb - 1, touched_hi + 1);
-        for (int b = v_lo; b <= v_hi; ++b) {
-            const double r0 = std::abs((b - t.half_bins) * kBinPx), r1 = std::abs((b - t.half_bins + 1) * kBinPx);
-            d[size_t(b)] = mass[size_t(b)] / (0.5 * std::abs(r1 * r1 - r0 * r0));  // per unit angle
+    const double ds = 1.0 / (double(K) * kRaysPerRow);
+    auto density = [&](int b) {  // per unit angle
+        const double r0 = std::abs((b - t.half_bins) * kBinPx), r1 = std::abs((b - t.half_bins + 1) * kBinPx);
+        return mass[size_t(b)] / (0.5 * std::abs(r1 * r1 - r0 * r0));
+    };
+    for (int k = std::max(1, k_begin); k < std::min(k_end, K + 1); ++k) {
+        int touched_lo = nb, touched_hi = -1;
+        for (int i = (k - 1) * kRaysPerRow; i < k * kRaysPerRow; ++i) {
+            const double s_mid  = (i + 0.5) * ds;
+            const double r_prev = r[size_t(i)], r_next = r[size_t(i) + 1];
+            const double m      = s_mid * ds;  // pupil area per unit angle
+            const double lo = std::min(r_prev, r_next), hi = std::max(r_prev, r_next);
+            const double f_lo = lo / kBinPx + t.half_bins, f_hi = hi / kBinPx + t.half_bins;
+            const int b_lo = std::clamp(int(std::floor(f_lo)), 0, nb - 1);
+            const int b_hi = std::clamp(int(std::floor(f_hi)), 0, nb - 1);
+            touched_lo     = std::min(touched_lo, b_lo);
+            touched_hi     = std::max(touched_hi, b_hi);
+            if (b_lo == b_hi || f_hi - f_lo < 1e-12) {
+                mass[size_t(b_lo)] += m;
+            } else {
+                const double span = f_hi - f_lo;
+                for (int b = b_lo; b <= b_hi; ++b) {
+                    const double a = std::max(f_lo, double(b)), e = std::min(f_hi, double(b + 1));
+                    if (e > a)
+                        mass[size_t(b)] += m * (e - a) / span;
+                }
+            }
         }
-        // Pre-filtered along R by a pixel-wide tent (1/4, 1/2, 1/4 of the half-pixel
-        // bins), each side of the axis alone: a pixel-centre sample then weighs an edge
-        // about as the pixel's area does (the flat kernels' anti-aliasing).
         float* row = &t.dens[size_t(k) * nb * 3];
+        const int v_lo = std::max(0, touched_lo - 1), v_hi = std::min(nb - 1, touched_hi + 1);
         for (int b = v_lo; b <= v_hi; ++b) {
             const bool pos  = b >= t.half_bins;
             const int first = pos ? t.half_bins : 0, last = pos ? nb - 1 : t.half_bins - 1;
-            const double v  = 0.25 * d[size_t(std::max(b - 1, first))] + 0.5 * d[size_t(b)]
-                             + 0.25 * d[size_t(std::min(b + 1, last))];
+            const double v  = 0.25 * density(std::max(b - 1, first)) + 0.5 * density(b)
+                             + 0.25 * density(std::min(b + 1, last));
             if (v != 0.0)
                 for (int c = 0; c < 3; ++c)
                     row[size_t(b) * 3 + c] += float(w[size_t(c)] * v);
         }
-    };
-    snapshot(0);
-    double r_prev = L.r(0.0);
-    for (int i = 0; i < K * kSub; ++i) {
-        const double s_mid  = (i + 0.5) * ds;
-        const double r_next = L.r((i + 1) * ds);
-        const double m      = s_mid * ds;  // pupil area per unit angle
-        const double lo = std::min(r_prev, r_next), hi = std::max(r_prev, r_next);
-        const double f_lo = lo / kBinPx + t.half_bins, f_hi = hi / kBinPx + t.half_bins;
-        const int b_lo = std::clamp(int(std::floor(f_lo)), 0, nb - 1);
-        const int b_hi = std::clamp(int(std::floor(f_hi)), 0, nb - 1);
-        touched_lo     = std::min(touched_lo, b_lo);
-        touched_hi     = std::max(touched_hi, b_hi);
-        if (b_lo == b_hi || f_hi - f_lo < 1e-12) {
-            mass[size_t(b_lo)] += m;
-        } else {
-            const double span = f_hi - f_lo;
-            for (int b = b_lo; b <= b_hi; ++b) {
-                const double a = std::max(f_lo, double(b)), e = std::min(f_hi, double(b + 1));
-                if (e > a)
-                    mass[size_t(b)] += m * (e - a) / span;
+        std::fill(mass.begin() + touched_lo, mass.begin() + touched_hi + 1, 0.0);
+    }
+}
+
+// Row k of the table = the sum of the increments of rows 0..k (summed in double, per bin,
+// in row order: the same for any thread count).
+void cumulate_rows(RgbTable& t, int nthreads)
+{
+    const int n = t.bins() * 3;
+    parallel_for_chunks(0, n, 768, nthreads, [&](int64_t i0, int64_t i1) {
+        std::vector<double> acc(size_t(i1 - i0), 0.0);
+        for (int k = 0; k <= t.K; ++k) {
+            float* row = &t.dens[size_t(k) * n];
+            for (int64_t i = i0; i < i1; ++i) {
+                acc[size_t(i - i0)] += row[i];
+                row[i] = float(acc[size_t(i - i0)]);
             }
         }
-        r_prev = r_next;
-        if ((i + 1) % kSub == 0)
-            snapshot((i + 1) / kSub);
-    }
+    });
 }
 
 // Everything about one request that does not depend on the wavelength.
@@ -338,8 +391,9 @@ struct SpanLut {
     int n = 0;
     std::vector<float> lo, hi, ncos;
     std::vector<uint8_t> ok;
+    double ncos_min = 1.0;  // over the directions with a span (lookup interpolates between them)
 
-    SpanLut(const LensCharacter& lens, const Geometry& g, double r_max_px)
+    SpanLut(const LensCharacter& lens, const Geometry& g, double r_max_px, int nthreads)
     {
         n = 1024;
         while (n < 8.0 * r_max_px * kPi / 4.0 && n < 65536)
@@ -348,19 +402,32 @@ struct SpanLut {
         hi.resize(size_t(n) + 1);
         ncos.resize(size_t(n) + 1);
         ok.resize(size_t(n) + 1);
-        for (int i = 0; i <= n; ++i) {
-            const double psi = 2.0 * kPi * i / n;
-            double l = 0.0, h = 0.0;
-            ok[size_t(i)]   = pupil_span(lens, g, psi, l, h);
-            lo[size_t(i)]   = float(l);
-            hi[size_t(i)]   = float(h);
-            ncos[size_t(i)] = float(lens.aperture.edge_normal_cos(psi));
-        }
+        // Entries are independent (the aperture's edge and normal cost ~0.5 us each).
+        parallel_for_chunks(0, n + 1, 256, nthreads, [&](int64_t i0, int64_t i1) {
+            for (int64_t i = i0; i < i1; ++i) {
+                const double psi = 2.0 * kPi * double(i) / n;
+                double l = 0.0, h = 0.0;
+                ok[size_t(i)]   = pupil_span(lens, g, psi, l, h);
+                lo[size_t(i)]   = float(l);
+                hi[size_t(i)]   = float(h);
+                ncos[size_t(i)] = float(lens.aperture.edge_normal_cos(psi));
+            }
+        });
+        for (int i = 0; i <= n; ++i)
+            if (ok[size_t(i)])
+                ncos_min = std::min(ncos_min, double(ncos[size_t(i)]));
     }
     bool lookup(double psi, double& l, double& h, double& c) const
     {
         double f = psi * (n / (2.0 * kPi));
-        f -= n * std::floor(f / n);
+        // Into [0, n): psi is within -pi .. 2 pi from the pixel loop, so one step does
+        // (the same value n floor(f / n) gives, without its division and floor).
+        if (f < 0.0)
+            f += n;
+        else if (f >= n)
+            f -= n;
+        if (!(f >= 0.0 && f < n))
+            f -= n * std::floor(f / n);
         const int i0 = std::min(int(f), n - 1);
         const double t = f - i0;
         const size_t a = size_t(i0), b = a + 1;
@@ -380,22 +447,64 @@ struct SpanLut {
     }
 };
 
-// A smooth value noise in the pupil (surface noise), fixed, zero mean, unit-ish amplitude.
+// A smooth value noise in the pupil (surface noise), fixed, zero mean, unit-ish amplitude:
+// three octaves of lattice values (a hash of the lattice point, -1..1) blended by
+// smoothstep. The lattice values the pupil (|x|, |y| <= 1) uses are hashed once into a
+// table (the hash's division was most of a sample's noise cost); points outside it
+// (none from lens_psf) hash as they go.
+double noise_lattice_hash(int i, int j)
+{
+    uint32_t h = uint32_t(i) * 374761393u + uint32_t(j) * 668265263u;
+    h          = (h ^ (h >> 13)) * 1274126177u;
+    return double(h ^ (h >> 16)) / 4294967295.0 * 2.0 - 1.0;
+}
+
+struct NoiseLattice {
+    static constexpr int kOctaves = 3;
+    static constexpr double kBaseFrequency = 6.0;
+    // Octave o (frequency f = 6 2^o) at lattice points 0 .. 3f + 1 per axis: (x + 2) f
+    // for |x| <= 1 and the next point.
+    std::array<std::vector<double>, kOctaves> value;
+    std::array<int, kOctaves> side{};
+    NoiseLattice()
+    {
+        double f = kBaseFrequency;
+        for (int o = 0; o < kOctaves; ++o, f *= 2.0) {
+            side[size_t(o)] = int(3.0 * f) + 2;
+            const int n     = side[size_t(o)];
+            value[size_t(o)].resize(size_t(n) * n);
+            for (int j = 0; j < n; ++j)
+                for (int i = 0; i < n; ++i)
+                    value[size_t(o)][size_t(j) * n + i] = noise_lattice_hash(i, j);
+        }
+    }
+};
+
 double pupil_noise(double x, double y)
 {
-    auto hash = [](int i, int j) {
-        uint32_t h = uint32_t(i) * 374761393u + uint32_t(j) * 668265263u;
-        h          = (h ^ (h >> 13)) * 1274126177u;
-        return double(h ^ (h >> 16)) / 4294967295.0 * 2.0 - 1.0;
-    };
-    double sum = 0.0, amp = 0.5, f = 6.0;
-    for (int octave = 0; octave < 3; ++octave, amp *= 0.5, f *= 2.0) {
+    static const NoiseLattice lattice;
+    double sum = 0.0, amp = 0.5, f = NoiseLattice::kBaseFrequency;
+    for (int octave = 0; octave < NoiseLattice::kOctaves; ++octave, amp *= 0.5, f *= 2.0) {
         const double u = (x + 2.0) * f, v = (y + 2.0) * f;
         const int i = int(std::floor(u)), j = int(std::floor(v));
         const double tu = u - i, tv = v - j;
         const double su = tu * tu * (3 - 2 * tu), sv = tv * tv * (3 - 2 * tv);
-        const double n0 = hash(i, j) + su * (hash(i + 1, j) - hash(i, j));
-        const double n1 = hash(i, j + 1) + su * (hash(i + 1, j + 1) - hash(i, j + 1));
+        const int n = lattice.side[size_t(octave)];
+        double h00, h10, h01, h11;
+        if (i >= 0 && j >= 0 && i + 1 < n && j + 1 < n) {
+            const double* row = &lattice.value[size_t(octave)][size_t(j) * n + i];
+            h00 = row[0];
+            h10 = row[1];
+            h01 = row[n];
+            h11 = row[n + 1];
+        } else {
+            h00 = noise_lattice_hash(i, j);
+            h10 = noise_lattice_hash(i + 1, j);
+            h01 = noise_lattice_hash(i, j + 1);
+            h11 = noise_lattice_hash(i + 1, j + 1);
+        }
+        const double n0 = h00 + su * (h10 - h00);
+        const double n1 = h01 + su * (h11 - h01);
         sum += amp * (n0 + sv * (n1 - n0));
     }
     return sum;
@@ -412,15 +521,21 @@ bool wavelength_independent(const LensCharacter& lens)
 // The fringe tables of `t` (step 3): the middle wavelength's rim sets the distance axis;
 // each wavelength adds its plateau density times the edge law at its own rim and scale.
 void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
-                 const std::vector<SpectralSample>& spectrum, double na_per_pitch)
+                 const std::vector<SpectralSample>& spectrum, double na_per_pitch, int nthreads)
 {
     // The smallest outer pupil radius any direction uses.
-    double s_min = 1.0;
-    for (int i = 0; i < 720; ++i) {
-        double lo, hi;
-        if (pupil_span(lens, g, 2.0 * kPi * i / 720.0, lo, hi))
-            s_min = std::min(s_min, hi);
-    }
+    const double s_min = parallel_reduce_chunks(
+        0, 720, 90, nthreads, 1.0,
+        [&](int64_t i0, int64_t i1) {
+            double m = 1.0;
+            for (int64_t i = i0; i < i1; ++i) {
+                double lo, hi;
+                if (pupil_span(lens, g, 2.0 * kPi * double(i) / 720.0, lo, hi))
+                    m = std::min(m, hi);
+            }
+            return m;
+        },
+        [](double& acc, double part) { acc = std::min(acc, part); });
     t.s_lo = std::max(0.0, std::min(s_min - 1.0 / t.K, 1.0 - 1.0 / t.K));
     t.Kf   = std::clamp(int(std::ceil((1.0 - t.s_lo) * 32.0)), 1, 32);
     const SpectralSample& mid = spectrum[spectrum.size() / 2];
@@ -454,14 +569,16 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
             if (-t.d_out + i * RgbTable::kFringeStep > 0.0)
                 for (int c = 0; c < 3; ++c)
                     t.fringe[(size_t(j) * t.nd + i) * 3 + c] = 1.0f;
-    std::vector<double> num(size_t(t.nd) * 3), den(3);
     // DiffractionModel::SeedMap: the seed's pseudo-diffraction map (core/diffraction_map.cpp),
     // relative to its flat level 1 / pi, in place of the edge law.
     const bool seed = lens.diffraction == DiffractionModel::SeedMap;
     static const SeedDiffractionMap seed_map;
     const SeedDiffractionMap* map = seed ? &seed_map : nullptr;
-    constexpr int kSubsamples = 8;  // per distance step, then a pixel-wide box
-    for (int j = 0; j <= t.Kf; ++j) {
+    const EdgeLawTable& law = edge_law_table();
+    constexpr int kSubsamples = 8;  // the seed's map: per distance step, then a pixel-wide box
+    // The rows are independent (each writes its own entries): in parallel.
+    parallel_for_chunks(0, t.Kf + 1, 1, nthreads, [&](int64_t j_begin, int64_t) {
+        const int j = int(j_begin);
         const double s     = t.s_lo + (1.0 - t.s_lo) * j / t.Kf;
         const double r_mid = Lmid.r(s);
         const double slope = Lmid.drds(s);
@@ -481,10 +598,10 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
         const double x   = std::clamp((rel - 0.05) / 0.2, 0.0, 1.0);
         t.gain[size_t(j)] = float(x * x * (3.0 - 2.0 * x));
         if (t.gain[size_t(j)] <= 0.0f)
-            continue;
+            return;
         t.side[size_t(j)] = int8_t(sd);
-        std::fill(num.begin(), num.end(), 0.0);
-        std::fill(den.begin(), den.end(), 0.0);
+        std::vector<double> num(size_t(t.nd) * 3, 0.0);
+        double den[3] = { 0.0, 0.0, 0.0 };
         for (const SpectralSample& smp : spectrum) {
             const Landing L{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm };
             const double r = std::abs(L.r(s)), drds = L.drds(s) * sd;
@@ -503,21 +620,32 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
             const double seed_width
                 = seed ? map->width_ratio(defocus_waves_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm))
                        : 0.0;
-            for (int c = 0; c < 3; ++c)
-                den[size_t(c)] += smp.rgb_weight[size_t(c)] * p;
+            double pw[3];
+            for (int c = 0; c < 3; ++c) {
+                pw[c] = smp.rgb_weight[size_t(c)] * p;
+                den[c] += pw[c];
+            }
+            // A pixel-wide box about d, in reference px (kappa px of image each): in v
+            // it is sqrt(2) / scale wide, and the geometric step covers the part of it
+            // inside the rim.
+            const double half_box_v = edge_v(0.5, scale);
             for (int i = 0; i < t.nd; ++i) {
-                // A pixel-wide box about d, in reference px (kappa px of image each).
-                double f = 0.0;
-                for (int k = 0; k < kSubsamples; ++k) {
-                    const double d_mid = -t.d_out + i * RgbTable::kFringeStep + (k + 0.5) / kSubsamples / g.kappa - 0.5 / g.kappa;
-                    const double d_l   = d_mid + r - std::abs(r_mid);
-                    const double fringe = seed ? kPi * map->lookup(1.0 - d_l * g.kappa / (0.5 * c_eff), seed_width)
-                                               : edge_law(edge_v(d_l * g.kappa, scale));
-                    f += gain_l * fringe + (1.0 - gain_l) * (d_l > 0.0 ? 1.0 : 0.0);
+                const double d_l = -t.d_out + i * RgbTable::kFringeStep + r - std::abs(r_mid);
+                double f         = 0.0;
+                if (seed) {
+                    for (int k = 0; k < kSubsamples; ++k) {
+                        const double d_k = d_l + ((k + 0.5) / kSubsamples - 0.5) / g.kappa;
+                        f += kPi * map->lookup(1.0 - d_k * g.kappa / (0.5 * c_eff), seed_width);
+                    }
+                    f /= kSubsamples;
+                } else {
+                    const double v = edge_v(d_l * g.kappa, scale);
+                    f              = law.mean(v - half_box_v, v + half_box_v);
                 }
-                f /= kSubsamples;
+                const double inside = std::clamp(d_l * g.kappa + 0.5, 0.0, 1.0);
+                f                   = gain_l * f + (1.0 - gain_l) * inside;
                 for (int c = 0; c < 3; ++c)
-                    num[size_t(i) * 3 + c] += smp.rgb_weight[size_t(c)] * p * f;
+                    num[size_t(i) * 3 + c] += pw[c] * f;
             }
         }
         // A channel whose weighted rim densities nearly cancel (negative colour-matching
@@ -525,9 +653,9 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
         for (int i = 0; i < t.nd; ++i)
             for (int c = 0; c < 3; ++c)
                 t.fringe[(size_t(j) * t.nd + i) * 3 + c]
-                    = den[size_t(c)] > 0.0 ? float(std::clamp(num[size_t(i) * 3 + c] / den[size_t(c)], -1.0, 4.0))
-                                           : float(-t.d_out + i * RgbTable::kFringeStep > 0.0 ? 1.0 : 0.0);
-    }
+                    = den[c] > 0.0 ? float(std::clamp(num[size_t(i) * 3 + c] / den[c], -1.0, 4.0))
+                                   : float(-t.d_out + i * RgbTable::kFringeStep > 0.0 ? 1.0 : 0.0);
+    });
 }
 
 }  // namespace
@@ -571,17 +699,41 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     const bool edge_law_on = lens.diffraction != DiffractionModel::Off;  // either fringe model
 
     RgbTable table;
+    double reach_px[2] = { -1.0, -1.0 };  // light's extent on the + and - side of the axis (-1: none)
     table.K         = std::clamp(int(std::ceil(2.0 * r_max)), 32, 1024);  // half a px of radius apart
     table.half_bins = int(std::ceil(r_max / kBinPx)) + 2;
     table.dens.assign(size_t(table.K + 1) * table.bins() * 3, 0.0f);
     {
-        std::vector<double> mass(size_t(table.bins())), scratch(size_t(table.bins()));
-        for (const SpectralSample& smp : spectrum)
-            add_wavelength(table, Landing{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm },
-                           smp.rgb_weight, mass, scratch);
+        // Each wavelength's rays, then the table's increments in bands of rows (every band
+        // adds the wavelengths in spectrum order), then their running sums: the same table
+        // for any thread count.
+        const int nspec = int(spectrum.size());
+        std::vector<std::vector<double>> radii{ size_t(nspec) };
+        parallel_for_chunks(0, nspec, 1, nthreads, [&](int64_t i, int64_t) {
+            landing_radii(radii[size_t(i)], Landing{ lens, 0.5 * g.c_ref, na_per_pitch, spectrum[size_t(i)].wavelength_nm },
+                          table.K);
+        });
+        parallel_for_chunks(1, table.K + 1, 32, nthreads, [&](int64_t k0, int64_t k1) {
+            std::vector<double> mass(size_t(table.bins()), 0.0);
+            for (int i = 0; i < nspec; ++i)
+                add_wavelength_increments(table, radii[size_t(i)], spectrum[size_t(i)].rgb_weight, int(k0), int(k1), mass);
+        });
+        cumulate_rows(table, nthreads);
+        // How far from the centre each side of the axis has light: table.cumulative is 0
+        // past the outermost ray's bin, its tent neighbour and the interpolation's next bin.
+        for (const std::vector<double>& r : radii)
+            for (double ri : r) {
+                if (ri >= 0.0)
+                    reach_px[0] = std::max(reach_px[0], ri);
+                else
+                    reach_px[1] = std::max(reach_px[1], -ri);
+            }
+        for (double& reach : reach_px)
+            if (reach >= 0.0)
+                reach = (std::floor(reach / kBinPx) + 3.0) * kBinPx;
     }
     if (edge_law_on)
-        add_fringes(table, lens, g, spectrum, na_per_pitch);
+        add_fringes(table, lens, g, spectrum, na_per_pitch, nthreads);
 
     // Onion-ring contrast per channel: procedural, plus the physical law per wavelength
     // 2 (2 pi a) sin(pi K^2 / (8 w)), w = W20 / l = c / (8 N l) in waves (OPTICS.md 4).
@@ -622,15 +774,53 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     out.rgb.assign(size_t(w) * h * 3, 0.0f);
     const int cx = w / 2, cy = h / 2;
 
-    const SpanLut spans(lens, g, r_max);
+    const SpanLut spans(lens, g, r_max, nthreads);
+    // Past branch_reach_px a side adds nothing, so a sample beyond both sides' reach is
+    // skipped before its trigonometry (the square's corners, and the side of the axis a
+    // back or front bokeh's rays never reach). A fringed rim moves light out to its band's
+    // outer edge d_out (along the edge normal), as far as the fringe table is 0 at the band's
+    // outer end (else its last entry would hold on past it: no bound).
+    double branch_reach_px[2] = { reach_px[0], reach_px[1] };
+    if (edge_law_on) {
+        bool tail_zero = true;
+        for (int j = 0; j <= table.Kf; ++j)
+            for (int c = 0; c < 3; ++c)
+                tail_zero = tail_zero && table.fringe[size_t(j) * table.nd * 3 + c] == 0.0f;
+        const double rim_max = *std::max_element(table.rim.begin(), table.rim.end());
+        for (int side = 0; side < 2; ++side) {
+            if (std::find(table.side.begin(), table.side.end(), int8_t(side == 0 ? 1 : -1)) == table.side.end())
+                continue;
+            branch_reach_px[side] = tail_zero && spans.ncos_min > 0.01
+                                        ? std::max(branch_reach_px[side], rim_max + table.d_out / spans.ncos_min + 1.0)
+                                        : std::numeric_limits<double>::infinity();
+        }
+    }
+    const double sample_reach_px = std::max(branch_reach_px[0], branch_reach_px[1]);
+    // The onion rings' cos(pi K rho / 2) against rho = |p - o| (the pupil point's distance
+    // from the rings' centre) tabulated 0.01 rad of phase apart (linear between entries:
+    // within 1.3e-5 of the ring's amplitude), signed so |cos|'s kinks stay exact.
+    const double ring_phase_per_rho = 0.5 * kPi * lens.onion_cycles;
+    const double ring_rho_max       = 1.0 + std::hypot(g.onion_x, g.onion_y) + 1e-6;
+    const int ring_n = std::clamp(int(std::ceil(ring_rho_max * ring_phase_per_rho / 0.01)), 2, 1 << 16);
+    const double ring_per_rho = ring_n / ring_rho_max;
+    std::vector<float> ring_cos;
+    if (modulated) {
+        ring_cos.resize(size_t(ring_n) + 2);
+        for (int i = 0; i <= ring_n + 1; ++i)
+            ring_cos[size_t(i)] = float(std::cos(ring_phase_per_rho * i / ring_per_rho));
+    }
     // RGB intensity at a point of the image (x right, y up, px from the centre).
     auto intensity = [&](double x, double y, double sum[3]) {
         const double qx = g.m_inv[0][0] * x + g.m_inv[0][1] * y;
         const double qy = g.m_inv[1][0] * x + g.m_inv[1][1] * y;
         const double xr = 0.5 * g.c_ref * qx, yr = 0.5 * g.c_ref * qy;
-        const double R  = std::hypot(xr, yr);
+        const double R  = std::sqrt(xr * xr + yr * yr);
+        if (R >= sample_reach_px)
+            return;
         const double phi = std::atan2(yr, xr);
         for (int branch = 1; branch >= -1; branch -= 2) {
+            if (R >= branch_reach_px[branch > 0 ? 0 : 1])
+                continue;
             const double psi = branch > 0 ? phi : phi + kPi;
             double lo, hi, ncos;
             if (!spans.lookup(psi, lo, hi, ncos))
@@ -646,6 +836,9 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
                         continue;
                     if (d < table.d_in) {
                         table.fringe_at(rim, d, fringe);
+                        // Outside the rim past the fringes' reach: an exact zero.
+                        if (rim.gain >= 1.0 && fringe[0] == 0.0 && fringe[1] == 0.0 && fringe[2] == 0.0)
+                            continue;
                         if (R > rim.plateau)
                             Rs = branch * rim.plateau;
                     }
@@ -672,10 +865,14 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
             double m[3] = { 1.0, 1.0, 1.0 };
             // The pupil pattern only where light lands (most of a PSF's square is dark).
             if (modulated && (a[0] != b[0] || a[1] != b[1] || a[2] != b[2])) {
+                // The pupil point: s along psi (psi's direction is branch (xr, yr) / R).
                 const double s  = std::min(1.0, R / (0.5 * std::abs(g.c_ref)));
-                const double px = s * std::cos(psi), py = s * std::sin(psi);
-                const double wave = std::abs(std::cos(0.5 * kPi * lens.onion_cycles
-                                                      * std::hypot(px - g.onion_x, py - g.onion_y)));
+                const double to_p = R > 0.0 ? branch * s / R : 0.0;
+                const double px = to_p * xr, py = to_p * yr;
+                const double rho_x = px - g.onion_x, rho_y = py - g.onion_y;
+                const double fr = std::sqrt(rho_x * rho_x + rho_y * rho_y) * ring_per_rho;
+                const int ir    = std::min(int(fr), ring_n);
+                const double wave = std::abs(ring_cos[size_t(ir)] + (fr - ir) * (ring_cos[size_t(ir) + 1] - ring_cos[size_t(ir)]));
                 const double ring = ((p_sharp == 1.0 ? wave : std::pow(wave, p_sharp)) - mean_p)
                                     / std::max(mean_p, 1.0 - mean_p);
                 const double noise = lens.surface_noise > 0.0 ? lens.surface_noise * pupil_noise(px, py) : 0.0;
@@ -712,19 +909,24 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     for (const auto& s : chunk_sum)
         for (int c = 0; c < 3; ++c)
             total[size_t(c)] += s[size_t(c)];
+    // Nothing landed in the image (a size smaller than the PSF's offset, or a pupil cut
+    // away): that channel's energy goes to the centre pixel.
+    std::array<bool, 3> empty{};
+    std::array<double, 3> inv{};
     for (int c = 0; c < 3; ++c) {
-        if (!(total[size_t(c)] > 0.0)) {
-            // Nothing landed in the image (a size smaller than the PSF's offset, or a
-            // pupil cut away): the channel's energy goes to the centre pixel.
-            for (size_t i = 0; i < size_t(w) * h; ++i)
-                out.rgb[i * 3 + c] = 0.0f;
-            out.rgb[(size_t(cy) * w + cx) * 3 + c] = 1.0f;
-            continue;
-        }
-        const double inv = 1.0 / total[size_t(c)];
-        for (size_t i = 0; i < size_t(w) * h; ++i)
-            out.rgb[i * 3 + c] = float(out.rgb[i * 3 + c] * inv);
+        empty[size_t(c)] = !(total[size_t(c)] > 0.0);
+        inv[size_t(c)]   = empty[size_t(c)] ? 0.0 : 1.0 / total[size_t(c)];
     }
+    parallel_for_chunks(0, int64_t(w) * h, 16384, nthreads, [&](int64_t i0, int64_t i1) {
+        for (int64_t i = i0; i < i1; ++i)
+            for (int c = 0; c < 3; ++c) {
+                float& v = out.rgb[size_t(i) * 3 + size_t(c)];
+                v        = empty[size_t(c)] ? 0.0f : float(v * inv[size_t(c)]);
+            }
+    });
+    for (int c = 0; c < 3; ++c)
+        if (empty[size_t(c)])
+            out.rgb[(size_t(cy) * w + cx) * 3 + c] = 1.0f;
     return true;
 }
 

@@ -226,3 +226,22 @@ TEST_F(Determinism, EveryScene)
     ASSERT_FALSE(outputs.empty());
     expect_same_bits_for_1_2_8_threads("scene", outputs, s_dir);
 }
+
+TEST_F(Determinism, LensPsf)
+{
+    // Lens PSFs build their radial and fringe tables and their pixels in parallel: every
+    // effect on, front and back, each diffraction model, and a contact sheet.
+    const std::string every = "lens=achromat:diffraction=exact:onion=0.2:noise=0.1:catseye=0.6:astigmatism=-20:"
+                              "kernel=polygon:blades=7:curvature=0.3:field=0.6,0.34";
+    expect_same_bits_for_1_2_8_threads(
+        "bokeh",
+        { { "", format("--bokeh:{} 255", every), "psf_every_255" },
+          { "", format("--bokeh:{} -45", every), "psf_every_front" },
+          { "", "--bokeh:lens=uncorrected:fstop=1.4:diffraction=seed:onion=0.15:catseye=0.5:field=0.3,-0.5 80",
+            "psf_seed" },
+          { "", "--bokeh:lens=achromat:correction=1.6:diffraction=exact:onionwaves=0.05:onionsharpness=3 100",
+            "psf_bubble" },
+          { "", "--bokeh:lens=apochromat:chromatic=10:diffraction=exact:onion=0.15:catseye=0.5:sheet=1 20",
+            "psf_sheet" } },
+        s_dir);
+}
