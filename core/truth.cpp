@@ -25,13 +25,13 @@
 #include <bokeh/parallel.h>
 #include <bokeh/truth.h>
 
+#include "progress.h"
+
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <mutex>
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/strutil.h>
@@ -659,9 +659,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     };
     const int64_t rows = out.height(), row_chunk = 2;
     const int64_t nchunks = (rows + row_chunk - 1) / row_chunk;
-    std::atomic<int64_t> done{ 0 };
-    std::mutex progress_lock;
-    int64_t reported = 0;
+    detail::ProgressCounter progress(opt.progress, double(nchunks));
     const Part total = parallel_reduce_chunks(
         0, rows, row_chunk, nthreads, Part{},
         [&](int64_t y0, int64_t y1) {
@@ -700,14 +698,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                 }
             }
             part.cells = ray.cells;
-            if (opt.progress) {
-                const int64_t now = ++done;
-                std::lock_guard<std::mutex> lock(progress_lock);
-                if (now > reported) {  // in rising order, whichever thread finishes
-                    reported = now;
-                    opt.progress(float(double(now) / double(nchunks)));
-                }
-            }
+            progress.add();
             return part;
         },
         [](Part& acc, const Part& p) {

@@ -12,6 +12,7 @@
 #include <bokeh/lens.h>
 #include <bokeh/optics.h>
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -85,6 +86,10 @@ struct DefocusOptions {
     /// At most this many sprites, the brightest (by the sprite's luminance); the rest stay
     /// in the layers. A cost guard: a pixel crossing the cut does pop.
     int max_sprites = 20000;
+    /// Layered methods and the reference (flat and deep): called with the fraction done
+    /// (0..1) as the layers' tiles are blurred, each weighted by its kernel's size; from
+    /// one thread at a time, in rising order. Empty: nothing is counted.
+    std::function<void(float)> progress;
 };
 
 /// What a defocus decided and found, for `-v` and for tests.
