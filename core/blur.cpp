@@ -303,7 +303,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (method == BlurMethod::Separable && opts.iris == 0.0f && !weights.is_identity())
         return separable_direct(dst, in, roi, factors->first, factors->second, opts.border, nthreads);
     if (method == BlurMethod::Fft && opts.iris == 0.0f && !weights.is_identity())
-        return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads);
+        return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads, opts.progress);
     if (method == BlurMethod::ThreeBoxes && opts.iris == 0.0f && !weights.is_identity()) {
         return three_boxes_direct(dst, in, roi, BoxPass(box3x), BoxPass(box3y), opts.border, nthreads);
     }
@@ -334,7 +334,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     Plane out;
     int ox = 0, oy = 0;  // where the output starts in `out` (planes the size of p)
     switch (method) {
-    case BlurMethod::Reference: out = convolve_brute(p, weights, nthreads); break;
+    case BlurMethod::Reference: out = convolve_brute(p, weights, nthreads, opts.progress); break;
     case BlurMethod::ThreeBoxes:
         out = std::move(p);
         for (int pass = 0; pass < 3; ++pass)

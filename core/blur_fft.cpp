@@ -39,6 +39,7 @@
 
 #include "fftw_planner.h"
 #include "plane.h"
+#include "progress.h"
 
 #include <algorithm>
 #include <cmath>
@@ -177,7 +178,7 @@ BOKEH_HOT void multiply_spectra(double* a, const double* b, size_t n)
 template<class ReadRow, class OutPixel>
 void convolve_tiles(int w, int h, int nc, const TileGrid& g, const std::vector<KernelWeights>& kernels,
                     const std::vector<int>& kernel_of, ReadRow read_row, OutPixel out_pixel,
-                    int nthreads)
+                    int nthreads, const std::function<void(float)>& progress = {})
 {
     if (w <= 0 || h <= 0)
         return;
@@ -218,6 +219,7 @@ void convolve_tiles(int w, int h, int nc, const TileGrid& g, const std::vector<K
     // source rows).
     const int64_t items = int64_t(g.nty) * g.ntx * nc;
     const bool huge     = double(g.points()) > kParallelTilePoints;
+    ProgressCounter counter(progress, double(items));
     parallel_for_chunks(0, items, 1, huge ? 1 : nthreads, [&](int64_t i0, int64_t i1) {
         Scratch& s = scratch.local();
         if (!s.tile) {
@@ -252,6 +254,7 @@ void convolve_tiles(int w, int h, int nc, const TileGrid& g, const std::vector<K
                 for (int x = 0; x < vx; ++x)
                     o[size_t(x) * ncs] = float(r[x]);
             }
+            counter.add();
         }
     });
 }
@@ -269,7 +272,7 @@ double fft_convolve_cost_ns(int w, int h, int nc, int rx, int ry)
 
 bool convolve_fft_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                          const std::vector<KernelWeights>& kernels, const std::vector<int>& kernel_of,
-                         Border border, int nthreads)
+                         Border border, int nthreads, const std::function<void(float)>& progress)
 {
     const TileGrid g = choose_tiles(roi.width(), roi.height(), kernels[0].rx, kernels[0].ry);
     if (g.ny == 0) {
@@ -286,7 +289,7 @@ bool convolve_fft_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OI
         [&](int x, int y) {
             return static_cast<float*>(dst.pixeladdr(roi.xbegin + x, roi.ybegin + y));
         },
-        nthreads);
+        nthreads, progress);
     return true;
 }
 
@@ -430,7 +433,7 @@ bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::
                                   return convolve_image(out, replaced, kernel, opts, roi, nthreads);
                               }, nthreads);
     if (opts.iris == 0.0f)
-        return convolve_fft_direct(dst, in, roi, kernels, kernel_of, opts.border, nthreads);
+        return convolve_fft_direct(dst, in, roi, kernels, kernel_of, opts.border, nthreads, opts.progress);
     // Iris mode needs each channel's range over the whole padded region first (Iris), so it
     // works on a padded plane.
     Plane p = pad(in, grown(roi, rx, ry), opts.border, nthreads);

@@ -7,6 +7,7 @@
 
 #include "plane.h"
 
+#include <functional>
 #include <utility>
 #include <vector>
 
@@ -40,8 +41,10 @@ bool three_boxes_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OII
 /// BlurMethod::ThreeBoxes' box along x and along y for the Gaussian of `k`.
 std::pair<std::vector<double>, std::vector<double>> gaussian_boxes(const Kernel& k);
 
-/// The brute force on a padded plane (blur_separable.cpp): the reference.
-Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads);
+/// The brute force on a padded plane (blur_separable.cpp): the reference; `progress` as
+/// BlurOptions::progress (by rows).
+Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads,
+                     const std::function<void(float)>& progress = {});
 /// The separable convolution wx (x) wy on a padded plane (iris mode).
 Plane convolve_separable(const Plane& in, const std::vector<double>& wx,
                          const std::vector<double>& wy, int nthreads);

@@ -18,8 +18,10 @@
 #include <bokeh/parallel.h>
 
 #include "blur_methods.h"
+#include "progress.h"
 
 #include <algorithm>
+#include <functional>
 #include <limits>
 #include <utility>
 #include <vector>
@@ -34,7 +36,8 @@ namespace {
 // 16 sums in registers over every tap; a row of double sums, added to once a tap, was
 // load- and store-bound, 61 KiB a 1080p RGBA row, past L1).
 template<class Source>
-void weighted_rows(Plane& out, const std::vector<double>& w, Source source, int nthreads)
+void weighted_rows(Plane& out, const std::vector<double>& w, Source source, int nthreads,
+                   ProgressCounter* progress = nullptr)
 {
     parallel_for_chunks(0, out.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
         std::vector<const float*> taps(w.size());
@@ -43,6 +46,8 @@ void weighted_rows(Plane& out, const std::vector<double>& w, Source source, int 
                 taps[j] = source(y, j);
             weighted_sum(out.row(y), taps.data(), w.data(), w.size(), out.stride());
         }
+        if (progress)
+            progress->add(double(y1 - y0));
     });
 }
 
@@ -51,7 +56,8 @@ void weighted_rows(Plane& out, const std::vector<double>& w, Source source, int 
 namespace detail {
 
 // The brute force: every output a weighted sum of its footprint's source pixels.
-Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads)
+Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads,
+                     const std::function<void(float)>& progress)
 {
     const KernelWeights k = reflected(kernel);
     // The non-zero taps as (row offset, column offset) with their weights.
@@ -65,9 +71,10 @@ Plane convolve_brute(const Plane& in, const KernelWeights& kernel, int nthreads)
             }
     Plane out(in.w - 2 * k.rx, in.h - 2 * k.ry, in.nc);
     const size_t nc = size_t(in.nc);
+    ProgressCounter counter(progress, double(out.h));
     weighted_rows(out, weights,
                   [&](int y, size_t j) { return in.row(y + taps[j].first) + size_t(taps[j].second) * nc; },
-                  nthreads);
+                  nthreads, counter.active() ? &counter : nullptr);
     return out;
 }
 

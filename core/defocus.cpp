@@ -45,6 +45,7 @@
 #include <bokeh/parallel.h>
 
 #include "defocus_layers.h"
+#include "progress.h"
 
 #include <algorithm>
 #include <array>
@@ -380,7 +381,7 @@ void divide_by_visibility(Plane& p)
 }  // namespace
 
 void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
-                      int nthreads, std::vector<Plane>* per_layer)
+                      int nthreads, std::vector<Plane>* per_layer, float progress_from)
 {
     if (per_layer) {
         per_layer->clear();
@@ -393,6 +394,14 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     const std::vector<std::vector<uint8_t>> tiles = layer_tiles(f, m, o, cols);
     const int gx = f.out.xbegin, gy = f.out.ybegin;
     const int up = f.up;  // `out` is over f.out scaled by up (per-layer planes: up is 1)
+    // Progress by tiles, each weighted by its kernel's rows plus its own (a tile's spans
+    // grow with the kernel's height in reduced pixels).
+    auto tile_weight = [&](size_t k) { return 2.0 + std::abs(m.coc_px[k]) / float(m.reduction[k]); };
+    double all_tiles = 0.0;
+    for (size_t k = 0; k < tiles.size() && o.progress; ++k)
+        all_tiles += tile_weight(k)
+                     * double(std::count_if(tiles[k].begin(), tiles[k].end(), [](uint8_t t) { return t != 0; }));
+    ProgressCounter progress(o.progress, all_tiles, progress_from);
     for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
         const float c = m.coc_px[size_t(k)];
         const int s   = m.reduction[size_t(k)], t = kTile * s;
@@ -401,7 +410,13 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
         for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
             if (tiles[size_t(k)][i])
                 todo.push_back(int(i));
+        const double weight = tile_weight(size_t(k));
         parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
+            struct Counted {  // the tile counts as done however it returns
+                ProgressCounter& p;
+                double units;
+                ~Counted() { p.add(units); }
+            } counted{ progress, weight };
             const int tx = todo[size_t(n)] % cols[size_t(k)], ty = todo[size_t(n)] / cols[size_t(k)];
             const OIIO::ROI region = OIIO::roi_intersection(
                 OIIO::ROI(gx + tx * t, gx + (tx + 1) * t, gy + ty * t, gy + (ty + 1) * t), f.out);

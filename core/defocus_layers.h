@@ -142,9 +142,10 @@ OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& da
 
 /// Blur every layer of `m` with the aperture at its CoC and composite them, front over
 /// back, into `out` (RGBA over f.out). With `per_layer`, each blurred layer is written
-/// there instead (one RGBA plane over f.out per layer) and `out` is left alone.
+/// there instead (one RGBA plane over f.out per layer) and `out` is left alone. Progress
+/// (o.progress) goes from `progress_from` (what the caller's work before took) to 1.
 void composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
-                      int nthreads, std::vector<Plane>* per_layer = nullptr);
+                      int nthreads, std::vector<Plane>* per_layer = nullptr, float progress_from = 0.0f);
 
 /// The display window's centre and half-diagonal, for field positions; a lens whose PSF
 /// does not change with the field (no cat's eye, field curvature, astigmatism or offset

@@ -300,10 +300,10 @@ bool blur_nonfinite(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const std::ve
 double fft_convolve_cost_ns(int w, int h, int nc, int rx, int ry);
 /// The exact convolution by FFT in overlap-save tiles, straight from the source into `dst`
 /// over `roi`, by the border rule (blur_fft.cpp): channel c with kernels[kernel_of[c]],
-/// all of the same reach.
+/// all of the same reach; `progress` as BlurOptions::progress (by tiles and channels).
 bool convolve_fft_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
                          const std::vector<KernelWeights>& kernels, const std::vector<int>& kernel_of,
-                         Border border, int nthreads);
+                         Border border, int nthreads, const std::function<void(float)>& progress = {});
 /// The same as a "valid" convolution of a padded plane (iris mode): the output is `in`
 /// less the kernels' reach on each side.
 Plane convolve_fft(const Plane& in, const std::vector<KernelWeights>& kernels,

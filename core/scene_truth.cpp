@@ -29,6 +29,7 @@
 
 #include "plane.h"
 #include "scene_geometry.h"
+#include "progress.h"
 #include "truth_sampler.h"
 
 #include <algorithm>
@@ -120,7 +121,7 @@ bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneO
         double zmin = std::numeric_limits<double>::infinity(), zmax = 0.0;
     };
     const int64_t row_chunk = 2, nchunks = (height + row_chunk - 1) / row_chunk;
-    detail::ChunkProgress progress(lo.progress, nchunks);
+    detail::ProgressCounter progress(lo.progress, double(nchunks));
     const Part total = parallel_reduce_chunks(
         0, height, row_chunk, nthreads, Part{},
         [&](int64_t y0, int64_t y1) {
@@ -163,7 +164,7 @@ bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneO
                     }
                 }
             }
-            progress.chunk_done();
+            progress.add();
             return part;
         },
         [](Part& acc, const Part& p) {

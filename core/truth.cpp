@@ -23,15 +23,14 @@
 #include <bokeh/parallel.h>
 #include <bokeh/truth.h>
 
+#include "progress.h"
 #include "truth_sampler.h"
 
 #include <algorithm>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
 #include <limits>
-#include <mutex>
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/strutil.h>
@@ -553,7 +552,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     };
     const int64_t rows = out.height(), row_chunk = 2;
     const int64_t nchunks = (rows + row_chunk - 1) / row_chunk;
-    detail::ChunkProgress progress(opt.progress, nchunks);
+    detail::ProgressCounter progress(opt.progress, double(nchunks));
     const Part total = parallel_reduce_chunks(
         0, rows, row_chunk, nthreads, Part{},
         [&](int64_t y0, int64_t y1) {
@@ -589,7 +588,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                 }
             }
             part.cells = ray.cells;
-            progress.chunk_done();
+            progress.add();
             return part;
         },
         [](Part& acc, const Part& p) {

@@ -8,15 +8,11 @@
 // Scrambling" (JCGT 9(4), 2020: the Laine-Karras style hash with his constants, applied to
 // the bit-reversed value). Ours: the per-pixel and per-half seeds (pixel_seed, half_seed).
 // Dimensions 0 and 1 place the ray on the aperture (ApertureSampler), 2 and 3 in the pixel.
-// Also what both do with the rays: the noise estimate from two half renders, and the
-// progress of their row chunks.
+// Also what both do with the rays: the noise estimate from two half renders.
 #pragma once
 
-#include <atomic>
 #include <cmath>
 #include <cstdint>
-#include <functional>
-#include <mutex>
 
 namespace bokeh::detail {
 
@@ -158,31 +154,6 @@ struct HalvesNoise {
         const double mse_tm = sq_tone * w / values;
         psnr_db             = mse_tm > 0.0 ? 10.0 * std::log10(1.0 / mse_tm) : 999.0;
     }
-};
-
-/// Reports the fraction of row chunks done, from one thread at a time, in rising order,
-/// whichever thread finishes a chunk.
-class ChunkProgress {
-public:
-    ChunkProgress(const std::function<void(float)>& fn, int64_t chunks) : m_fn(fn), m_chunks(chunks) {}
-    void chunk_done()
-    {
-        if (!m_fn)
-            return;
-        const int64_t now = ++m_done;
-        std::lock_guard<std::mutex> lock(m_lock);
-        if (now > m_reported) {
-            m_reported = now;
-            m_fn(float(double(now) / double(m_chunks)));
-        }
-    }
-
-private:
-    const std::function<void(float)>& m_fn;
-    int64_t m_chunks;
-    std::atomic<int64_t> m_done{ 0 };
-    std::mutex m_lock;
-    int64_t m_reported = 0;
 };
 
 }  // namespace bokeh::detail

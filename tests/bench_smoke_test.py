@@ -88,6 +88,27 @@ for task in tasks:
         path = os.path.join(charts, f"{stem}.{ext}")
         check(os.path.isfile(path) and os.path.getsize(path) > 1000, f"chart {path}")
 
+# The deep task's rows against the truth (as bokeh-bench --task deep writes them, which
+# needs ../shared/data, so written here): one chart for every frame, a table per frame.
+truth_csv = os.path.join(scratch, "deep.csv")
+with open(truth_csv, "w") as f:
+    f.write("task,method,peer,size_px,threads,median_ms,reps,rmse_linear,psnr_db_tonemapped,max_abs_linear\n")
+    for frame, scale in (("deep A", 1.0), ("deep B", 0.1)):
+        f.write(f"{frame},truth 64 spp,,0,2,{9000 * scale},1,,55.0,\n")
+        for method, ms, db in (("deep auto", 500, 42.0), ("flat auto of the flatten", 130, 38.0)):
+            f.write(f"{frame},{method} vs truth,,0,2,{ms * scale},3,0.02,{db},0.5\n")
+            f.write(f"{frame},{method} vs truth (mask),,0,2,{ms * scale},3,,{db - 6},\n")
+        f.write(f"{frame},flatten,,0,2,{30 * scale},3,,,\n")
+r = run(["/usr/bin/python3", chart, truth_csv, charts])
+check(r.returncode == 0, "chart.py ran on the truth rows: " + r.stderr[-2000:])
+for frame in ("deep A", "deep B"):
+    check(f"### {frame}\n" in r.stdout, f"chart.py printed the truth table of {frame}")
+check("| deep auto | 500 | 42.0 | 36.0 |" in r.stdout, "the table pairs frame and mask: " + r.stdout)
+for ext in ("png", "svg"):
+    path = os.path.join(charts, f"deep_truth.{ext}")
+    check(os.path.isfile(path) and os.path.getsize(path) > 1000, f"chart {path}")
+check(not os.path.exists(os.path.join(charts, "deep_A.png")), "no per-task chart for truth rows")
+
 # Bad arguments: one line naming the argument, status 1, no CSV written.
 for args, says in ((["--scenes", "nosuch"], "nosuch"),
                    (["--image", os.path.join(scratch, "missing.exr")], "missing.exr"),

@@ -2,6 +2,10 @@
 // input (one line, exit 1, nothing written).
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <string>
+#include <vector>
+
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/strutil.h>
@@ -89,6 +93,69 @@ TEST(CliDeep, DeepDefocusFlatAndDeepOut)
                          "deep", dir + "/t.exr");
     expect_clean_failure(bokehtool(format("{} --defocus:spp=16 -o {}/t.exr", a, dir)), "spp", dir + "/t.exr");
     expect_clean_failure(bokehtool(format("{} --defocus:method=truth:bloom=2 -o {}/t.exr", a, dir)), "bloom",
+                         dir + "/t.exr");
+}
+
+// --progress: a long command's progress on stderr, rising to 100 %, nothing on stdout and
+// nothing without the flag; the output the same with and without it.
+TEST(CliDeep, ProgressOfLongCommands)
+{
+    const std::string dir = fresh_dir("cli_deep_progress");
+    const std::string a   = write_deep(dir, "a.exr");
+    // The lines of `text` that report progress of `command` ("--defocus: 37% (0.2 s)").
+    auto progress_lines = [](const std::string& text, const std::string& command) {
+        std::vector<int> percents;
+        for (const std::string& line : OIIO::Strutil::splits(text, "\n")) {
+            if (!OIIO::Strutil::starts_with(line, command + ": "))
+                continue;
+            const size_t pct = line.find("% (");
+            EXPECT_NE(pct, std::string::npos) << line;
+            EXPECT_TRUE(OIIO::Strutil::ends_with(line, " s)")) << line;
+            if (pct != std::string::npos)
+                percents.push_back(std::stoi(line.substr(command.size() + 2, pct - command.size() - 2)));
+        }
+        return percents;
+    };
+    auto same_pixels = [](const std::string& p, const std::string& q) {
+        OIIO::ImageBuf x(p), y(q);
+        if (!x.read(0, 0, true, OIIO::TypeFloat) || !y.read(0, 0, true, OIIO::TypeFloat) || x.roi() != y.roi()
+            || x.nchannels() != y.nchannels())
+            return false;
+        std::vector<float> vx(size_t(x.spec().image_pixels()) * size_t(x.nchannels())), vy(vx.size());
+        return x.get_pixels(x.roi(), OIIO::TypeFloat, vx.data()) && y.get_pixels(y.roi(), OIIO::TypeFloat, vy.data())
+               && vx == vy;
+    };
+    const std::vector<std::pair<std::string, std::string>> runs = {
+        { "truth", format("{} --defocus:math=direct:scale=3:method=truth:spp=256", a) },
+        { "reference", format("{} --defocus:math=direct:scale=3:method=reference", a) },
+        { "blur", "--scene lights:width=96:height=54 --blur:method=reference 31" },
+    };
+    for (const auto& [name, line] : runs) {
+        const std::string command = name == "blur" ? "--blur" : "--defocus";
+        RunResult on = bokehtool(format("--progress:interval=0 {} -o {}/{}_on.exr", line, dir, name));
+        ASSERT_EQ(on.status, 0) << name << ": " << on.err;
+        const std::vector<int> shown = progress_lines(on.err, command);
+        ASSERT_GE(shown.size(), 2u) << name << ": a line per percent with interval=0: " << on.err;
+        EXPECT_TRUE(std::is_sorted(shown.begin(), shown.end())) << name << ": " << on.err;
+        EXPECT_EQ(std::adjacent_find(shown.begin(), shown.end()), shown.end()) << name << ": no percent twice";
+        EXPECT_EQ(shown.back(), 100) << name << ": " << on.err;
+        EXPECT_TRUE(progress_lines(on.out, command).empty()) << name << ": progress stays off stdout: " << on.out;
+
+        RunResult off = bokehtool(format("{} -o {}/{}_off.exr", line, dir, name));
+        ASSERT_EQ(off.status, 0) << name << ": " << off.err;
+        EXPECT_TRUE(progress_lines(off.err, command).empty()) << name << ": " << off.err;
+        EXPECT_TRUE(same_pixels(format("{}/{}_on.exr", dir, name), format("{}/{}_off.exr", dir, name)))
+            << name << ": the output does not depend on --progress";
+
+        // -q silences it; the default interval (1 s) prints nothing for a command this short.
+        RunResult quiet = bokehtool(format("-q --progress:interval=0 {} -o {}/{}_q.exr", line, dir, name));
+        ASSERT_EQ(quiet.status, 0) << quiet.err;
+        EXPECT_TRUE(progress_lines(quiet.err, command).empty()) << name << ": " << quiet.err;
+    }
+    RunResult brief = bokehtool(format("--progress {} --defocus:math=direct:scale=3 -o {}/brief.exr", a, dir));
+    ASSERT_EQ(brief.status, 0) << brief.err;
+    EXPECT_TRUE(progress_lines(brief.err, "--defocus").empty()) << "under a second, no line: " << brief.err;
+    expect_clean_failure(bokehtool(format("--progress:interval=-1 {} --deeptidy -o {}/t.exr", a, dir)), "interval",
                          dir + "/t.exr");
 }
 

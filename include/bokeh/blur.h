@@ -9,6 +9,7 @@
 // All channels of the image are filtered alike, as oiiotool's --blur does.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -103,6 +104,10 @@ struct BlurOptions {
     /// picks it from the kernel (reduction_factor). Iris mode is refused with it (a
     /// block's mean of exp(k x) widens every highlight by up to a block: 20 dB measured).
     float reduction = 0.0f;
+    /// The methods whose single call can take long, method=reference and the FFT (large
+    /// kernels, kernel images): called with the fraction done (0..1) as rows or tiles
+    /// finish; from one thread at a time, in rising order. Empty: nothing is counted.
+    std::function<void(float)> progress;
 };
 
 /// A kernel's normalised weights on a (2 rx + 1) x (2 ry + 1) grid centred on (0, 0).

@@ -12,6 +12,7 @@
 #include <bokeh/lens.h>
 #include <bokeh/optics.h>
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -94,6 +95,10 @@ struct DefocusOptions {
     /// the sum over the output is supersample^2 times the input's). Not for the gather
     /// method nor deep output.
     int supersample = 1;
+    /// Layered methods and the reference (flat and deep): called with the fraction done
+    /// (0..1) as the layers' tiles are blurred, each weighted by its kernel's size; from
+    /// one thread at a time, in rising order. Empty: nothing is counted.
+    std::function<void(float)> progress;
 };
 
 /// What a defocus decided and found, for `-v` and for tests.

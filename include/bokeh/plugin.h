@@ -24,7 +24,7 @@
 
 #include <OpenImageIO/imagebuf.h>
 
-#define BOKEH_PLUGIN_ABI_VERSION 2
+#define BOKEH_PLUGIN_ABI_VERSION 3
 #define BOKEH_PLUGIN_EXPORT extern "C" __attribute__((visibility("default")))
 
 namespace bokeh {
@@ -99,6 +99,10 @@ struct CommandContext {
     int verbosity  = 1;               ///< 0 quiet, 1 normal, 2 verbose
     const ColorSystem* colors = nullptr;
     std::function<void(const std::string&)> message;  ///< informational output (stdout)
+    /// The fraction (0..1) of a long command done, rising; set by the host under
+    /// `--progress` (it prints a throttled line on stderr), empty otherwise. Hand it to the
+    /// library's `progress` options as it is: an empty one costs them nothing.
+    std::function<void(float)> progress;
     std::string error;                ///< why the command failed
 
     /// Record the reason and return false: `return ctx.fail("...")`.

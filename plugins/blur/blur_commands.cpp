@@ -27,7 +27,8 @@ bokeh::BlurOptions blur_options(const CommandContext& c)
                : border == "mirror" ? bokeh::Border::Mirror
                                     : bokeh::Border::Black;
     o.grow = c.options.get_bool("grow");
-    o.iris = float(c.options.get_float("iris"));
+    o.iris     = float(c.options.get_float("iris"));
+    o.progress = c.progress;
     return o;
 }
 

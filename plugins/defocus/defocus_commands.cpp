@@ -67,6 +67,7 @@ bool defocus_command(CommandContext& c)
         t.nonfinite = o.nonfinite;
         t.spp       = c.options.get_int("spp");
         t.seed      = uint32_t(c.options.get_int("seed"));
+        t.progress  = c.progress;
         bokeh::TruthReport report;
         ok = bokeh::defocus_truth(*out.buf, *in.buf, t, &report, c.nthreads);
         if (ok && c.verbosity >= 1)
@@ -79,7 +80,8 @@ bool defocus_command(CommandContext& c)
         ok = bokeh::layer_map(*out.buf, src, o, c.nthreads);
     else {
         bokeh::DefocusReport report;
-        ok = bokeh::defocus(*out.buf, *in.buf, o, &report, c.nthreads);
+        o.progress = c.progress;
+        ok         = bokeh::defocus(*out.buf, *in.buf, o, &report, c.nthreads);
         if (ok && c.verbosity >= 2) {
             c.message("  defocus " + report.summary);
             std::string layers;

@@ -5,8 +5,11 @@
 #include <bokeh/resample.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <vector>
 
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
 
 namespace bokeh_bench {
@@ -49,6 +52,47 @@ OIIO::ROI most_varied_crop(const OIIO::ImageBuf& img, int w, int h, int threads)
     const int x0 = std::clamp((r.xbegin + bx) * b, d.xbegin, d.xend - w);
     const int y0 = std::clamp((r.ybegin + by) * b, d.ybegin, d.yend - h);
     return OIIO::ROI(x0, x0 + w, y0, y0 + h);
+}
+
+bool write_sheet(const std::string& path, const std::vector<std::pair<std::string, OIIO::ImageBuf>>& tiles,
+                 int cols, int threads, std::string& err)
+{
+    namespace IBA = OIIO::ImageBufAlgo;
+    if (tiles.empty())
+        return true;
+    const int tw = tiles[0].second.spec().width, th = tiles[0].second.spec().height;
+    cols           = std::max(1, std::min(cols, int(tiles.size())));
+    const int rows = int(tiles.size() + size_t(cols) - 1) / cols;
+    const int gap = 6, label_h = 24;
+    OIIO::ImageSpec spec(cols * tw + (cols + 1) * gap, rows * (th + label_h + gap) + gap, 3, OIIO::TypeFloat);
+    OIIO::ImageBuf sheet(spec);
+    const float grey[3] = { 0.12f, 0.12f, 0.12f };
+    IBA::fill(sheet, grey);
+    const std::string font = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
+    const bool have_font   = OIIO::Filesystem::exists(font);
+    const float white[3]   = { 1.0f, 1.0f, 1.0f };
+    for (size_t i = 0; i < tiles.size(); ++i) {
+        const int x = gap + int(i % size_t(cols)) * (tw + gap);
+        const int y = gap + int(i / size_t(cols)) * (th + label_h + gap);
+        if (!IBA::paste(sheet, x, y + label_h, 0, 0, tiles[i].second, {}, threads)) {
+            err = path + ": " + sheet.geterror();
+            return false;
+        }
+        if (have_font)
+            IBA::render_text(sheet, x + 4, y + label_h - 6, tiles[i].first, 17, font, white);
+    }
+    if (!have_font) {
+        std::string order;
+        for (const auto& t : tiles)
+            order += (order.empty() ? "" : ", ") + t.first;
+        std::printf("(no font at %s: %s is unlabelled; tiles left to right, top to bottom: %s)\n", font.c_str(),
+                    path.c_str(), order.c_str());
+    }
+    if (!sheet.write(path, OIIO::TypeUInt8)) {
+        err = path + ": " + sheet.geterror();
+        return false;
+    }
+    return true;
 }
 
 

@@ -1,10 +1,13 @@
 // bench_common.h — what bokeh-bench's tasks share: the CSV columns every task writes and
-// the error fields in them, and where on a frame an error is worth measuring.
+// the error fields in them, where on a frame an error is worth measuring, and the picture
+// sheets that show it.
 #pragma once
 
 #include <bokeh/metrics.h>
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <OpenImageIO/imagebuf.h>
 
@@ -22,5 +25,12 @@ std::string error_fields(const bokeh::ImageError& e);
 /// The crop (at most w x h, inside `img`'s data window) where brightness varies most: a
 /// light and the gradient around it. Searched on 8 x 8 blocks of R + G + B.
 OIIO::ROI most_varied_crop(const OIIO::ImageBuf& img, int w, int h, int threads);
+
+/// A picture sheet: `tiles` (label, RGB display values in 0..1, all the size of the first)
+/// in a grid of `cols` columns, each with its label above it (DejaVu Sans; without that
+/// font the tiles go unlabelled and their order is printed), as an 8-bit image at `path`.
+/// False + `err` naming the file.
+bool write_sheet(const std::string& path, const std::vector<std::pair<std::string, OIIO::ImageBuf>>& tiles,
+                 int cols, int threads, std::string& err);
 
 }  // namespace bokeh_bench

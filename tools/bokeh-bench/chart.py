@@ -15,6 +15,12 @@ OUTDIR/<task>.svg with two panels:
          not grow with the kernel.
 
 It also prints, per task, a Markdown table of the Pareto-front points for the docs.
+
+Tasks with rows "METHOD vs truth" and "METHOD vs truth (mask)" (bokeh-bench --task deep)
+go into one chart instead, OUTDIR/deep_truth.png and .svg: a panel per frame, each
+method's PSNR against the thin-lens truth over the frame (filled) and over the
+disocclusion mask (hollow) against its median time, and the truth at its own time and
+noise floor (the "truth N spp" row; a dotted line); with a Markdown table per frame.
 Methods are compared at equal kernel size: a small kernel is no substitute for a large
 one, so a front across sizes would mostly list the smallest size of the fastest method.
 
@@ -438,6 +444,97 @@ def draw_task(plt, ticker, task, rows, base, suffix, size_label=SIZE_LABEL):
     return markdown_front(task, front, labels, size_label)
 
 
+TRUTH_SUFFIX = " vs truth"
+MASK_SUFFIX = " vs truth (mask)"
+
+
+def is_truth_task(task_rows):
+    """A deep task measured against the thin-lens truth (bokeh-bench --task deep)."""
+    return any(r["method"].endswith(TRUTH_SUFFIX) for r in task_rows)
+
+
+def draw_truth(plt, ticker, frames, base, suffix):
+    """Write base.png and base.svg: per deep frame, each method's PSNR against the truth
+    over the frame (filled) and over the disocclusion mask (hollow, joined to it) against
+    its median time, and the truth itself at its time and noise floor. Return the
+    Markdown tables."""
+    colours = [c for i, c in enumerate(plt.get_cmap("tab10").colors) if i != 7]
+    markers = "o^sDvP"
+    fig, axes = plt.subplots(1, len(frames), figsize=(6.2 * len(frames), 5.2), squeeze=False)
+    tables, handles, seen = [], {}, []
+    for ax, (task, rows) in zip(axes[0], frames):
+        methods = []
+        for r in rows:
+            m = r["method"]
+            name = (m[:-len(MASK_SUFFIX)] if m.endswith(MASK_SUFFIX)
+                    else m[:-len(TRUTH_SUFFIX)] if m.endswith(TRUTH_SUFFIX) else None)
+            if name is not None and name not in methods:
+                methods.append(name)
+        truth = [r for r in rows if r["method"].startswith("truth ")]
+        values, lines = [], [f"### {task}", "",
+                             "| method | median ms | PSNR vs truth, frame | disocclusion mask |",
+                             "|---|---:|---:|---:|"]
+        for name in methods:
+            if name not in seen:
+                seen.append(name)
+            i = seen.index(name)
+            colour, marker = colours[i % len(colours)], markers[i % len(markers)]
+            frame = next((r for r in rows if r["method"] == name + TRUTH_SUFFIX), None)
+            mask = next((r for r in rows if r["method"] == name + MASK_SUFFIX), None)
+            pts = [p for p in (frame, mask) if p]
+            if not pts:
+                continue
+            if frame and mask:
+                ax.plot([frame["ms"]] * 2, [frame["psnr"], mask["psnr"]], color=colour,
+                        linewidth=1, zorder=2)
+            if frame:
+                h, = ax.plot([frame["ms"]], [frame["psnr"]], marker=marker, color=colour,
+                             markersize=8, linestyle="none", zorder=3)
+                handles.setdefault(name, h)
+            if mask:
+                ax.plot([mask["ms"]], [mask["psnr"]], marker=marker, color=colour, markersize=8,
+                        markerfacecolor="white", markeredgewidth=1.6, linestyle="none", zorder=3)
+            values += pts
+            fmt = lambda r: f"{r['psnr']:.1f}" if r else ""
+            lines.append(f"| {name} | {ms_text(pts[0]['ms'])} | {fmt(frame)} | {fmt(mask)} |")
+        for t in truth:
+            h, = ax.plot([t["ms"]], [t["psnr"]], marker="*", color="black", markersize=13,
+                         linestyle="none", zorder=3)
+            handles.setdefault(f"{t['method']}: its noise floor, at its time", h)
+            ax.axhline(t["psnr"], color="0.35", linestyle=":", linewidth=1.1, zorder=1)
+            values.append(t)
+            lines.append(f"| {t['method']} (its noise) | {ms_text(t['ms'])} | {t['psnr']:.1f} | |")
+        ax.set_xscale("log")
+        log_ticks(ax.xaxis, ticker, [v["ms"] for v in values])
+        lo = min(v["psnr"] for v in values)
+        hi = max(v["psnr"] for v in values)
+        ax.set_ylim(lo - 3, hi + 3)
+        ax.set_xlim(min(v["ms"] for v in values) / 1.6, max(v["ms"] for v in values) * 1.6)
+        ax.grid(True, which="major", color="0.9", linewidth=0.6)
+        ax.set_xlabel("median time, ms (log; left is faster)")
+        ax.set_ylabel("PSNR against the truth, dB (up is closer)")
+        ax.set_title(task.removeprefix("deep "), fontsize=10)
+        placer = Placer(ax, [(v["ms"], v["psnr"]) for v in values])
+        for v in values:
+            placer.place(f"{v['psnr']:.1f}", [((v["ms"], v["psnr"]), off) for off in SIZE_LABEL_OFFSETS],
+                         7.5, color="0.2")
+        tables.append("\n".join(lines))
+    # A legend entry for the two fills, drawn as grey markers.
+    h_frame, = axes[0][0].plot([], [], marker="o", color="0.4", linestyle="none")
+    h_mask, = axes[0][0].plot([], [], marker="o", color="0.4", markerfacecolor="white",
+                               linestyle="none")
+    labels = list(handles) + ["filled: over the frame", "hollow: over the disocclusion mask"]
+    fig.legend(list(handles.values()) + [h_frame, h_mask], labels, loc="lower center",
+               ncol=3, fontsize=9, frameon=False, numpoints=1)
+    fig.suptitle("deep defocus against the thin-lens truth: accuracy vs time"
+                 + (f" {suffix}" if suffix else ""), fontsize=13)
+    fig.subplots_adjust(left=0.07, right=0.985, top=0.86, bottom=0.25, wspace=0.22)
+    fig.savefig(base + ".png", dpi=100, metadata={"Software": None})
+    fig.savefig(base + ".svg", metadata={"Date": None})
+    plt.close(fig)
+    return tables
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("csv", help="CSV written by bokeh-bench --csv")
@@ -462,10 +559,14 @@ def main():
         fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
 
     tables, bases = [], set()
+    truth_frames = []
     for task in task_names:
         task_rows = [r for r in rows if r["task"] == task]
         if not task_rows:
             note(f"{args.csv}: task {task!r} has no usable rows, skipped")
+            continue
+        if is_truth_task(task_rows):
+            truth_frames.append((task, task_rows))   # one chart for all of them, below
             continue
         # Task names become file names; "disk hard" and "disk_hard" must not overwrite.
         base = os.path.join(args.outdir, re.sub(r"[^A-Za-z0-9._-]+", "_", task))
@@ -477,6 +578,12 @@ def main():
         try:
             tables.append(draw_task(plt, ticker, task, task_rows, base, args.title_suffix,
                                     args.size_label))
+        except OSError as e:
+            fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
+    if truth_frames:
+        try:
+            tables += draw_truth(plt, ticker, truth_frames, os.path.join(args.outdir, "deep_truth"),
+                                 args.title_suffix)
         except OSError as e:
             fail(args.outdir, e.strerror.lower() if e.strerror else str(e))
     print("\n\n".join(tables))

@@ -6,7 +6,10 @@
 // samples a pixel). Every case is timed in interleaved rounds (timing.h), medians.
 // Errors: our flatten against OIIO's where OIIO is exact (tidy, sorted input), the merge's
 // flatten against OIIO's merge's (OIIO culls hidden samples, which a flatten cannot see),
-// and each defocus against the deep reference (one full-resolution layer per CoC step).
+// each defocus against the deep reference (one full-resolution layer per CoC step), and,
+// on both frames, every defocus method (deep and of the flatten, timed) against the
+// thin-lens truth over the frame and over the disocclusion mask ("vs truth" rows; chart.py
+// draws them); with --images, deep_sheet.png shows LowResLeftView's results beside it.
 
 #include "deep_task.h"
 #include "bench_common.h"
@@ -18,9 +21,12 @@
 #include <bokeh/metrics.h>
 #include <bokeh/truth.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <string>
+#include <vector>
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebufalgo.h>
@@ -45,6 +51,195 @@ OIIO::ImageBuf rgba_of(const OIIO::ImageBuf& img, const OIIO::ROI& roi)
 {
     OIIO::ImageBuf out = IBA::channels(img, 4, { 0, 1, 2, 3 });
     return IBA::crop(out, roi);
+}
+
+
+// A deep frame measured against its thin-lens truth.
+struct TruthShot {
+    std::string name;                   // the frame, as the CSV's task names it
+    const OIIO::ImageBuf* deep = nullptr;
+    const OIIO::ImageBuf* flat = nullptr;  // its flatten
+    bokeh::DefocusOptions lens;
+};
+
+// What the picture sheet shows: the truth, the disocclusion mask over it, each method's
+// result (RGBA over the truth's region) with its PSNR over the frame and the mask.
+struct TruthPictures {
+    OIIO::ImageBuf truth;
+    std::vector<uint8_t> mask;  // per pixel of truth.roi()
+    int spp = 0;
+    struct Result {
+        std::string name;
+        OIIO::ImageBuf image;
+        double frame_db = 0.0, mask_db = 0.0;
+    };
+    std::vector<Result> results;
+};
+
+// The truth of `shot` and every method against it (the layered methods with a black
+// border: the rays see nothing past the frame), over the frame and over the disocclusion
+// mask: the pixels where the truth of the deep image and the truth of its flatten differ by
+// more than 0.01, what the flat image hides. Each method is timed (its median with that
+// border) so the CSV's rows put accuracy against time. False + message on stderr.
+bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std::string>& rows, TruthPictures& pic)
+{
+    const int t = args.threads;
+    bokeh::TruthOptions to;
+    to.coc      = shot.lens.coc;
+    to.aperture = shot.lens.aperture;
+    to.spp      = args.reps >= 5 ? 256 : 64;
+    pic.spp     = to.spp;
+    OIIO::ImageBuf truth_flat, flat_deep;
+    bokeh::TruthReport tr;
+    OIIO::Timer timer;
+    const bool ok = bokeh::defocus_truth(pic.truth, *shot.deep, to, &tr, t);
+    const double truth_ms = timer() * 1e3;
+    if (!ok || !bokeh::deepen(flat_deep, *shot.flat, 1.0f, t) || !bokeh::defocus_truth(truth_flat, flat_deep, to, nullptr, t)) {
+        std::fprintf(stderr, "bokeh-bench: deep: %s: truth: %s%s\n", shot.name.c_str(), pic.truth.geterror().c_str(),
+                     truth_flat.geterror().c_str());
+        return false;
+    }
+    const OIIO::ROI roi = pic.truth.roi();
+    const OIIO::ImageBuf tr4 = rgba_of(pic.truth, roi), tf4 = rgba_of(truth_flat, roi);
+    pic.mask.assign(size_t(roi.npixels()), 0);
+    int64_t in_mask = 0;
+    for (int y = roi.ybegin; y < roi.yend; ++y)
+        for (int x = roi.xbegin; x < roi.xend; ++x) {
+            float a[4], b[4];
+            tr4.getpixel(x, y, a, 4);
+            tf4.getpixel(x, y, b, 4);
+            bool differs = false;
+            for (int c = 0; c < 4; ++c)
+                differs |= std::abs(a[c] - b[c]) > 0.01f;
+            pic.mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)] = differs;
+            in_mask += differs;
+        }
+    std::printf("%s: truth: %d rays a pixel, %.0f ms, CoC %.1f .. %.1f px, noise %.1f dB; disocclusion mask %lld px "
+                "(%.1f %%)\n",
+                shot.name.c_str(), to.spp, truth_ms, tr.min_coc_px, tr.max_coc_px, tr.noise_psnr_db, (long long)in_mask,
+                100.0 * double(in_mask) / double(roi.npixels()));
+    rows.push_back(format("deep {},truth {} spp,,0,{},{:.3f},1,,{:.2f},", shot.name, to.spp, t, truth_ms, tr.noise_psnr_db));
+
+    struct Method {
+        std::string name;
+        const OIIO::ImageBuf* src;
+        bokeh::DefocusMethod method;
+    };
+    const std::vector<Method> methods = {
+        { "deep reference", shot.deep, bokeh::DefocusMethod::Reference },
+        { "deep auto", shot.deep, bokeh::DefocusMethod::Auto },
+        { "flat reference of the flatten", shot.flat, bokeh::DefocusMethod::Reference },
+        { "flat auto of the flatten", shot.flat, bokeh::DefocusMethod::Auto },
+    };
+    std::vector<OIIO::ImageBuf> outs(methods.size());
+    std::vector<std::function<void()>> fns;
+    std::vector<int> reps;
+    std::vector<bool> warm;
+    for (size_t i = 0; i < methods.size(); ++i) {
+        bokeh::DefocusOptions o = shot.lens;
+        o.method                = methods[i].method;
+        o.border                = bokeh::Border::Black;
+        fns.push_back([&, o, i] {
+            if (!bokeh::defocus(outs[i], *methods[i].src, o, nullptr, t))
+                std::fprintf(stderr, "bokeh-bench: deep: %s: %s\n", methods[i].name.c_str(), outs[i].geterror().c_str());
+        });
+        const bool reference = methods[i].method == bokeh::DefocusMethod::Reference;
+        reps.push_back(reference ? std::max(1, args.reps / 3) : args.reps);
+        warm.push_back(!reference);
+    }
+    const std::vector<double> ms = interleaved_medians_ms(fns, reps, warm);
+    const double share = in_mask > 0 ? double(in_mask) / double(roi.npixels()) : 1.0;
+    for (size_t i = 0; i < methods.size(); ++i) {
+        if (!outs[i].initialized())
+            return false;
+        const OIIO::ImageBuf got = rgba_of(outs[i], roi);
+        bokeh::ImageError frame, inside;
+        std::string why;
+        bokeh::compare(frame, got, tr4, why, {}, t);
+        // The mask's error: outside it the result is set to the truth, so the mean squared
+        // error over the frame is the mask's times its share of the frame.
+        OIIO::ImageBuf masked = got;
+        for (int y = roi.ybegin; y < roi.yend; ++y)
+            for (int x = roi.xbegin; x < roi.xend; ++x)
+                if (!pic.mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)]) {
+                    float v[4];
+                    tr4.getpixel(x, y, v, 4);
+                    masked.setpixel(x, y, v, 4);
+                }
+        bokeh::compare(inside, masked, tr4, why, {}, t);
+        const double mask_db = inside.psnr_db + 10.0 * std::log10(share);
+        std::printf("  %-30s %9.0f ms  vs truth: frame %.2f dB, disocclusion mask %.2f dB\n", methods[i].name.c_str(),
+                    ms[i], frame.psnr_db, mask_db);
+        rows.push_back(format("deep {},{} vs truth,,0,{},{:.3f},{},{}", shot.name, methods[i].name, t, ms[i], reps[i],
+                              error_fields(frame)));
+        rows.push_back(format("deep {},{} vs truth (mask),,0,{},{:.3f},{},,{:.2f},", shot.name, methods[i].name, t, ms[i],
+                              reps[i], mask_db));
+        pic.results.push_back({ methods[i].name, got, frame.psnr_db, mask_db });
+    }
+    return true;
+}
+
+// The w x h window (inside `roi`) holding the most pixels of `mask`, searched on a 4-pixel
+// grid by a summed-area table.
+OIIO::ROI densest_window(const std::vector<uint8_t>& mask, const OIIO::ROI& roi, int w, int h)
+{
+    const int W = roi.width(), H = roi.height();
+    w = std::min(w, W), h = std::min(h, H);
+    std::vector<int64_t> sat(size_t(W + 1) * size_t(H + 1), 0);
+    auto at = [&](int x, int y) -> int64_t& { return sat[size_t(y) * size_t(W + 1) + size_t(x)]; };
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x)
+            at(x + 1, y + 1) = mask[size_t(y) * size_t(W) + size_t(x)] + at(x, y + 1) + at(x + 1, y) - at(x, y);
+    int64_t best = -1;
+    int bx = 0, by = 0;
+    for (int y = 0; y + h <= H; y += 4)
+        for (int x = 0; x + w <= W; x += 4) {
+            const int64_t n = at(x + w, y + h) - at(x, y + h) - at(x + w, y) + at(x, y);
+            if (n > best)
+                best = n, bx = x, by = y;
+        }
+    return OIIO::ROI(roi.xbegin + bx, roi.xbegin + bx + w, roi.ybegin + by, roi.ybegin + by + h);
+}
+
+// The picture sheet of a frame against its truth (bench_common's write_sheet): a crop of
+// 256 x 144 where the disocclusion mask is densest, magnified 2x with nearest so pixels
+// show; linear premultiplied RGB clamped to 0..1 and encoded sRGB, the same for every tile.
+// Tiles: the truth, the mask (red over the dimmed truth), each method with its PSNR.
+bool write_truth_sheet(const std::string& path, const TruthPictures& pic, int threads, std::string& err)
+{
+    const OIIO::ROI roi  = pic.truth.roi();
+    const OIIO::ROI crop = densest_window(pic.mask, roi, 256, 144);
+    constexpr int magnify = 2;
+    auto display = [&](const OIIO::ImageBuf& img) {
+        OIIO::ROI c = crop;
+        c.chbegin = 0, c.chend = 3;
+        OIIO::ImageBuf rgb = IBA::cut(img, c, threads);
+        rgb                = IBA::clamp(rgb, 0.0f, 1.0f, false, {}, threads);
+        return IBA::colorconvert(rgb, "linear", "sRGB", false, "", "", nullptr, {}, threads);
+    };
+    auto magnified = [&](const OIIO::ImageBuf& tile) {
+        return IBA::resize(tile, "box", 0.0f,
+                           OIIO::ROI(0, crop.width() * magnify, 0, crop.height() * magnify, 0, 1, 0, 3), threads);
+    };
+    std::vector<std::pair<std::string, OIIO::ImageBuf>> tiles;
+    const OIIO::ImageBuf truth = display(pic.truth);
+    tiles.emplace_back(format("truth ({} rays a pixel)", pic.spp), magnified(truth));
+    OIIO::ImageBuf mask = IBA::mul(truth, 0.35f, {}, threads);
+    int64_t n = 0;
+    for (int y = 0; y < crop.height(); ++y)
+        for (int x = 0; x < crop.width(); ++x)
+            if (pic.mask[size_t(crop.ybegin + y - roi.ybegin) * size_t(roi.width()) + size_t(crop.xbegin + x - roi.xbegin)]) {
+                const float red[3] = { 1.0f, 0.25f, 0.2f };
+                mask.setpixel(mask.xbegin() + x, mask.ybegin() + y, red, 3);
+                ++n;
+            }
+    tiles.emplace_back(format("disocclusion mask ({:.0f} % here)", 100.0 * double(n) / double(crop.npixels())),
+                       magnified(mask));
+    for (const TruthPictures::Result& r : pic.results)
+        tiles.emplace_back(format("{}: {:.1f} / {:.1f} dB", r.name, r.frame_db, r.mask_db), magnified(display(r.image)));
+    std::printf("%s: crop %dx%d at (%d, %d), %dx; labels: PSNR vs truth over the frame / the mask\n", path.c_str(),
+                crop.width(), crop.height(), crop.xbegin, crop.ybegin, magnify);
+    return write_sheet(path, tiles, 3, threads, err);
 }
 
 }  // namespace
@@ -153,75 +348,35 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
             error_of[i] = measure(flat_dof, ref);
     }
 
-    // Against the thin-lens truth (the layered methods with a black border: the rays see
-    // nothing past the frame), over the frame and over the disocclusion mask: the pixels
-    // where the truth of the deep image and the truth of its flatten differ by more than
-    // 0.01, what the flat image hides.
+    // Against the thin-lens truth: LowResLeftView with the defocus cases' lens, and
+    // representativeDeepImage (Z 2.8 .. 10.8, units not stated) read as decimetres, a
+    // 0.3 .. 1.1 m table-top scene, 50 mm f/2 focused at 0.55 m (its median sample depth):
+    // CoCs about -10 .. +5 px on its 150 px width.
     {
-        bokeh::TruthOptions to;
-        to.coc      = lens.coc;
-        to.aperture = lens.aperture;
-        to.spp      = args.reps >= 5 ? 256 : 64;
-        OIIO::ImageBuf truth, truth_flat, flat_deep;
-        bokeh::TruthReport tr;
-        OIIO::Timer timer;
-        const bool ok = bokeh::defocus_truth(truth, merged, to, &tr, t);
-        const double truth_ms = timer() * 1e3;
-        if (!ok || !bokeh::deepen(flat_deep, flat, 1.0f, t) || !bokeh::defocus_truth(truth_flat, flat_deep, to, nullptr, t)) {
-            std::fprintf(stderr, "bokeh-bench: deep: truth: %s%s\n", truth.geterror().c_str(), truth_flat.geterror().c_str());
+        TruthShot lrv{ lr, &merged, &flat, lens };
+        TruthPictures pic;
+        if (!against_truth(lrv, args, rows, pic))
+            return false;
+        if (!args.images_dir.empty() && !write_truth_sheet(args.images_dir + "/deep_sheet.png", pic, t, err)) {
+            std::fprintf(stderr, "bokeh-bench: %s\n", err.c_str());
             return false;
         }
-        const OIIO::ROI roi = truth.roi();
-        const OIIO::ImageBuf tr4 = rgba_of(truth, roi), tf4 = rgba_of(truth_flat, roi);
-        std::vector<uint8_t> mask(size_t(roi.npixels()), 0);
-        int64_t in_mask = 0;
-        for (int y = roi.ybegin; y < roi.yend; ++y)
-            for (int x = roi.xbegin; x < roi.xend; ++x) {
-                float a[4], b[4];
-                tr4.getpixel(x, y, a, 4);
-                tf4.getpixel(x, y, b, 4);
-                bool differs = false;
-                for (int c = 0; c < 4; ++c)
-                    differs |= std::abs(a[c] - b[c]) > 0.01f;
-                mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)] = differs;
-                in_mask += differs;
-            }
-        std::printf("truth: %d rays a pixel, %.0f ms, noise %.1f dB; disocclusion mask %lld px (%.1f %%)\n",
-                    to.spp, truth_ms, tr.noise_psnr_db, (long long)in_mask, 100.0 * double(in_mask) / double(roi.npixels()));
-        rows.push_back(format("deep {},truth {} spp,,0,{},{:.3f},1,,{:.2f},", lr, to.spp, t, truth_ms, tr.noise_psnr_db));
-        auto vs_truth = [&](const std::string& name, const OIIO::ImageBuf& src, bokeh::DefocusMethod m) {
-            bokeh::DefocusOptions o = with(m, false);
-            o.border                = bokeh::Border::Black;
-            OIIO::ImageBuf out;
-            if (!bokeh::defocus(out, src, o, nullptr, t))
-                return;
-            const OIIO::ImageBuf got = rgba_of(out, roi);
-            bokeh::ImageError frame, inside;
-            std::string why;
-            bokeh::compare(frame, got, tr4, why, {}, t);
-            // The mask's error: outside it the result is set to the truth, so the mean
-            // squared error over the frame is the mask's times its share of the frame.
-            OIIO::ImageBuf masked = got;
-            for (int y = roi.ybegin; y < roi.yend; ++y)
-                for (int x = roi.xbegin; x < roi.xend; ++x)
-                    if (!mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)]) {
-                        float v[4];
-                        tr4.getpixel(x, y, v, 4);
-                        masked.setpixel(x, y, v, 4);
-                    }
-            bokeh::compare(inside, masked, tr4, why, {}, t);
-            const double share = in_mask > 0 ? double(in_mask) / double(roi.npixels()) : 1.0;
-            const double mask_db = inside.psnr_db + 10.0 * std::log10(share);
-            std::printf("  %-34s vs truth: frame %.2f dB, disocclusion mask %.2f dB\n", name.c_str(), frame.psnr_db, mask_db);
-            rows.push_back(format("deep {},{} vs truth,,0,{},,,{}", lr, name, t, error_fields(frame)));
-            rows.push_back(format("deep {},{} vs truth (mask),,0,{},,,,{:.2f},", lr, name, t, mask_db));
-        };
-        vs_truth("deep reference", merged, bokeh::DefocusMethod::Reference);
-        vs_truth("deep auto", merged, bokeh::DefocusMethod::Auto);
-        vs_truth("flat reference of the flatten", flat, bokeh::DefocusMethod::Reference);
-        vs_truth("flat auto of the flatten", flat, bokeh::DefocusMethod::Auto);
     }
-
+    if (have_rep) {
+        OIIO::ImageBuf rep_flat;
+        if (!bokeh::flatten(rep_flat, rep_img, {}, t)) {
+            std::fprintf(stderr, "bokeh-bench: deep: %s\n", rep_flat.geterror().c_str());
+            return false;
+        }
+        TruthShot rep{ "representativeDeepImage", &rep_img, &rep_flat, {} };
+        rep.lens.coc.lens.focal_mm       = 50.0;
+        rep.lens.coc.lens.fstop          = 2.0;
+        rep.lens.coc.lens.depth_unit_mm  = 100.0;
+        rep.lens.coc.lens.focus_distance = 5.5;
+        TruthPictures pic;
+        if (!against_truth(rep, args, rows, pic))
+            return false;
+    }
     std::printf("%-38s %-5s %-24s %10s %10s\n", "method", "peer", "frame", "median_ms", "psnr_db");
     for (size_t i = 0; i < cases.size(); ++i) {
         const Case& c = cases[i];

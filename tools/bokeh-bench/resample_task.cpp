@@ -39,7 +39,6 @@
 #include <map>
 #include <utility>
 
-#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
 #include <OpenImageIO/timer.h>
@@ -208,46 +207,8 @@ struct Sheet {
                                 magnified(IBA::channels(grey, 3, { 0, 0, 0 }), threads));
         }
         std::printf("enlarge_sheet_error.png: error scale +-%.3g (bilinear's largest)\n", double(e));
-        return write_sheet(dir + "/enlarge_sheet.png", pictures, threads, err)
-               && write_sheet(dir + "/enlarge_sheet_error.png", errors, threads, err);
-    }
-
-    bool write_sheet(const std::string& path, const std::vector<std::pair<std::string, OIIO::ImageBuf>>& tiles,
-                     int threads, std::string& err) const
-    {
-        const int tw = crop.width() * magnify, th = crop.height() * magnify;
-        const int cols = 4, rows = int(tiles.size() + cols - 1) / cols;
-        const int gap = 6, label_h = 24;
-        OIIO::ImageSpec spec(cols * tw + (cols + 1) * gap, rows * (th + label_h + gap) + gap, 3,
-                             OIIO::TypeFloat);
-        OIIO::ImageBuf sheet(spec);
-        const float grey[3] = { 0.12f, 0.12f, 0.12f };
-        IBA::fill(sheet, grey);
-        const std::string font = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
-        const bool have_font   = OIIO::Filesystem::exists(font);
-        const float white[3]   = { 1.0f, 1.0f, 1.0f };
-        for (size_t i = 0; i < tiles.size(); ++i) {
-            const int x = gap + int(i % cols) * (tw + gap);
-            const int y = gap + int(i / cols) * (th + label_h + gap);
-            if (!IBA::paste(sheet, x, y + label_h, 0, 0, tiles[i].second, {}, threads)) {
-                err = path + ": " + sheet.geterror();
-                return false;
-            }
-            if (have_font)
-                IBA::render_text(sheet, x + 4, y + label_h - 6, tiles[i].first, 17, font, white);
-        }
-        if (!have_font) {
-            std::string order;
-            for (const auto& t : tiles)
-                order += (order.empty() ? "" : ", ") + t.first;
-            std::printf("(no font at %s: %s is unlabelled; tiles left to right, top to bottom: %s)\n",
-                        font.c_str(), path.c_str(), order.c_str());
-        }
-        if (!sheet.write(path, OIIO::TypeUInt8)) {
-            err = path + ": " + sheet.geterror();
-            return false;
-        }
-        return true;
+        return write_sheet(dir + "/enlarge_sheet.png", pictures, 4, threads, err)
+               && write_sheet(dir + "/enlarge_sheet_error.png", errors, 4, threads, err);
     }
 };
 

@@ -82,6 +82,48 @@ static bool parse_tile_size(const std::string& text, int& width, int& height)
            && h.empty() && width > 0 && height > 0 && width <= 65536 && height <= 65536;
 }
 
+// A long command's progress on stderr (`--progress`), never on stdout with the messages:
+// a line such as "--defocus: 37% (12.0 s)" when the percentage has changed and at least
+// `interval_s` has passed since the command started or the last line, so a command of
+// under a second prints none; "100%" at the end once a line was printed. The library calls
+// it from one thread at a time; the lock keeps a plugin that does not from mixing lines.
+class ProgressLine {
+public:
+    ProgressLine(std::string command, double interval_s) : m_command(std::move(command)), m_interval_s(interval_s) {}
+
+    void report(float fraction)
+    {
+        std::lock_guard<std::mutex> lock(m_lock);
+        const int percent = std::clamp(int(std::floor(double(fraction) * 100.0)), 0, 100);
+        const double now  = m_timer();
+        if (percent == m_percent || now - m_last_s < m_interval_s)
+            return;
+        print(percent, now);
+    }
+
+    void finish(bool ok)
+    {
+        std::lock_guard<std::mutex> lock(m_lock);
+        if (ok && m_percent >= 0 && m_percent < 100)
+            print(100, m_timer());
+    }
+
+private:
+    void print(int percent, double now)
+    {
+        std::cerr << format("{}: {}% ({:.1f} s)\n", m_command, percent, now) << std::flush;
+        m_percent = percent;
+        m_last_s  = now;
+    }
+
+    std::string m_command;
+    double m_interval_s;
+    OIIO::Timer m_timer;
+    double m_last_s = 0.0;
+    int m_percent   = -1;  // the last printed, -1 before the first line
+    std::mutex m_lock;
+};
+
 Host::Host()
 {
     m_registry.set_current_plugin(kProgram);
@@ -243,9 +285,18 @@ void Host::register_host_commands()
                                   "Refuse to replace existing output files",
                                   [this](CommandContext&) { return m_no_clobber = true, true; }),
                      true);
-    add_host_command(host_command("--progress", "", 0, 0, "Print a line per frame",
-                                  [this](CommandContext&) { return m_progress = true, true; }),
-                     true);
+    Command progress = host_command(
+        "--progress", "", 0, 0,
+        "Print a line per frame, and on stderr how far a long command is (the truth, a "
+        "defocus, a reference or FFT blur): at most a line every interval= seconds",
+        [this](CommandContext& c) {
+            m_progress            = true;
+            m_progress_interval_s = c.options.get_float("interval");
+            return true;
+        });
+    progress.options = { OptionSpec::Float("interval", 1.0, 0.0, 3600.0,
+                                           "seconds between progress lines (0: every percent)") };
+    add_host_command(std::move(progress), true);
     add_host_command(host_command("--colorconfig", "FILE", 0, 0,
                                   "OCIO config to use (default: $OCIO, else the shipped one)",
                                   [this](CommandContext& c) {
@@ -608,6 +659,11 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     ctx.verbosity = m_verbosity;
     ctx.colors    = &m_colors;
     ctx.message   = [this](const std::string& s) { message(s); };
+    std::shared_ptr<ProgressLine> progress;
+    if (m_progress && m_verbosity > 0) {
+        progress     = std::make_shared<ProgressLine>(cmd.name, m_progress_interval_s);
+        ctx.progress = [progress](float fraction) { progress->report(fraction); };
+    }
     ctx.inputs.assign(m_stack.end() - inputs, m_stack.end());
     m_stack.resize(m_stack.size() - size_t(inputs));
 
@@ -637,6 +693,8 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     } catch (...) {
         ctx.error = "failed with an unknown exception";
     }
+    if (progress)
+        progress->finish(ok);
     if (!ok)
         return fail(cmd.name, ctx.error.empty() ? "failed (no reason given)" : ctx.error);
     if (int(ctx.outputs.size()) != cmd.outputs)

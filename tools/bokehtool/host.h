@@ -93,6 +93,7 @@ private:
     // Global settings (pass 1).
     int m_threads = 0, m_verbosity = 1;
     bool m_info = false, m_no_clobber = false, m_progress = false;
+    double m_progress_interval_s = 1.0;  // --progress:interval=
     bokeh::NonFinitePolicy m_nan_policy = bokeh::NonFinitePolicy::Zero;
     std::string m_colorconfig;
     bokeh::ReadOptions m_read_options;
