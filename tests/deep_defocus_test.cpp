@@ -319,3 +319,68 @@ TEST(DeepDefocus, ASlopedOpaqueSurfaceStaysOpaque)
         EXPECT_LT(max_difference(out, flat_out), 5e-3) << method_name(m);
     }
 }
+
+TEST(DeepDefocus, ASlopedSurfaceOverARecordedWallStaysOpaque)
+{
+    // The sloped plane again, with a wall recorded behind every pixel (as a renderer that
+    // keeps hidden samples writes it): the layers between the plane and the wall are known
+    // to be empty there, yet the plane's farther ribbons must still be continued under its
+    // nearer ones (a nearer piece of nearly the same CoC is the same surface), or the wall
+    // shows through seams between the ribbons.
+    const int w = 96, h = 40;
+    const auto img = deep_image(w, h, [&](int x, int) {
+        return std::vector<Smp>{ { 0.5f, 0.4f, 0.3f, 1.0f, -30.0f + 20.0f * float(x) / float(w) },
+                                 { 0.0f, 0.0f, 1.0f, 1.0f, 6.0f } };
+    });
+    for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+        DefocusOptions o = direct_options(m);
+        o.border         = Border::Clamp;
+        OIIO::ImageBuf out;
+        ASSERT_TRUE(defocus(out, img, o)) << out.geterror();
+        float most_blue = 0.0f;
+        for (int y = 15; y < h - 15; ++y)
+            for (int x = 15; x < w - 15; ++x)
+                most_blue = std::max(most_blue, out.getchannel(x, y, 0, 2) - 0.3f);
+        // The plane's own blue is 0.3; the wall's showing through would add to it.
+        EXPECT_LT(most_blue, 2e-3f) << method_name(m);
+    }
+}
+
+TEST(DeepDefocus, ALightHiddenBehindACardGainsNoEnergy)
+{
+    // An opaque card (CoC -20 px) in front of a wall (CoC 6 px) recorded behind it, and a
+    // one-pixel light (CoC 3 px) behind the card, 3 px or 16 px inside its edge. The light
+    // may show through the card's blurred edge, never with more than its own energy; deep
+    // inside it stays hidden. (Continuing the light's layer under the card, as if nothing
+    // were known behind it, spreads the pixel over its whole disk at its own level.)
+    const int w = 80, h = 64;
+    const float E = 1000.0f;
+    for (int inside : { 3, 16 }) {
+        auto scene = [&](bool light) {
+            return deep_image(w, h, [&, light](int x, int y) {
+                std::vector<Smp> s;
+                if (x < 40)
+                    s.push_back({ 0.2f, 0.2f, 0.2f, 1.0f, -20.0f });
+                if (light && x == 40 - inside && y == 32)
+                    s.push_back({ E, E, E, 1.0f, 3.0f });
+                s.push_back({ 0.1f, 0.1f, 0.1f, 1.0f, 6.0f });
+                return s;
+            });
+        };
+        for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+            OIIO::ImageBuf with, without;
+            ASSERT_TRUE(defocus(with, scene(true), direct_options(m))) << with.geterror();
+            ASSERT_TRUE(defocus(without, scene(false), direct_options(m))) << without.geterror();
+            double added = 0.0;
+            for (int y = with.roi().ybegin; y < with.roi().yend; ++y)
+                for (int x = with.roi().xbegin; x < with.roi().xend; ++x)
+                    added += double(with.getchannel(x, y, 0, 0)) - double(without.getchannel(x, y, 0, 0));
+            std::cout << method_name(m) << ", light " << inside << " px inside the card: " << added / E
+                      << " of its energy shows\n";
+            if (inside > 11)
+                EXPECT_LT(std::abs(added), 1e-3 * E) << method_name(m);
+            else
+                EXPECT_LE(added, 1.0001 * E) << method_name(m);
+        }
+    }
+}
