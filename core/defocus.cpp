@@ -1212,6 +1212,7 @@ bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, c
         dst.errorfmt("defocus scatter reference: {}", err);
         return false;
     }
+    fill_disocclusions(out, f, rep.max_coc_px, nthreads);  // as the layered method ends
     write_result(dst, src, f, out, nthreads);
     return true;
 }

@@ -140,9 +140,13 @@ bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOpti
 /// The brute-force reference of lens character: every pixel of a flat `src` scattered with
 /// the lens PSF of its own CoC (exact to `opts.reference_step_px`) and field position,
 /// into one full-resolution layer per CoC step (alpha scattered with the PSF's mean of
-/// R, G, B), layers composited nearer over farther. No visibility division and no
-/// disocclusion fill: meant for small scenes whose occlusions are simple (lights over a
-/// background). Uses opts.lens as `defocus` does (lens_character need not be set).
+/// R, G, B), layers composited nearer over farther with the layered method's occlusion
+/// model: each layer divided by its visibility (the blur of 1 - coverage over the pixels
+/// in nearer layers, with the layer's on-axis PSF), the border rule's pixels past the data
+/// window scattered too, the disocclusion fill at the end. So it differs from the layered
+/// reference (method reference) only in the PSFs. Slow by design: every pixel's PSF
+/// square, and each layer's visibility gathered over its PSF; meant for frames up to about
+/// 640x360. Uses opts.lens as `defocus` does (lens_character need not be set).
 bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
                                const DefocusOptions& opts, int nthreads = 0);
 
