@@ -230,12 +230,16 @@ void landing_radii(std::vector<double>& r, const Landing& L, int K)
 // `t`: row k gets the density the rays of step k (pupil radii (k - 1) / K .. k / K) add,
 // each ray's mass s ds spread over the R interval between its landing radii (`r`,
 // landing_radii), divided by the bins' annulus areas and pre-filtered along R by a
-// pixel-wide tent (1/4, 1/2, 1/4 of the half-pixel bins), each side of the axis alone: a
-// pixel-centre sample then weighs an edge about as the pixel's area does (the flat
-// kernels' anti-aliasing). A step's rays reach a few bins, so a row costs a few bins, not
+// pixel-wide tent (1/4, 1/2, 1/4 of the half-pixel bins), each side of the axis alone, when
+// `tent`: a pixel-centre sample then weighs an edge about as the pixel's area does (the
+// flat kernels' anti-aliasing). Only for PSFs sampled once a pixel (Geometry::ss = 1):
+// sub-samples integrate the pixel's area themselves, and a tent on top counted it twice
+// (a point of CoC under a pixel came out 3 x 3, centre 0.49, where the flat kernel keeps
+// it a point; on the edges scene's in-focus HDR print that cost the lens-off scatter
+// reference 6.5 dB against the layers: bokeh-bench --task lens --size 640x360). A step's rays reach a few bins, so a row costs a few bins, not
 // every bin reached so far; cumulate_rows turns the increments into the cumulative table.
 void add_wavelength_increments(RgbTable& t, const std::vector<double>& r, const std::array<double, 3>& w,
-                               int k_begin, int k_end, std::vector<double>& mass)
+                               int k_begin, int k_end, std::vector<double>& mass, bool tent)
 {
     const int K = t.K, nb = t.bins();
     const double ds = 1.0 / (double(K) * kRaysPerRow);
@@ -271,8 +275,9 @@ void add_wavelength_increments(RgbTable& t, const std::vector<double>& r, const 
         for (int b = v_lo; b <= v_hi; ++b) {
             const bool pos  = b >= t.half_bins;
             const int first = pos ? t.half_bins : 0, last = pos ? nb - 1 : t.half_bins - 1;
-            const double v  = 0.25 * density(std::max(b - 1, first)) + 0.5 * density(b)
-                             + 0.25 * density(std::min(b + 1, last));
+            const double v  = tent ? 0.25 * density(std::max(b - 1, first)) + 0.5 * density(b)
+                                         + 0.25 * density(std::min(b + 1, last))
+                                   : density(b);
             if (v != 0.0)
                 for (int c = 0; c < 3; ++c)
                     row[size_t(b) * 3 + c] += float(w[size_t(c)] * v);
@@ -716,7 +721,8 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
         parallel_for_chunks(1, table.K + 1, 32, nthreads, [&](int64_t k0, int64_t k1) {
             std::vector<double> mass(size_t(table.bins()), 0.0);
             for (int i = 0; i < nspec; ++i)
-                add_wavelength_increments(table, radii[size_t(i)], spectrum[size_t(i)].rgb_weight, int(k0), int(k1), mass);
+                add_wavelength_increments(table, radii[size_t(i)], spectrum[size_t(i)].rgb_weight, int(k0), int(k1), mass,
+                                          g.ss == 1);
         });
         cumulate_rows(table, nthreads);
         // How far from the centre each side of the axis has light: table.cumulative is 0
@@ -773,6 +779,14 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     out.height = h;
     out.rgb.assign(size_t(w) * h * 3, 0.0f);
     const int cx = w / 2, cy = h / 2;
+    // All light (fringe band included) within half a pixel of the centre: the centre
+    // pixel's square holds that whole disk, so the pixel-area integral is exactly a point,
+    // as the flat kernel's (the half-pixel bins' interpolation would spread it a pixel).
+    if (ex - 1.0 <= 0.5 && ey - 1.0 <= 0.5) {
+        for (int c = 0; c < 3; ++c)
+            out.rgb[(size_t(cy) * w + cx) * 3 + c] = 1.0f;
+        return true;
+    }
 
     const SpanLut spans(lens, g, r_max, nthreads);
     // Past branch_reach_px a side adds nothing, so a sample beyond both sides' reach is

@@ -279,17 +279,19 @@ TEST(LensPsf, EnergyPerChannelAndSymmetry)
 TEST(LensPsf, OffIsTheFlatDiskKernel)
 {
     // Every effect off: the anti-aliased disk kernel of the flat defocus. The kernel's rim
-    // is the exact pixel-area coverage; the PSF's is a pixel-wide tent along the radius
-    // (core/lens_psf.cpp): they differ at rim pixels by up to 15 % of the disk's level
-    // (measured 14 %, 14 %, 10 % at 9, 31, 64 px), by 5 % of it rms over the square.
-    for (double coc : { 9.0, 31.0, 64.0 }) {
+    // is the exact pixel-area coverage; the PSF's is its sub-samples' under 16 px and a
+    // pixel-wide tent along the radius above (core/lens_psf.cpp). Under 16 px they differ
+    // at rim pixels by up to 4 % of the disk's level, 1 % rms over the square (measured
+    // 2.7 %, 0.5 % at 9 px); above, where the tent stands in for the pixel's area, by up to
+    // 15 %, 3 % rms (measured 14 %, 2.4 % at 31 px). Under a pixel of CoC both are a point.
+    for (double coc : { 0.0, 0.5, 9.0, 31.0, 64.0 }) {
         bokeh::LensCharacter off;
         const bokeh::Psf p = psf_of(off, coc);
         bokeh::Kernel k;
         k.shape    = bokeh::KernelShape::Disk;
         k.width_px = k.height_px = float(coc);
         const bokeh::KernelWeights kw = bokeh::kernel_weights(k, 1);
-        const double level = 1.0 / (kPi * coc * coc / 4.0);
+        const double level = coc < 1.0 ? 1.0 : 1.0 / (kPi * coc * coc / 4.0);
         double worst = 0.0, sq = 0.0;
         for (int y = 0; y < p.height; ++y)
             for (int x = 0; x < p.width; ++x) {
@@ -299,8 +301,9 @@ TEST(LensPsf, OffIsTheFlatDiskKernel)
                 worst = std::max(worst, d);
                 sq += d * d;
             }
-        EXPECT_LT(worst, 0.15 * level) << "coc " << coc;
-        EXPECT_LT(std::sqrt(sq / (p.width * p.height)), 0.055 * level) << "coc " << coc;
+        const bool sub_sampled = coc < 16.0;
+        EXPECT_LT(worst, (sub_sampled ? 0.04 : 0.15) * level) << "coc " << coc;
+        EXPECT_LT(std::sqrt(sq / (p.width * p.height)), (sub_sampled ? 0.01 : 0.03) * level) << "coc " << coc;
         // The interior equals the level to 1 % (the rim's share of the energy differs).
         EXPECT_NEAR(p.at(p.width / 2, p.height / 2, 0), level, 0.01 * level) << "coc " << coc;
         std::cout << "off vs disk kernel, CoC " << coc << ": max " << worst / level << " of the level, rms "
