@@ -1,5 +1,5 @@
 // defocus.cpp — depth defocus of a flat RGBA + Z image: layered scatter with occlusion,
-// its exact reference, and the seed 001 gather.
+// its exact reference, and the dispatch to the seed 001 gather (core/defocus_gather.cpp).
 //
 // The layer model (ours; the idea of layers composited back to front is ZDefocus's and
 // SEEDS.md section 11's). Pixels are sorted into layers by signed CoC (front to back).
@@ -29,7 +29,7 @@
 // * Iris mode: the layers average exp(k colour) and come back by log / k (IrisSpace).
 // * Lens character (core/defocus_sprites.cpp): highlights leave the layers and are drawn
 //   as the lens's PSF into the layer of their depth (composite_layers, after the layer).
-// * Gather (SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
+// * Gather (core/defocus_gather.cpp; SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
 //   few representative CoCs (4 behind focus, 3 in front; large ones in 1/2 and 1/4
 //   buffers), per-pixel smoothstep blend between the two levels around its CoC, a back-
 //   bokeh mask taken from the previous level, and a front-edge blur inside a widened Sobel
@@ -63,84 +63,6 @@ namespace {
 using OIIO::Strutil::fmt::format;
 
 // --- the image being defocused ------------------------------------------------------
-
-// The mean over s x s full-resolution pixels of `fetch(x, y, v)` (which adds nc values
-// into v), for the reduced pixels of `low`: reduced pixel (i, j) covers full resolution
-// [gx + i s, gx + (i + 1) s) x [gy + j s, ...).
-template<class Fetch>
-Plane reduce_region(const OIIO::ROI& low, int gx, int gy, int s, int nc, int nthreads, Fetch fetch)
-{
-    Plane p(low.width(), low.height(), nc);
-    const float inv = 1.0f / float(s * s);
-    parallel_for_chunks(0, p.h, 4, nthreads, [&](int64_t j0, int64_t j1) {
-        std::vector<float> v(static_cast<size_t>(nc));
-        for (int j = int(j0); j < int(j1); ++j) {
-            float* row = p.row(j);
-            for (int i = 0; i < p.w; ++i) {
-                std::fill(v.begin(), v.end(), 0.0f);
-                const int x0 = gx + (low.xbegin + i) * s, y0 = gy + (low.ybegin + j) * s;
-                for (int y = y0; y < y0 + s; ++y)
-                    for (int x = x0; x < x0 + s; ++x)
-                        fetch(x, y, v.data());
-                for (int c = 0; c < nc; ++c)
-                    row[size_t(i) * size_t(nc) + size_t(c)] = s == 1 ? v[size_t(c)] : v[size_t(c)] * inv;
-            }
-        }
-    });
-    return p;
-}
-
-// Bilinear read of plane `p` at (u, v) in its pixels (pixel centres at integers, clamped
-// to the plane); 4 channels into `out`. Exact (a copy) on a pixel centre.
-inline void bilinear(const Plane& p, float u, float v, float out[4])
-{
-    const float fu = std::floor(u), fv = std::floor(v);
-    const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
-    const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
-    const float tx = u - fu, ty = v - fv;
-    const size_t nc = size_t(p.nc);
-    const float *a = p.row(j0) + size_t(i0) * nc, *b = p.row(j0) + size_t(i1) * nc;
-    const float *c = p.row(j1) + size_t(i0) * nc, *d = p.row(j1) + size_t(i1) * nc;
-    if (tx == 0.0f && ty == 0.0f) {
-        std::copy_n(a, 4, out);
-        return;
-    }
-    for (int k = 0; k < 4; ++k) {
-        const float top = a[k] + (b[k] - a[k]) * tx, bottom = c[k] + (d[k] - c[k]) * tx;
-        out[k]          = top + (bottom - top) * ty;
-    }
-}
-
-// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
-// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
-inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
-                   float out[4])
-{
-    bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
-             (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), out);
-}
-
-// The same at the centre of sub-pixel (sx, sy) of `up` x `up` in full-resolution pixel
-// (x, y): the enlargement of pseudo-high resolution.
-inline void sample_sub(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y, int up,
-                       int sx, int sy, float out[4])
-{
-    bilinear(p, (float(x - gx) + (float(sx) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.xbegin),
-             (float(y - gy) + (float(sy) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.ybegin), out);
-}
-
-// The aperture at diameter |coc_px| / s (and the aspect), as exact weights. In front of
-// focus the rays reach the sensor before they cross, behind it after: the two bokeh are
-// the aperture and its point reflection, which shows with an odd number of blades.
-KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads)
-{
-    Kernel k = o.aperture;
-    if (coc_px < 0.0f)
-        k.rotation_deg += 180.0f;
-    k.width_px  = std::abs(coc_px) / float(s);
-    k.height_px = std::abs(coc_px) * o.aspect / float(s);
-    return kernel_weights(k, nthreads);
-}
 
 // Full-resolution reach of a CoC: half the kernel, rounded up, plus one for bilinear reads.
 int reach_x(float coc_px) { return int(std::ceil(0.5f * std::abs(coc_px))) + 1; }
@@ -365,8 +287,23 @@ void from_iris_space(Plane& p, const IrisSpace& iris)
     }
 }
 
+}  // namespace
+
+// The aperture at diameter |coc_px| / s (and the aspect), as exact weights. In front of
+// focus the rays reach the sensor before they cross, behind it after: the two bokeh are
+// the aperture and its point reflection, which shows with an odd number of blades.
+KernelWeights detail::aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads)
+{
+    Kernel k = o.aperture;
+    if (coc_px < 0.0f)
+        k.rotation_deg += 180.0f;
+    k.width_px  = std::abs(coc_px) / float(s);
+    k.height_px = std::abs(coc_px) * o.aspect / float(s);
+    return kernel_weights(k, nthreads);
+}
+
 // Colour and coverage over visibility (channel 4), in place.
-void divide_by_visibility(Plane& p)
+void detail::divide_by_visibility(Plane& p)
 {
     for (int j = 0; j < p.h; ++j) {
         float* px = p.row(j);
@@ -377,8 +314,6 @@ void divide_by_visibility(Plane& p)
         }
     }
 }
-
-}  // namespace
 
 void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
                       int nthreads, std::vector<Plane>* per_layer, float progress_from)
@@ -633,172 +568,6 @@ void fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads
                     d[c] += w * px[c];
             }
         }
-    });
-}
-
-// --- gather (seed 001) ---------------------------------------------------------------
-
-float smoothstep(float t)
-{
-    t = std::clamp(t, 0.0f, 1.0f);
-    return t * t * (3.0f - 2.0f * t);
-}
-
-// A blurred level: RGBA of the pixels `mask` accepts, blurred with CoC `c` at reduction
-// s and normalised by the blurred mask (SEEDS.md section 2: masked texels are dropped from
-// the weight), over the output region.
-struct Level {
-    float coc_px = 0.0f;
-    int s        = 1;
-    OIIO::ROI low;
-    Plane p;
-};
-
-template<class Mask>
-Level blurred_level(const Frame& f, const DefocusOptions& o, float c, Mask mask, int nthreads)
-{
-    Level l;
-    l.coc_px = c;
-    l.s      = std::abs(c) >= 32.0f ? 4 : std::abs(c) >= 16.0f ? 2 : 1;  // "1/2 down to 1/4"
-    const KernelWeights w = aperture_weights(o, c, l.s, nthreads);
-    const int gx = f.out.xbegin, gy = f.out.ybegin, s = l.s;
-    l.low = OIIO::ROI(-1, floor_div(f.out.width() - 1, s) + 2, -1, floor_div(f.out.height() - 1, s) + 2);
-    Plane p = reduce_region(grown(l.low, w.rx, w.ry), gx, gy, s, 5, nthreads,
-                            [&](int x, int y, float* v) {
-                                const int64_t i = f.source(x, y);
-                                if (i < 0 || !mask(f.coc[size_t(i)]))
-                                    return;
-                                const float* px = f.img.rgba.data() + size_t(i) * 4;
-                                for (int c4 = 0; c4 < 4; ++c4)
-                                    v[c4] += px[c4];
-                                v[4] += 1.0f;
-                            });
-    l.p = w.is_identity() ? std::move(p) : convolve_spans(p, w, nthreads);
-    divide_by_visibility(l.p);  // here: by the blurred mask
-    return l;
-}
-
-// Representative CoCs for n levels up to `extreme` (> 0), geometric from extreme / 2^(n-1).
-std::vector<float> level_cocs(float extreme, int n)
-{
-    std::vector<float> c;
-    for (int i = n - 1; i >= 0; --i)
-        c.push_back(extreme / float(1 << i));
-    return c;
-}
-
-void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads)
-{
-    const int gx = f.out.xbegin, gy = f.out.ybegin;
-    // Level 0 is the sharp image; back levels mask texels in front of the previous level.
-    std::vector<Level> back, front;
-    if (hi > 1.0f) {
-        float previous = 0.0f;
-        for (float c : level_cocs(hi, 4)) {
-            const float keep_from = previous;
-            back.push_back(blurred_level(f, o, c, [keep_from](float t) { return t >= keep_from; }, nthreads));
-            previous = c;
-        }
-    }
-    if (lo < -1.0f)
-        for (float c : level_cocs(-lo, 3))
-            front.push_back(blurred_level(f, o, -c, [](float) { return true; }, nthreads));
-
-    auto read_level = [&](const Level& l, int x, int y, float v[4]) {
-        sample(l.p, l.low, gx, gy, l.s, x, y, v);
-    };
-    // The CoC standing for output pixel (x, y); 0 where the border leaves it empty.
-    auto coc_at = [&](int x, int y) {
-        const int64_t i = f.source(x, y);
-        return i < 0 ? 0.0f : f.coc[size_t(i)];
-    };
-    auto blend = [&](int x, int y, float c, float v[4]) {
-        const std::vector<Level>& levels = c >= 0.0f ? back : front;
-        const float a = std::abs(c);
-        // Between level j (CoC cj, level -1 = sharp) and j + 1.
-        float c_lo    = 0.0f;
-        float lo_v[4] = { 0, 0, 0, 0 };
-        const int64_t i = f.source(x, y);
-        if (i >= 0)
-            std::copy_n(f.img.rgba.data() + size_t(i) * 4, 4, lo_v);
-        for (const Level& l : levels) {
-            const float cl = std::abs(l.coc_px);
-            float hi_v[4];
-            read_level(l, x, y, hi_v);
-            if (a <= cl) {
-                const float t = smoothstep((a - c_lo) / (cl - c_lo));
-                for (int k = 0; k < 4; ++k)
-                    v[k] = lo_v[k] + (hi_v[k] - lo_v[k]) * t;
-                return;
-            }
-            c_lo = cl;
-            std::copy_n(hi_v, 4, lo_v);
-        }
-        std::copy_n(lo_v, 4, v);
-    };
-    parallel_for_chunks(f.out.ybegin, f.out.yend, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y)
-            for (int x = f.out.xbegin; x < f.out.xend; ++x)
-                blend(x, y, coc_at(x, y), out.row(y - gy) + size_t(x - gx) * 4);
-    });
-    if (front.empty())
-        return;
-
-    // Front-edge blur: a Sobel of the front CoC with taps 5 px apart finds where a blurred
-    // foreground meets what is behind it; there the result is blurred again, by the front
-    // CoC found nearby, so the foreground's silhouette softens over the background.
-    constexpr int kTap = 5;
-    // The front CoC over the output grown by the taps' reach, read directly below.
-    const OIIO::ROI fr = grown(f.out, kTap, kTap);
-    std::vector<float> fcoc(size_t(fr.width()) * size_t(fr.height()));
-    parallel_for_chunks(fr.ybegin, fr.yend, 16, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y)
-            for (int x = fr.xbegin; x < fr.xend; ++x)
-                fcoc[size_t(y - fr.ybegin) * size_t(fr.width()) + size_t(x - fr.xbegin)]
-                    = std::max(0.0f, -coc_at(x, y));
-    });
-    auto front_coc = [&](int x, int y) {
-        return fcoc[size_t(y - fr.ybegin) * size_t(fr.width()) + size_t(x - fr.xbegin)];
-    };
-    Frame pass;  // the gathered result as the source of the edge blur
-    pass.data    = f.out;
-    pass.out     = f.out;
-    pass.border  = f.border;
-    pass.img.roi = f.out;
-    pass.img.rgba.assign(out.px.get(), out.px.get() + out.size());
-    pass.coc.assign(size_t(f.out.width()) * size_t(f.out.height()), 0.0f);
-    std::vector<Level> soft;
-    for (const Level& l : front)
-        soft.push_back(blurred_level(pass, o, l.coc_px, [](float) { return true; }, nthreads));
-    parallel_for_chunks(f.out.ybegin, f.out.yend, 8, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y)
-            for (int x = f.out.xbegin; x < f.out.xend; ++x) {
-                const float gxs = front_coc(x + kTap, y - kTap) + 2.0f * front_coc(x + kTap, y)
-                                  + front_coc(x + kTap, y + kTap) - front_coc(x - kTap, y - kTap)
-                                  - 2.0f * front_coc(x - kTap, y) - front_coc(x - kTap, y + kTap);
-                const float gys = front_coc(x - kTap, y + kTap) + 2.0f * front_coc(x, y + kTap)
-                                  + front_coc(x + kTap, y + kTap) - front_coc(x - kTap, y - kTap)
-                                  - 2.0f * front_coc(x, y - kTap) - front_coc(x + kTap, y - kTap);
-                // |gradient| / 8 is the CoC step across the edge; a 2 px step is a full edge.
-                const float mask = std::min(1.0f, std::hypot(gxs, gys) / 16.0f);
-                if (mask <= 0.0f)
-                    continue;
-                float near = 0.0f;
-                for (int dy = -kTap; dy <= kTap; dy += kTap)
-                    for (int dx = -kTap; dx <= kTap; dx += kTap)
-                        near = std::max(near, front_coc(x + dx, y + dy));
-                float v[4];
-                const Level* pick = &soft.back();
-                for (const Level& l : soft)
-                    if (std::abs(l.coc_px) >= near) {
-                        pick = &l;
-                        break;
-                    }
-                read_level(*pick, x, y, v);
-                float* d = out.row(y - gy) + size_t(x - gx) * 4;
-                for (int k = 0; k < 4; ++k)
-                    d[k] += (v[k] - d[k]) * mask;
-            }
     });
 }
 

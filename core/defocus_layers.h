@@ -13,6 +13,8 @@
 
 #include "plane.h"
 
+#include <bokeh/parallel.h>
+
 #include <array>
 #include <cstdint>
 #include <memory>
@@ -192,6 +194,83 @@ std::string sprite_summary(const DefocusReport& rep);
 /// f.out by the PSFs' reach and fills `out` (RGBA over f.out). False + `err`.
 bool scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec,
                        int nthreads, std::string& err);
+
+/// The aperture at diameter |coc_px| / s (and the aspect), as exact weights; rotated half
+/// a turn in front of focus (core/defocus.cpp).
+KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads);
+
+/// Colour and coverage (channels 0-3) over the visibility in channel 4, in place; 0 where
+/// the visibility is 0.
+void divide_by_visibility(Plane& p);
+
+// The mean over s x s full-resolution pixels of `fetch(x, y, v)` (which adds nc values
+// into v), for the reduced pixels of `low`: reduced pixel (i, j) covers full resolution
+// [gx + i s, gx + (i + 1) s) x [gy + j s, ...).
+template<class Fetch>
+inline Plane reduce_region(const OIIO::ROI& low, int gx, int gy, int s, int nc, int nthreads, Fetch fetch)
+{
+    Plane p(low.width(), low.height(), nc);
+    const float inv = 1.0f / float(s * s);
+    parallel_for_chunks(0, p.h, 4, nthreads, [&](int64_t j0, int64_t j1) {
+        std::vector<float> v(static_cast<size_t>(nc));
+        for (int j = int(j0); j < int(j1); ++j) {
+            float* row = p.row(j);
+            for (int i = 0; i < p.w; ++i) {
+                std::fill(v.begin(), v.end(), 0.0f);
+                const int x0 = gx + (low.xbegin + i) * s, y0 = gy + (low.ybegin + j) * s;
+                for (int y = y0; y < y0 + s; ++y)
+                    for (int x = x0; x < x0 + s; ++x)
+                        fetch(x, y, v.data());
+                for (int c = 0; c < nc; ++c)
+                    row[size_t(i) * size_t(nc) + size_t(c)] = s == 1 ? v[size_t(c)] : v[size_t(c)] * inv;
+            }
+        }
+    });
+    return p;
+}
+
+// Bilinear read of plane `p` at (u, v) in its pixels (pixel centres at integers, clamped
+// to the plane); 4 channels into `out`. Exact (a copy) on a pixel centre.
+inline void bilinear(const Plane& p, float u, float v, float out[4])
+{
+    const float fu = std::floor(u), fv = std::floor(v);
+    const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
+    const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
+    const float tx = u - fu, ty = v - fv;
+    const size_t nc = size_t(p.nc);
+    const float *a = p.row(j0) + size_t(i0) * nc, *b = p.row(j0) + size_t(i1) * nc;
+    const float *c = p.row(j1) + size_t(i0) * nc, *d = p.row(j1) + size_t(i1) * nc;
+    if (tx == 0.0f && ty == 0.0f) {
+        std::copy_n(a, 4, out);
+        return;
+    }
+    for (int k = 0; k < 4; ++k) {
+        const float top = a[k] + (b[k] - a[k]) * tx, bottom = c[k] + (d[k] - c[k]) * tx;
+        out[k]          = top + (bottom - top) * ty;
+    }
+}
+
+// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
+// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
+inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
+                   float out[4])
+{
+    bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), out);
+}
+
+// The same at the centre of sub-pixel (sx, sy) of `up` x `up` in full-resolution pixel
+// (x, y): the enlargement of pseudo-high resolution.
+inline void sample_sub(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y, int up,
+                       int sx, int sy, float out[4])
+{
+    bilinear(p, (float(x - gx) + (float(sx) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + (float(sy) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.ybegin), out);
+}
+
+/// The seed 001 gather (core/defocus_gather.cpp): blurred levels blended per pixel by its
+/// CoC, the front-edge blur; into `out` (RGBA over f.out). lo, hi: the frame's CoC range.
+void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
 
 /// The defocus of a deep image (core/defocus_deep.cpp); bokeh::defocus calls it.
 bool defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& o,
