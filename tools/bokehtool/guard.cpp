@@ -28,6 +28,15 @@ int g_stderr = 2;  // the terminal's stderr, also while a StderrCapture holds fd
 
 void write_text(const char* s) { (void)!write(g_stderr, s, std::strlen(s)); }
 
+void stop_signal(int sig)
+{
+    bokeh::remove_partial_writes();
+    signal(sig, SIG_DFL);
+    raise(sig);
+}
+
+// The fault handler and its number writer: installed only without ASan (install_guards).
+#if !defined(__SANITIZE_ADDRESS__)
 void write_number(int n)
 {
     char digits[16];
@@ -43,13 +52,6 @@ void write_number(int n)
     write_text(digits + i);
 }
 
-void stop_signal(int sig)
-{
-    bokeh::remove_partial_writes();
-    signal(sig, SIG_DFL);
-    raise(sig);
-}
-
 void fault_signal(int sig)
 {
     bokeh::remove_partial_writes();
@@ -61,6 +63,7 @@ void fault_signal(int sig)
     signal(sig, SIG_DFL);
     raise(sig);
 }
+#endif
 
 void on_terminate()
 {
