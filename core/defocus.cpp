@@ -28,7 +28,9 @@
 //   kernels of at most 2 q px unless at full resolution.
 // * Iris mode: the layers average exp(k colour) and come back by log / k (IrisSpace).
 // * Lens character (core/defocus_sprites.cpp): highlights leave the layers and are drawn
-//   as the lens's PSF into the layer of their depth (composite_layers, after the layer).
+//   as the lens's PSF into the layer of their depth (composite_layers, after the layer);
+//   the layers within a pixel of focus are blurred with the lens's PSF instead of the
+//   aperture (by FFT, in tiles of kLensTile reduced pixels).
 // * Gather (core/defocus_gather.cpp; SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
 //   few representative CoCs (4 behind focus, 3 in front; large ones in 1/2 and 1/4
 //   buffers), per-pixel smoothstep blend between the two levels around its CoC, a back-
@@ -74,19 +76,23 @@ int reach_y(float coc_px, float aspect) { return int(std::ceil(0.5f * std::abs(c
 // pixels within reach: sparse layers (a few lights, a thin band of floor) cost what they
 // hold, not their bounding box. Tiles are independent, so they run in parallel.
 constexpr int kTile = 64;
+// A layer blurred with the lens's PSF goes by FFT, whose every call transforms its four
+// kernels and pays a margin of the kernel's reach: its tiles are 4 times wider.
+constexpr int kLensTile = 256;
 
 // Which tiles of each layer's grid (tile size kTile * reduction, from the output's
 // origin) must be computed: those holding a share of the layer, those the border rule
 // repeats them into, and their neighbours within the kernel's reach.
-std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& m,
-                                              const DefocusOptions& o, std::vector<int>& cols)
+std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& m, const DefocusOptions& o,
+                                              const std::vector<std::vector<KernelWeights>>& lens,
+                                              std::vector<int>& cols)
 {
     const size_t K = m.coc_px.size();
     std::vector<std::vector<uint8_t>> tiles(K);
     std::vector<int> rows(K), size(K);
     cols.assign(K, 0);
     for (size_t k = 0; k < K; ++k) {
-        size[k] = kTile * m.reduction[k];
+        size[k] = (lens[k].empty() ? kTile : kLensTile) * m.reduction[k];
         cols[k] = (f.out.width() + size[k] - 1) / size[k];
         rows[k] = (f.out.height() + size[k] - 1) / size[k];
         tiles[k].assign(size_t(cols[k]) * size_t(rows[k]), 0);
@@ -144,7 +150,12 @@ std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& 
         }
         // Neighbours within reach of a held tile.
         const float c = m.coc_px[k];
-        const int rx = (reach_x(c) + t - 1) / t, ry = (reach_y(c, o.aspect) + t - 1) / t;
+        int reach_px = reach_x(c), reach_py = reach_y(c, o.aspect);
+        if (!lens[k].empty()) {  // the lens's aberrations reach past the CoC
+            reach_px = std::max(reach_px, (lens[k][0].rx + 2) * m.reduction[k]);
+            reach_py = std::max(reach_py, (lens[k][0].ry + 2) * m.reduction[k]);
+        }
+        const int rx = (reach_px + t - 1) / t, ry = (reach_py + t - 1) / t;
         for (int ty = 0; ty < ny; ++ty)
             for (int tx = 0; tx < nx; ++tx) {
                 uint8_t any = 0;
@@ -315,8 +326,8 @@ void detail::divide_by_visibility(Plane& p)
     }
 }
 
-void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
-                      int nthreads, std::vector<Plane>* per_layer, float progress_from)
+bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
+                              int nthreads, std::string& err, std::vector<Plane>* per_layer, float progress_from)
 {
     if (per_layer) {
         per_layer->clear();
@@ -325,8 +336,11 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             std::fill_n(per_layer->back().px.get(), per_layer->back().size(), 0.0f);
         }
     }
+    std::vector<std::vector<KernelWeights>> lens(m.coc_px.size());
+    if (f.sprites && !lens_layer_kernels(lens, f, m, nthreads, err))
+        return false;
     std::vector<int> cols;
-    const std::vector<std::vector<uint8_t>> tiles = layer_tiles(f, m, o, cols);
+    const std::vector<std::vector<uint8_t>> tiles = layer_tiles(f, m, o, lens, cols);
     const int gx = f.out.xbegin, gy = f.out.ybegin;
     const int up = f.up;  // `out` is over f.out scaled by up (per-layer planes: up is 1)
     // Progress by tiles, each weighted by its kernel's rows plus its own (a tile's spans
@@ -339,8 +353,10 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     ProgressCounter progress(o.progress, all_tiles, progress_from);
     for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
         const float c = m.coc_px[size_t(k)];
-        const int s   = m.reduction[size_t(k)], t = kTile * s;
-        const KernelWeights w = aperture_weights(o, c, s, nthreads);
+        const std::vector<KernelWeights>& lens_kernels = lens[size_t(k)];
+        const int cells       = lens_kernels.empty() ? kTile : kLensTile;
+        const int s           = m.reduction[size_t(k)], t = cells * s;
+        const KernelWeights w = lens_kernels.empty() ? aperture_weights(o, c, s, nthreads) : lens_kernels[3];
         std::vector<int> todo;
         for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
             if (tiles[size_t(k)][i])
@@ -356,8 +372,8 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             const OIIO::ROI region = OIIO::roi_intersection(
                 OIIO::ROI(gx + tx * t, gx + (tx + 1) * t, gy + ty * t, gy + (ty + 1) * t), f.out);
             // The tile's reduced pixels, one more each side for bilinear reads.
-            const OIIO::ROI low(tx * kTile - 1, floor_div(region.xend - 1 - gx, s) + 2,
-                                ty * kTile - 1, floor_div(region.yend - 1 - gy, s) + 2);
+            const OIIO::ROI low(tx * cells - 1, floor_div(region.xend - 1 - gx, s) + 2,
+                                ty * cells - 1, floor_div(region.yend - 1 - gy, s) + 2);
             // Only where the layer's pixels reach: past its pixels' bounding box grown by
             // the kernel the layer is exactly 0 (so compositing it changes nothing). One
             // reduced pixel more keeps the bilinear reads at the edge exact.
@@ -378,7 +394,13 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             if (draw.xbegin >= draw.xend || draw.ybegin >= draw.yend)
                 return;
             Plane p     = layer_input(f, m, k, grown(need, w.rx, w.ry), gx, gy, s, content.hidden);
-            Plane layer = w.is_identity() ? std::move(p) : convolve_spans(p, w, 1);
+            Plane layer;
+            if (w.is_identity())
+                layer = std::move(p);
+            else if (lens_kernels.empty())
+                layer = convolve_spans(p, w, 1);
+            else  // R, G and B each with its own PSF; coverage and visibility with their mean
+                layer = convolve_fft(p, lens_kernels, { 0, 1, 2, 3, 3 }, 1);
             if (content.hidden)
                 divide_by_visibility(layer);
             from_iris_space(layer, f.iris);
@@ -416,6 +438,7 @@ void detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
         if (f.sprites)
             draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads);
     }
+    return true;
 }
 
 namespace {
@@ -935,14 +958,20 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         }
         rep.layer_coc_px    = m.coc_px;
         rep.layer_reduction = m.reduction;
-        composite_layers(out, f, m, opts, nthreads);
+        if (!composite_layers(out, f, m, opts, nthreads, err)) {
+            dst.errorfmt("defocus: {}", err);
+            return false;
+        }
         break;
     }
     default: {
         const Membership m  = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
         rep.layer_coc_px    = m.coc_px;
         rep.layer_reduction = m.reduction;
-        composite_layers(out, f, m, opts, nthreads);
+        if (!composite_layers(out, f, m, opts, nthreads, err)) {
+            dst.errorfmt("defocus: {}", err);
+            return false;
+        }
     }
     }
     if (rep.method != DefocusMethod::Gather)

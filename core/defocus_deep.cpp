@@ -399,6 +399,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                 v[c] -= sp.rgb[c];
         }
         set->sprites = std::move(highlights);
+        set->lens    = lens;
         PsfCache cache(lens, nthreads);
         if (!fetch_sprite_psfs(*set, cache, FieldFrame(src.spec(), lens), o.supersample, nthreads, err))
             return fail(err);
@@ -416,7 +417,8 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         const OIIO::ROI region = scaled_roi(f.out, f.up);
         Plane out(region.width(), region.height(), 4);
         std::fill_n(out.px.get(), out.size(), 0.0f);
-        composite_layers(out, f, m, o, nthreads, nullptr, kFilledShare);
+        if (!composite_layers(out, f, m, o, nthreads, err, nullptr, kFilledShare))
+            return fail(err);
         OIIO::ImageSpec fs = derived_spec(src.spec(), { "R", "G", "B", "A" }, region);
         scale_display_window(fs, src.spec(), f.up);
         fs.deep            = false;
@@ -430,7 +432,8 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     } else {
         std::vector<Plane> layers;
         Plane unused(1, 1, 4);
-        composite_layers(unused, f, m, o, nthreads, &layers, kFilledShare);
+        if (!composite_layers(unused, f, m, o, nthreads, err, &layers, kFilledShare))
+            return fail(err);
         // Layer k's depth range: from its rung's depth to the next rung's, kept strictly
         // increasing so that no two layers of a pixel coincide (a tidy would merge them).
         std::vector<float> z0(K), z1(K);

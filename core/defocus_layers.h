@@ -47,7 +47,9 @@ struct SpriteSet {
     int64_t drawn     = 0;     // sprites drawn, after merging those of a block (one shared
                                // between two layers counted once)
     double seconds    = 0.0;   // selection, PSFs and (added as they are drawn) scatter
+    LensCharacter lens;        // the defocus's lens (defocus_lens), pitch of the output's pixels
 };
+
 
 // Iris mode (SEEDS.md section 3) in the layers: colour is carried as
 // A (exp(k (colour / A - shift)) - 1) (premultiplied exp-space colour), so each layer
@@ -142,12 +144,13 @@ std::vector<int> layer_reductions(const std::vector<float>& rungs, const Defocus
 OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& data, float extreme_px,
                                 const DefocusOptions& o);
 
-/// Blur every layer of `m` with the aperture at its CoC and composite them, front over
-/// back, into `out` (RGBA over f.out). With `per_layer`, each blurred layer is written
-/// there instead (one RGBA plane over f.out per layer) and `out` is left alone. Progress
-/// (o.progress) goes from `progress_from` (what the caller's work before took) to 1.
-void composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
-                      int nthreads, std::vector<Plane>* per_layer = nullptr, float progress_from = 0.0f);
+/// Blur every layer of `m` with the aperture at its CoC (with lens character, the lens's
+/// PSF near focus: lens_layer_kernels) and composite them, front over back, into `out`
+/// (RGBA over f.out). With `per_layer`, each blurred layer is written there instead (one
+/// RGBA plane over f.out per layer) and `out` is left alone. Progress (o.progress) goes
+/// from `progress_from` (what the caller's work before took) to 1. False + `err`.
+bool composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o, int nthreads,
+                      std::string& err, std::vector<Plane>* per_layer = nullptr, float progress_from = 0.0f);
 
 /// The display window's centre and half-diagonal, for field positions; a lens whose PSF
 /// does not change with the field (no cat's eye, field curvature, astigmatism or offset
@@ -179,6 +182,13 @@ bool select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& sp
 /// `up` is the output's resolution over the frame's (2: PSFs at twice the CoC, box-folded).
 bool fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int up, int nthreads,
                        std::string& err);
+
+/// Lens character in the layers near focus (core/defocus_sprites.cpp): for each layer of
+/// `m` within kLensLayerMaxCoc_px of focus, the lens's PSF at its CoC on axis, at its
+/// buffer's reduction, as four kernels: R, G, B, and their mean (for coverage and
+/// visibility); empty for the layers that keep the aperture. False + `err`.
+bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Frame& f, const Membership& m,
+                        int nthreads, std::string& err);
 
 /// Add the sprites of layer k (share by `m` for flat frames, their own layer for deep
 /// ones) into `target` (RGBA over f.out; colour only: a sprite is the light of a pixel

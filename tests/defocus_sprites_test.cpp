@@ -450,9 +450,11 @@ TEST(DefocusSprites, ReportCountsASpriteSharedBetweenLayersOnce)
 
 TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
 {
-    // A 1e4 light at CoC 24 behind a sharp (CoC 0) opaque grey 0.3 card over x >= 40: the
-    // light's sprite reaches to x = 42 and more, but every card pixel stays 0.3 (1e-5),
-    // while the light shows left of the card.
+    // A 1e4 light at CoC 24 behind an in-focus (CoC 0) opaque grey 0.3 card over x >= 40:
+    // the light's sprite reaches to x = 42 and more, but every card pixel 7 px or more from
+    // the card's edges stays 0.3 (1e-5), while the light shows left of the card. (The lens's
+    // in-focus PSF, its axial colour, softens and tints the card's own edges over a pixel
+    // or two: InFocusLayersTakeTheLensPsf.)
     const OIIO::ImageBuf src = image(96, 64, [](int x, int y) {
         Px p;
         p.z = 24.0f;
@@ -469,7 +471,7 @@ TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
         EXPECT_EQ(rep.sprites, 1);
         double card = 0.0, left = 0.0;
         for (int y = 0; y < 64; ++y) {
-            for (int x = 40; x < 96; ++x)
+            for (int x = 47; x < 89 && y >= 7 && y < 57; ++x)
                 card = std::max(card, double(std::abs(at(out, x, y, 0) - 0.3f)));
             for (int x = 0; x < 40; ++x)
                 left += at(out, x, y, 0);
@@ -477,6 +479,68 @@ TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
         EXPECT_LT(card, 1e-5) << "the sprite shows through the card";
         EXPECT_GT(left, 0.5 * 1e4) << "the light's visible part";
     }
+}
+
+TEST(DefocusSprites, InFocusLayersTakeTheLensPsf)
+{
+    // A dim texture in focus (CoC 0, no highlights): with lens character each channel is the
+    // texture convolved with that channel of the lens's PSF at CoC 0 (the uncorrected
+    // singlet's axial colour, 1/40 mm pixels: a blur of several pixels), edges clamped.
+    // The layers trim the PSF's faint tail (1e-4 of its light) and renormalise; so within
+    // 1e-4 of the texture's range. The scatter reference agrees within the same. Alpha
+    // stays 1. Lens off, the texture is unchanged.
+    const int w = 48, h = 40;
+    const OIIO::ImageBuf src = image(w, h, [](int x, int y) {
+        Px p;
+        p.r = 0.5f * hash01(x, y), p.g = 0.5f * hash01(y, x + 7), p.b = 0.5f * hash01(x + 3, y + 5);
+        return p;
+    });
+    DefocusOptions o                = with_lens(direct(DefocusMethod::Layers, Border::Clamp), LensPreset::Uncorrected);
+    o.coc.lens.sensor_width_mm      = 48.0 / 40.0;  // pitch 1/40 mm
+    LensCharacter lens;
+    lens.preset         = LensPreset::Uncorrected;
+    lens.fstop          = o.coc.lens.fstop;
+    lens.focal_mm       = o.coc.lens.focal_mm;
+    lens.pixel_pitch_mm = 1.0 / 40.0;
+    Psf psf;
+    std::string err;
+    ASSERT_TRUE(lens_psf(psf, lens, PsfRequest{ 0.0, 0.0, 0.0, 0 }, err)) << err;
+    ASSERT_GE(psf.width, 7) << "the in-focus PSF should spread over pixels";
+    const int hw = psf.width / 2, hh = psf.height / 2;
+    DefocusReport rep;
+    const OIIO::ImageBuf out = run(src, o, &rep);
+    EXPECT_EQ(rep.sprites, 0);
+    OIIO::ImageBuf ref;
+    ASSERT_TRUE(defocus_scatter_reference(ref, src, o)) << ref.geterror();
+    double worst = 0.0, worst_ref = 0.0, worst_alpha = 0.0, moved = 0.0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            for (int c = 0; c < 3; ++c) {
+                double want = 0.0;
+                for (int j = 0; j < psf.height; ++j)
+                    for (int i = 0; i < psf.width; ++i) {
+                        const int sx = std::clamp(x - (i - hw), 0, w - 1), sy = std::clamp(y - (j - hh), 0, h - 1);
+                        want += double(psf.at(i, j, c)) * at(src, sx, sy, c);
+                    }
+                worst     = std::max(worst, std::abs(at(out, x, y, c) - want));
+                worst_ref = std::max(worst_ref, double(std::abs(at(out, x, y, c) - at(ref, x, y, c))));
+                moved     = std::max(moved, double(std::abs(at(out, x, y, c) - at(src, x, y, c))));
+            }
+            worst_alpha = std::max(worst_alpha, double(std::abs(at(out, x, y, 3) - 1.0f)));
+        }
+    std::printf("in-focus lens layer: worst %.2e against the convolution, %.2e against the scatter reference, "
+                "alpha %.2e, largest change %.3f\n", worst, worst_ref, worst_alpha, moved);
+    EXPECT_LT(worst, 0.5e-4);
+    EXPECT_LT(worst_ref, 0.5e-4);
+    EXPECT_LT(worst_alpha, 1e-5);
+    EXPECT_GT(moved, 0.05) << "the lens's in-focus blur is visible";
+    const OIIO::ImageBuf plain = run(src, direct(DefocusMethod::Layers, Border::Clamp));
+    double plain_moved = 0.0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x)
+            for (int c = 0; c < 4; ++c)
+                plain_moved = std::max(plain_moved, double(std::abs(at(plain, x, y, c) - at(src, x, y, c))));
+    EXPECT_LT(plain_moved, 1e-6) << "lens off: the in-focus texture stays sharp";
 }
 
 TEST(DefocusSprites, DeepInputGetsSprites)
