@@ -362,6 +362,21 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             if (tiles[size_t(k)][i])
                 todo.push_back(int(i));
         const double weight = tile_weight(size_t(k));
+        // Lens character on a flat frame: the layer's sprites are divided by its visibility
+        // as its colour is (a deep frame's layers are continued only under the same
+        // surface, composite_layers' deep visibility; its sprites are not).
+        SpriteGain gain;
+        if (f.sprites && !f.deep() && layer_has_sprites(f, m, k)) {
+            gain.used    = true;
+            gain.up      = up;
+            gain.gx      = gx;
+            gain.gy      = gy;
+            gain.tile_px = t;
+            gain.cols    = cols[size_t(k)];
+            gain.rows    = int(tiles[size_t(k)].size()) / cols[size_t(k)];
+            gain.region.resize(tiles[size_t(k)].size());
+            gain.inv_vis.resize(tiles[size_t(k)].size());
+        }
         parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
             struct Counted {  // the tile counts as done however it returns
                 ProgressCounter& p;
@@ -403,6 +418,18 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
                 layer = convolve_fft(p, lens_kernels, { 0, 1, 2, 3, 3 }, 1);
             if (content.hidden)
                 divide_by_visibility(layer);
+            if (content.hidden && gain.used) {
+                const size_t i = size_t(todo[size_t(n)]);
+                gain.region[i] = region;
+                std::vector<float>& g = gain.inv_vis[i];
+                g.assign(size_t(region.npixels()), 1.0f);
+                for (int y = draw.ybegin; y < draw.yend; ++y)
+                    for (int x = draw.xbegin; x < draw.xend; ++x) {
+                        const float vis = sample_visibility(layer, need, gx, gy, s, x, y);
+                        g[size_t(y - region.ybegin) * size_t(region.width()) + size_t(x - region.xbegin)] =
+                            vis > 1e-6f ? 1.0f / vis : 0.0f;
+                    }
+            }
             from_iris_space(layer, f.iris);
             Plane& target = per_layer ? (*per_layer)[size_t(k)] : out;
             if (up == 1) {
@@ -436,7 +463,7 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
         });
         // Lens character: the layer's highlights, before any nearer layer hides them.
         if (f.sprites)
-            draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads);
+            draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads, &gain);
     }
     return true;
 }

@@ -190,10 +190,41 @@ bool fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field,
 bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Frame& f, const Membership& m,
                         int nthreads, std::string& err);
 
+/// What a layer's sprites are multiplied by where they land: 1 over the layer's blurred
+/// visibility (composite_layers), as the layer's own colour is divided, so a sprite is the
+/// highlight's light in its layer exactly as the layer treats it. Kept only for the
+/// layer's tiles where a nearer layer hides some of it (elsewhere 1), each over its
+/// full-resolution region; read at frame pixels (output pixels / `up`).
+struct SpriteGain {
+    bool used = false;
+    int up    = 1;
+    int gx = 0, gy = 0, tile_px = 1, cols = 0, rows = 0;  // the layer's tile grid
+    std::vector<OIIO::ROI> region;           // per tile
+    std::vector<std::vector<float>> inv_vis; // per tile, over its region; empty: 1
+    /// The tile holding frame pixel (x, y), or -1 past the grid.
+    int tile_of(int x, int y) const
+    {
+        const int tx = floor_div(x - gx, tile_px), ty = floor_div(y - gy, tile_px);
+        return tx < 0 || ty < 0 || tx >= cols || ty >= rows ? -1 : ty * cols + tx;
+    }
+    float at(int x_out, int y_out) const
+    {
+        const int x = floor_div(x_out, up), y = floor_div(y_out, up), t = tile_of(x, y);
+        if (t < 0 || inv_vis[size_t(t)].empty())
+            return 1.0f;
+        const OIIO::ROI& r = region[size_t(t)];
+        return inv_vis[size_t(t)][size_t(y - r.ybegin) * size_t(r.width()) + size_t(x - r.xbegin)];
+    }
+};
+
+/// Whether layer k holds a share of any sprite.
+bool layer_has_sprites(const Frame& f, const Membership& m, int k);
+
 /// Add the sprites of layer k (share by `m` for flat frames, their own layer for deep
 /// ones) into `target` (RGBA over f.out; colour only: a sprite is the light of a pixel
-/// whose coverage stays in the layer).
-void draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads);
+/// whose coverage stays in the layer), times `gain` where given.
+void draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads,
+                        const SpriteGain* gain = nullptr);
 
 /// The report's sprite figures from `set` (null: lens character off), and its summary
 /// part (", N sprites, CoC a .. b px, t s"; empty when off).
@@ -240,21 +271,22 @@ inline Plane reduce_region(const OIIO::ROI& low, int gx, int gy, int s, int nc, 
 }
 
 // Bilinear read of plane `p` at (u, v) in its pixels (pixel centres at integers, clamped
-// to the plane); 4 channels into `out`. Exact (a copy) on a pixel centre.
-inline void bilinear(const Plane& p, float u, float v, float out[4])
+// to the plane); channels first .. first + count - 1 into `out`. Exact (a copy) on a pixel
+// centre.
+inline void bilinear(const Plane& p, float u, float v, float* out, int first = 0, int count = 4)
 {
     const float fu = std::floor(u), fv = std::floor(v);
     const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
     const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
     const float tx = u - fu, ty = v - fv;
     const size_t nc = size_t(p.nc);
-    const float *a = p.row(j0) + size_t(i0) * nc, *b = p.row(j0) + size_t(i1) * nc;
-    const float *c = p.row(j1) + size_t(i0) * nc, *d = p.row(j1) + size_t(i1) * nc;
+    const float *a = p.row(j0) + size_t(i0) * nc + first, *b = p.row(j0) + size_t(i1) * nc + first;
+    const float *c = p.row(j1) + size_t(i0) * nc + first, *d = p.row(j1) + size_t(i1) * nc + first;
     if (tx == 0.0f && ty == 0.0f) {
-        std::copy_n(a, 4, out);
+        std::copy_n(a, count, out);
         return;
     }
-    for (int k = 0; k < 4; ++k) {
+    for (int k = 0; k < count; ++k) {
         const float top = a[k] + (b[k] - a[k]) * tx, bottom = c[k] + (d[k] - c[k]) * tx;
         out[k]          = top + (bottom - top) * ty;
     }
@@ -267,6 +299,15 @@ inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, 
 {
     bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
              (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), out);
+}
+
+// The layer's visibility (channel 4) read as `sample` reads its colour.
+inline float sample_visibility(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y)
+{
+    float vis;
+    bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), &vis, 4, 1);
+    return vis;
 }
 
 // The same at the centre of sub-pixel (sx, sy) of `up` x `up` in full-resolution pixel

@@ -19,6 +19,12 @@
 //   exactly the sprite added into the layer's premultiplied colour (with zero alpha: the
 //   light of a pixel whose coverage the layer already holds); nearer layers then hide it
 //   as they hide the layer. A pixel shared between two layers shares its sprite alike.
+//   On a flat frame the sprite is divided by the layer's visibility where it lands, as the
+//   layer's own colour is (SpriteGain), so moving a pixel's light between the layer and
+//   its sprite changes its shape only, never how it is occluded (measured: without it a
+//   light beside an in-focus card lost 19 % of its visible energy,
+//   DefocusSprites.ASpriteIsOccludedAsItsLayerIs). A deep frame's layers are continued
+//   under the same surface only (core/defocus_deep.cpp), and its sprites are not divided.
 // * Near focus (ours): the layers within kLensLayerMaxCoc_px of focus are blurred with the
 //   lens's PSF on axis (lens_layer_kernels; R, G, B each their own, coverage and visibility
 //   their mean), by FFT: there the aperture is a point and the blur a dim texture gets is
@@ -105,7 +111,7 @@ void bins_around(float c, double& c0, double& c1, double& t)
 // Add `scale` * psf (per channel: rgb[c]) with its top-left pixel at (x0, y0) into rows
 // [band0, band1) of `target` (RGBA over `out`).
 void add_psf(Plane& target, const OIIO::ROI& out, const Psf& psf, int x0, int y0, const float rgb[3],
-             float scale, int band0, int band1)
+             float scale, int band0, int band1, const SpriteGain* gain = nullptr)
 {
     const int top = std::max(y0, band0), bottom = std::min(y0 + psf.height, band1);
     const int left = std::max(x0, out.xbegin), right = std::min(x0 + psf.width, out.xend);
@@ -115,6 +121,33 @@ void add_psf(Plane& target, const OIIO::ROI& out, const Psf& psf, int x0, int y0
     for (int y = top; y < bottom; ++y) {
         float* d       = target.row(y - out.ybegin) + size_t(left - out.xbegin) * 4;
         const float* p = psf.rgb.data() + (size_t(y - y0) * size_t(psf.width) + size_t(left - x0)) * 3;
+        if (gain && gain->used && gain->up > 1) {
+            for (int x = left; x < right; ++x, d += 4, p += 3) {
+                const float g = gain->at(x, y);
+                d[0] += g * k[0] * p[0];
+                d[1] += g * k[1] * p[1];
+                d[2] += g * k[2] * p[2];
+            }
+            continue;
+        }
+        if (gain && gain->used) {  // by runs within one tile of the gain
+            for (int x = left; x < right;) {
+                const int t   = gain->tile_of(x, y);
+                const int end = t < 0 ? right
+                                      : std::min(right, gain->gx + (t % gain->cols + 1) * gain->tile_px);
+                const float* g = t < 0 || gain->inv_vis[size_t(t)].empty() ? nullptr
+                                 : gain->inv_vis[size_t(t)].data()
+                                       + size_t(y - gain->region[size_t(t)].ybegin) * size_t(gain->region[size_t(t)].width())
+                                       + size_t(x - gain->region[size_t(t)].xbegin);
+                for (; x < end; ++x, d += 4, p += 3) {
+                    const float gx = g ? *g++ : 1.0f;
+                    d[0] += gx * k[0] * p[0];
+                    d[1] += gx * k[1] * p[1];
+                    d[2] += gx * k[2] * p[2];
+                }
+            }
+            continue;
+        }
         for (int x = left; x < right; ++x, d += 4, p += 3) {
             d[0] += k[0] * p[0];
             d[1] += k[1] * p[1];
@@ -406,7 +439,20 @@ bool detail::lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, co
     return true;
 }
 
-void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads)
+bool detail::layer_has_sprites(const Frame& f, const Membership& m, int k)
+{
+    if (!f.sprites)
+        return false;
+    for (const Sprite& sp : f.sprites->sprites) {
+        if (f.deep() ? sp.layer == k
+                     : m.lower[sp.at] == k || (m.lower[sp.at] + 1 == k && m.upper[sp.at] > 0.0f))
+            return true;
+    }
+    return false;
+}
+
+void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads,
+                                const SpriteGain* gain)
 {
     if (!f.sprites || f.sprites->sprites.empty())
         return;
@@ -506,7 +552,7 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
                 if (it->psf[j]) {
                     const Psf& psf = *it->psf[j];
                     const int hw = (psf.width - (up - 1)) / 2, hh = (psf.height - (up - 1)) / 2;
-                    add_psf(target, region, psf, it->x * up - hw, it->y * up - hh, it->rgb[j], scale, y0, y1);
+                    add_psf(target, region, psf, it->x * up - hw, it->y * up - hh, it->rgb[j], scale, y0, y1, gain);
                 }
     });
     // A sprite shared between two layers is drawn in both but counted once, in the first.

@@ -481,6 +481,49 @@ TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
     }
 }
 
+TEST(DefocusSprites, ASpriteIsOccludedAsItsLayerIs)
+{
+    // A light of 100 at CoC 12 on a dim wall, 4 px left of an in-focus opaque card over
+    // x >= 24: the card hides the right part of the light's disk. With lens character
+    // and the lens off, the light is a sprite drawn with the aperture's PSF; it must come
+    // out as the plain layers draw it, divided by the layer's visibility as the layer's
+    // own colour is (the layered model continues a layer under a nearer one's blurred
+    // edge). Measured against the plain defocus over the wall left of the card: the
+    // light's energy within 2 % and no pixel off by more than 10 % of the light's peak
+    // (measured 0.06 % and 7.6 %, at the disk's anti-aliased rim, where the lens-off PSF
+    // and the aperture's kernel differ: LensPsf.OffIsTheFlatDiskKernel). Not divided by
+    // the visibility the sprite came out 19 % short, its worst pixel 45 % of the peak.
+    const OIIO::ImageBuf src = image(64, 48, [](int x, int y) {
+        Px p;
+        p.r = p.g = p.b = 0.02f;
+        p.z             = 12.0f;
+        if (x == 20 && y == 24)
+            p.r = p.g = p.b = 100.0f;
+        if (x >= 24)
+            p.r = p.g = p.b = 0.3f, p.z = 0.0f;
+        return p;
+    }, OIIO::ROI(-16, 80, -16, 64));
+    for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+        SCOPED_TRACE(method_name(m));
+        DefocusOptions plain = direct(m), lens = with_lens(plain, LensPreset::Off);
+        DefocusReport rep;
+        const OIIO::ImageBuf a = run(src, plain), b = run(src, lens, &rep);
+        EXPECT_EQ(rep.sprites, 1);
+        double sum_a = 0.0, sum_b = 0.0, worst = 0.0, peak = 0.0;
+        for (int y = 0; y < 48; ++y)
+            for (int x = 0; x < 24; ++x) {
+                sum_a += at(a, x, y, 0) - 0.02;
+                sum_b += at(b, x, y, 0) - 0.02;
+                worst = std::max(worst, double(std::abs(at(a, x, y, 0) - at(b, x, y, 0))));
+                peak  = std::max(peak, double(at(a, x, y, 0)));
+            }
+        std::printf("%s: the light left of the card %.3f plain, %.3f as a sprite; worst pixel %.4f of peak %.3f\n",
+                    method_name(m), sum_a, sum_b, worst, peak);
+        EXPECT_NEAR(sum_b / sum_a, 1.0, 0.02);
+        EXPECT_LT(worst, 0.1 * peak);
+    }
+}
+
 TEST(DefocusSprites, InFocusLayersTakeTheLensPsf)
 {
     // A dim texture in focus (CoC 0, no highlights): with lens character each channel is the
