@@ -216,6 +216,13 @@ double Aperture::edge_normal_cos(double phi) const
     return r / std::sqrt(r * r + dr * dr);
 }
 
+bool Aperture::operator==(const Aperture& o) const
+{
+    return m_kind == o.m_kind && m_blades == o.m_blades && m_curvature == o.m_curvature
+           && m_vertex_rad == o.m_vertex_rad && m_inner_ratio == o.m_inner_ratio && m_hole == o.m_hole
+           && m_min_edge == o.m_min_edge && m_table == o.m_table;
+}
+
 std::string Aperture::describe() const
 {
     switch (m_kind) {

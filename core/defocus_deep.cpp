@@ -400,8 +400,8 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         }
         set->sprites = std::move(highlights);
         set->lens    = lens;
-        PsfCache cache(lens, nthreads);
-        if (!fetch_sprite_psfs(*set, cache, FieldFrame(src.spec(), lens), o.supersample, nthreads, err))
+        if (!fetch_sprite_psfs(*set, *shared_psf_cache(lens, nthreads), FieldFrame(src.spec(), lens), o.supersample,
+                               nthreads, err))
             return fail(err);
         set->seconds     = std::chrono::duration<double>(Clock::now() - t0).count();
         sprite_extent_px = set->extent_px;

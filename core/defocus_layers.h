@@ -194,7 +194,7 @@ bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Fram
 /// visibility (composite_layers), as the layer's own colour is divided, so a sprite is the
 /// highlight's light in its layer exactly as the layer treats it. Kept only for the
 /// layer's tiles where a nearer layer hides some of it (elsewhere 1), each over its
-/// full-resolution region; read at frame pixels (output pixels / `up`).
+/// full-resolution region; read at frame pixels (output pixels / `up`) by add_psf.
 struct SpriteGain {
     bool used = false;
     int up    = 1;
@@ -206,14 +206,6 @@ struct SpriteGain {
     {
         const int tx = floor_div(x - gx, tile_px), ty = floor_div(y - gy, tile_px);
         return tx < 0 || ty < 0 || tx >= cols || ty >= rows ? -1 : ty * cols + tx;
-    }
-    float at(int x_out, int y_out) const
-    {
-        const int x = floor_div(x_out, up), y = floor_div(y_out, up), t = tile_of(x, y);
-        if (t < 0 || inv_vis[size_t(t)].empty())
-            return 1.0f;
-        const OIIO::ROI& r = region[size_t(t)];
-        return inv_vis[size_t(t)][size_t(y - r.ybegin) * size_t(r.width()) + size_t(x - r.xbegin)];
     }
 };
 

@@ -121,29 +121,24 @@ void add_psf(Plane& target, const OIIO::ROI& out, const Psf& psf, int x0, int y0
     for (int y = top; y < bottom; ++y) {
         float* d       = target.row(y - out.ybegin) + size_t(left - out.xbegin) * 4;
         const float* p = psf.rgb.data() + (size_t(y - y0) * size_t(psf.width) + size_t(left - x0)) * 3;
-        if (gain && gain->used && gain->up > 1) {
-            for (int x = left; x < right; ++x, d += 4, p += 3) {
-                const float g = gain->at(x, y);
-                d[0] += g * k[0] * p[0];
-                d[1] += g * k[1] * p[1];
-                d[2] += g * k[2] * p[2];
-            }
-            continue;
-        }
         if (gain && gain->used) {  // by runs within one tile of the gain
+            const int up = gain->up, fy = floor_div(y, up);
             for (int x = left; x < right;) {
-                const int t   = gain->tile_of(x, y);
-                const int end = t < 0 ? right
-                                      : std::min(right, gain->gx + (t % gain->cols + 1) * gain->tile_px);
-                const float* g = t < 0 || gain->inv_vis[size_t(t)].empty() ? nullptr
-                                 : gain->inv_vis[size_t(t)].data()
-                                       + size_t(y - gain->region[size_t(t)].ybegin) * size_t(gain->region[size_t(t)].width())
-                                       + size_t(x - gain->region[size_t(t)].xbegin);
-                for (; x < end; ++x, d += 4, p += 3) {
-                    const float gx = g ? *g++ : 1.0f;
-                    d[0] += gx * k[0] * p[0];
-                    d[1] += gx * k[1] * p[1];
-                    d[2] += gx * k[2] * p[2];
+                const int fx = floor_div(x, up), t = gain->tile_of(fx, fy);
+                const int end = t < 0 ? x + 1 : std::min(right, (gain->gx + (t % gain->cols + 1) * gain->tile_px) * up);
+                const OIIO::ROI* r = t < 0 || gain->inv_vis[size_t(t)].empty() ? nullptr : &gain->region[size_t(t)];
+                const float* g = r ? gain->inv_vis[size_t(t)].data() + size_t(fy - r->ybegin) * size_t(r->width())
+                                         + size_t(fx - r->xbegin)
+                                   : nullptr;
+                for (int phase = x - fx * up; x < end; ++x, d += 4, p += 3) {
+                    const float gv = g ? *g : 1.0f;
+                    d[0] += gv * k[0] * p[0];
+                    d[1] += gv * k[1] * p[1];
+                    d[2] += gv * k[2] * p[2];
+                    if (++phase == up) {
+                        phase = 0;
+                        g += g ? 1 : 0;
+                    }
                 }
             }
             continue;
@@ -315,7 +310,7 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
             s.psf_id[j]   = ids.emplace(s.psf[j].get(), int(ids.size())).first->second;
         }
     }
-    set.psfs = cache.size();
+    set.psfs = todo.size();
     return true;
 }
 
@@ -364,8 +359,8 @@ bool detail::select_sprites(Frame& f, const DefocusOptions& o, const OIIO::Image
         set->sprites.push_back(s);
     }
     set->lens = lens;
-    PsfCache cache(lens, nthreads);
-    if (!fetch_sprite_psfs(*set, cache, FieldFrame(spec, lens), o.supersample, nthreads, err))
+    if (!fetch_sprite_psfs(*set, *shared_psf_cache(lens, nthreads), FieldFrame(spec, lens), o.supersample, nthreads,
+                           err))
         return false;
     set->seconds = seconds_since(t0);
     f.sprites    = std::move(set);
@@ -377,21 +372,26 @@ bool detail::lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, co
 {
     const size_t K = m.coc_px.size();
     out.assign(K, {});
+    // Each layer's lens: its buffer's pixels are s times the frame's (the sprites' lens has
+    // the output's pitch, f.up times finer than the frame's).
+    std::vector<std::shared_ptr<PsfCache>> caches(K);
+    for (size_t k = 0; k < K; ++k)
+        if (std::abs(m.coc_px[k]) <= kLensLayerMaxCoc_px) {
+            LensCharacter lens = f.sprites->lens;
+            lens.pixel_pitch_mm *= double(f.up * m.reduction[k]);
+            caches[k] = shared_psf_cache(lens, nthreads);
+        }
     std::vector<std::string> errors(K);
     parallel_for_chunks(0, int64_t(K), 1, nthreads, [&](int64_t b, int64_t e) {
         for (int64_t k = b; k < e; ++k) {
-            if (!(std::abs(m.coc_px[size_t(k)]) <= kLensLayerMaxCoc_px))
+            if (!caches[size_t(k)])
                 continue;
-            // The layer's buffer: CoC and pixels s times its own (the sprites' lens has the
-            // output's pitch, f.up times finer than the frame's).
-            const int s        = m.reduction[size_t(k)];
-            LensCharacter lens = f.sprites->lens;
-            lens.pixel_pitch_mm *= double(f.up * s);
             PsfRequest r;
-            r.coc_px = double(m.coc_px[size_t(k)]) / s;
-            Psf psf;
-            if (!lens_psf(psf, lens, r, errors[size_t(k)], 1))
+            r.coc_px = double(m.coc_px[size_t(k)]) / m.reduction[size_t(k)];
+            const std::shared_ptr<const Psf> built = caches[size_t(k)]->get_exact(r, errors[size_t(k)]);
+            if (!built)
                 continue;
+            const Psf& psf = *built;
             // The PSF's square is sized for its faintest halo; the kernel keeps the centred
             // square outside which each channel has at most kLensKernelTail of its light,
             // renormalised (the FFT's tiles grow with the kernel).

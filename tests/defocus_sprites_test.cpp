@@ -586,6 +586,43 @@ TEST(DefocusSprites, InFocusLayersTakeTheLensPsf)
     EXPECT_LT(plain_moved, 1e-6) << "lens off: the in-focus texture stays sharp";
 }
 
+TEST(DefocusSprites, SharedPsfCacheChangesNoResult)
+{
+    // The process keeps each lens's PSFs across calls (shared_psf_cache): a second frame
+    // with the same lens, and one after the caches are dropped, are bit for bit the first,
+    // on 1 and 2 threads; the same lens gets the same cache, another lens (one field
+    // changed) its own.
+    const OIIO::ImageBuf src = lights_scene();
+    DefocusOptions o = with_lens(direct(DefocusMethod::Layers), LensPreset::Achromat);
+    o.lens.diffraction = DiffractionModel::EdgeLaw;
+    clear_shared_psf_caches();
+    const OIIO::ImageBuf cold = run(src, o);
+    OIIO::ImageBuf warm, warm1;
+    ASSERT_TRUE(defocus(warm, src, o, nullptr, 2)) << warm.geterror();
+    ASSERT_TRUE(defocus(warm1, src, o, nullptr, 1)) << warm1.geterror();
+    clear_shared_psf_caches();
+    const OIIO::ImageBuf again = run(src, o);
+    EXPECT_TRUE(bit_identical(cold, warm));
+    EXPECT_TRUE(bit_identical(cold, warm1));
+    EXPECT_TRUE(bit_identical(cold, again));
+
+    LensCharacter lens;
+    lens.preset = LensPreset::Achromat;
+    const std::shared_ptr<PsfCache> a = shared_psf_cache(lens, 1), b = shared_psf_cache(lens, 2);
+    EXPECT_EQ(a, b);
+    LensCharacter other = lens;
+    other.onion_offset = 0.5;
+    EXPECT_FALSE(same_lens(lens, other));
+    EXPECT_NE(shared_psf_cache(other, 1), a);
+    std::string err;
+    Kernel hexagonal;
+    hexagonal.shape = KernelShape::Polygon;
+    ASSERT_TRUE(Aperture::from_kernel(hexagonal, other.aperture, err)) << err;
+    other.onion_offset = lens.onion_offset;
+    EXPECT_FALSE(same_lens(lens, other));
+    EXPECT_TRUE(same_lens(lens, LensCharacter(lens)));
+}
+
 TEST(DefocusSprites, DeepInputGetsSprites)
 {
     // A deep 48 x 48: a grey card (alpha 0.5, CoC 2) in front of a light of 1e3 at CoC 12 in

@@ -63,6 +63,10 @@ public:
     /// "round", "6 blades", "star 5", "picture", for messages.
     std::string describe() const;
 
+    /// The same opening: kind, blades, curvature, rotation, star ratio, hole and table.
+    bool operator==(const Aperture& o) const;
+    bool operator!=(const Aperture& o) const { return !(*this == o); }
+
 private:
     enum class Kind { Round, Polygon, Star, Table };
     Kind m_kind = Kind::Round;

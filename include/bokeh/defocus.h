@@ -111,7 +111,8 @@ struct DefocusReport {
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
     NonFiniteCount nonfinite;
     /// Lens character: how many sprites were scattered, their CoC range, the seconds their
-    /// selection, PSFs and scatter took, and the PSFs the cache built.
+    /// selection, PSFs and scatter took, and the distinct PSFs they use (built, or taken from
+    /// the process's PSF cache: shared_psf_cache, optics.h).
     bool lens_character = false;
     int64_t sprites = 0;
     int64_t sprite_candidates = 0;  ///< pixels with a sprite share before the max_sprites cut

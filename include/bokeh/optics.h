@@ -27,6 +27,7 @@
 #include <bokeh/spectrum.h>
 
 #include <map>
+#include <atomic>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -54,6 +55,7 @@ enum class DiffractionModel {
                ///< 4-16 % off the exact ones, docs/methods/diffraction.md)
 };
 
+/// (same_lens, core/lens_psf.cpp, compares every field: a new field goes there too.)
 struct LensCharacter {
     LensPreset preset = LensPreset::Off;
     Aperture aperture;          ///< the stop's shape (round by default)
@@ -150,14 +152,36 @@ public:
     const LensCharacter& lens() const { return m_lens; }
     /// The PSF of the bin `req` falls in; null + `err` on failure.
     std::shared_ptr<const Psf> get(const PsfRequest& req, std::string& err);
+    /// The PSF of exactly `req` (not its bin's centre), built once; null + `err`.
+    std::shared_ptr<const Psf> get_exact(const PsfRequest& req, std::string& err);
+    /// PSFs held (binned and exact), and their bytes.
     size_t size() const;
+    size_t bytes() const;
+    /// The threads a PSF is built with (lens_psf's `nthreads`).
+    void set_threads(int nthreads) { m_nthreads = nthreads; }
 
 private:
     LensCharacter m_lens;
-    int m_nthreads;
+    std::atomic<int> m_nthreads;
     mutable std::mutex m_mutex;
     std::map<std::tuple<int, int, int>, std::shared_ptr<const Psf>> m_psfs;
+    std::map<std::tuple<double, double, double, int>, std::shared_ptr<const Psf>> m_exact;
+    size_t m_bytes = 0;
 };
+
+/// Whether two lenses draw the same PSFs: every field of LensCharacter equal.
+bool same_lens(const LensCharacter& a, const LensCharacter& b);
+
+/// The process's PSF cache for `lens` (built with `nthreads`), so that the frames of a
+/// sequence, and repeated calls, draw their sprites and near-focus layers without
+/// building the same PSFs again (a PSF is the same for any thread count, so reuse
+/// changes no result). At most kSharedPsfCacheBytes are held over all lenses: past it
+/// the least recently used lenses' caches are dropped, and a lens whose cache alone is
+/// past it starts a new one.
+constexpr size_t kSharedPsfCacheBytes = size_t(512) << 20;
+std::shared_ptr<PsfCache> shared_psf_cache(const LensCharacter& lens, int nthreads);
+/// Drop every shared PSF cache (a benchmark's cold start).
+void clear_shared_psf_caches();
 
 /// A contact sheet: PSFs across defocus (columns, from `coc_max_px` in front through focus
 /// to `coc_max_px` behind) and field height (rows, centre to corner along the diagonal),
