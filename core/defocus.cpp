@@ -29,7 +29,7 @@
 // * Iris mode: the layers average exp(k colour) and come back by log / k (IrisSpace).
 // * Lens character (core/defocus_sprites.cpp): highlights leave the layers and are drawn
 //   as the lens's PSF into the layer of their depth (composite_layers, after the layer);
-//   the layers within a pixel of focus are blurred with the lens's PSF instead of the
+//   the in-focus layer is blurred with the lens's PSF instead of the
 //   aperture (by FFT, in tiles of kLensTile reduced pixels).
 // * Gather (core/defocus_gather.cpp; SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
 //   few representative CoCs (4 behind focus, 3 in front; large ones in 1/2 and 1/4

@@ -145,7 +145,7 @@ OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& da
                                 const DefocusOptions& o);
 
 /// Blur every layer of `m` with the aperture at its CoC (with lens character, the lens's
-/// PSF near focus: lens_layer_kernels) and composite them, front over back, into `out`
+/// PSF at focus: lens_layer_kernels) and composite them, front over back, into `out`
 /// (RGBA over f.out). With `per_layer`, each blurred layer is written there instead (one
 /// RGBA plane over f.out per layer) and `out` is left alone. Progress (o.progress) goes
 /// from `progress_from` (what the caller's work before took) to 1. False + `err`.
@@ -183,8 +183,8 @@ bool select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& sp
 bool fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int up, int nthreads,
                        std::string& err);
 
-/// Lens character in the layers near focus (core/defocus_sprites.cpp): for each layer of
-/// `m` within kLensLayerMaxCoc_px of focus, the lens's PSF at its CoC on axis, at its
+/// Lens character in the in-focus layer (core/defocus_sprites.cpp): for each layer of
+/// `m` within kLensLayerMaxCoc_px of focus (the rung at CoC 0), the lens's PSF at its CoC on axis, at its
 /// buffer's reduction, as four kernels: R, G, B, and their mean (for coverage and
 /// visibility); empty for the layers that keep the aperture. False + `err`.
 bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Frame& f, const Membership& m,

@@ -25,7 +25,7 @@
 //   light beside an in-focus card lost 19 % of its visible energy,
 //   DefocusSprites.ASpriteIsOccludedAsItsLayerIs). A deep frame's layers are continued
 //   under the same surface only (core/defocus_deep.cpp), and its sprites are not divided.
-// * Near focus (ours): the layers within kLensLayerMaxCoc_px of focus are blurred with the
+// * At focus (ours): the in-focus layer (within kLensLayerMaxCoc_px) is blurred with the
 //   lens's PSF on axis (lens_layer_kernels; R, G, B each their own, coverage and visibility
 //   their mean), by FFT: there the aperture is a point and the blur a dim texture gets is
 //   the lens's aberrations and colour, which no highlight selection would carry.
@@ -33,7 +33,7 @@
 //   half the frame's, with the lens PSF at the output's CoC and pixel pitch, box-folded
 //   (box_folded) so each sits centred on its frame pixel; the layers are enlarged.
 // Limits: the sprite is drawn pixel by pixel over its PSFs' full squares (no span or
-// running-sum interior); past a pixel of focus dim pixels keep the aperture (the lens's
+// running-sum interior); out of focus, dim pixels keep the aperture (the lens's
 // rim and fringes show on highlights only); field bins are not interpolated (a sprite moving across a 1/8 field bin changes shape at once); the
 // `max_sprites` cut is hard; past the data window (clamp, mirror) the layers repeat the
 // highlight-less pixels, so highlights are not repeated there.
@@ -61,18 +61,21 @@ namespace {
 using OIIO::Strutil::fmt::format;
 using Clock = std::chrono::steady_clock;
 
-// Lens character in the layers near focus. Within a pixel of focus the aperture is at most
-// a pixel across, so the blur a dim, in-focus texture gets is the lens's own: its
-// aberrations and secondary spectrum (an achromat at f/1.06 softens the edges scene's
-// in-focus checker by about 2 px, which the aperture's point leaves sharp). Those layers
-// take the lens's PSF; farther out the PSF is the aperture's disk with a modulated rim,
-// which the highlights carry as sprites. Measured (bokeh-bench --task lens --size 640x360,
-// achromat with rim diffraction, PSNR against the scatter reference; lights / edges /
-// giant): no layer with the PSF 44.5 / 30.0 / 37.6 dB; |CoC| <= 0, 1, 2, 8 px and every
-// layer 44.6 / 44.7 / 45.1 / 46.6 / 46.6 dB on lights, 38.4 dB on edges and 41.6 dB on
-// giant for each. Cost on lights at 1920x1080 (2 threads, in-process median of 5): none
-// 453 ms, |CoC| <= 0, 1, 2, 8 px and every layer 543 / 605 / 688 / 773 / 1008 ms.
-constexpr float kLensLayerMaxCoc_px = 1.0f;
+// Lens character in the in-focus layer. At focus the aperture is a point, so the blur a
+// dim, in-focus texture gets is the lens's own: its aberrations and secondary spectrum (an
+// achromat at f/1.06 softens the edges scene's in-focus checker by about 2 px, which the
+// aperture's point leaves sharp). The layers within kLensLayerMaxCoc_px of focus take the
+// lens's PSF; farther out the PSF is the aperture's disk with a modulated rim, which the
+// highlights carry as sprites. Measured (bokeh-bench --task lens --size 640x360, achromat
+// with rim diffraction, PSNR against the scatter reference; lights / edges / giant): no
+// layer with the PSF 44.5 / 30.0 / 37.6 dB; with sprites undivided by their layer's
+// visibility, |CoC| <= 0, 1, 2, 8 px and every layer gave 44.6 / 44.7 / 45.1 / 46.6 /
+// 46.6 dB on lights and 38.4 dB on edges, 41.6 dB on giant for each; with the division,
+// 0 px 45.4 / 42.3 / 43.0 dB and 1 px 45.5 / 42.3 / 43.0 dB. Cost on lights at 1920x1080
+// (2 threads, in-process median of 7, PSFs cached): 0 px 1.26x the plain default, 1 px
+// 1.34x, each further layer about 30 ms. So only the in-focus rung (the ladder always has
+// one at 0).
+constexpr float kLensLayerMaxCoc_px = 0.0f;
 // The share of each channel's light a layer's lens kernel may leave out past its square:
 // at 1e-4 the kernels shrink from 25..65 px to 3..25 px with no change in those figures.
 constexpr double kLensKernelTail = 1e-4;

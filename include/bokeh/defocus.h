@@ -72,9 +72,9 @@ struct DefocusOptions {
     /// Lens character (optics.h) on the highlights: pixels brighter than
     /// `highlight_threshold` are scattered as sprites, each the lens's PSF at its signed
     /// CoC and field position, inside the layer of its depth (nearer layers hide them as
-    /// they hide any pixel); the rest goes through the layers, and the layers within a
-    /// pixel of focus are blurred with the lens's PSF on axis (its in-focus softness and
-    /// colour, which the aperture's point would leave out). Off: the output is the
+    /// they hide any pixel); the rest goes through the layers, and the in-focus layer is
+    /// blurred with the lens's PSF on axis (its in-focus softness and colour, which the
+    /// aperture's point would leave out). Off: the output is the
     /// plain method's, bit for bit. Only the lens's aberrations, spectrum, diffraction,
     /// onion rings and field effects are read from `lens`: its aperture, aspect and camera
     /// (f-stop, focal length, pixel pitch) are this defocus's own (`aperture`, `aspect`,
