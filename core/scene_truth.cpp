@@ -69,17 +69,7 @@ bool check_lens(const SceneTruthOptions& o, std::string& err)
                      l.focal_mm);
         return false;
     }
-    if (o.aperture.shape != KernelShape::Disk && o.aperture.shape != KernelShape::Polygon) {
-        err = "the aperture must be a disk or a polygon";
-        return false;
-    }
-    if (!validate_aperture(o.aperture, o.aspect, err))
-        return false;
-    if (o.spp < 1 || o.spp > (1 << 20)) {
-        err = format("spp {} is outside 1..1048576", o.spp);
-        return false;
-    }
-    return true;
+    return detail::check_truth_rays(o.aperture, o.aspect, o.spp, err);
 }
 
 }  // namespace

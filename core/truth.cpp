@@ -384,23 +384,22 @@ void trace(const Scene& sc, float lo, float hi, double px, double py, double sx,
     }
 }
 
-bool check_options(const TruthOptions& o, std::string& err)
+}  // namespace
+
+bool detail::check_truth_rays(const Kernel& aperture, float aspect, int spp, std::string& err)
 {
-    if (o.aperture.shape != KernelShape::Disk && o.aperture.shape != KernelShape::Polygon) {
+    if (aperture.shape != KernelShape::Disk && aperture.shape != KernelShape::Polygon) {
         err = "the aperture must be a disk or a polygon";
         return false;
     }
-    if (!validate_aperture(o.aperture, o.aspect, err))
+    if (!validate_aperture(aperture, aspect, err))
         return false;
-    if (o.spp < 1 || o.spp > (1 << 20)) {
-        err = format("spp {} is outside 1..1048576", o.spp);
+    if (spp < 1 || spp > (1 << 20)) {
+        err = format("spp {} is outside 1..1048576", spp);
         return false;
     }
     return true;
 }
-
-
-}  // namespace
 
 // --- the aperture --------------------------------------------------------------------
 
@@ -476,7 +475,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
         return fail("no image");
     if (!src.deep())
         return fail("needs a deep image, this one is flat (--deepen makes one)");
-    if (!check_options(opt, err))
+    if (!detail::check_truth_rays(opt.aperture, opt.aspect, opt.spp, err))
         return fail(err);
     const OIIO::ImageSpec& spec = src.spec();
     if (channel_named(spec, { "Z" }) < 0)

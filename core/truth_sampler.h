@@ -11,10 +11,17 @@
 // Also what both do with the rays: the noise estimate from two half renders.
 #pragma once
 
+#include <bokeh/blur.h>
+
 #include <cmath>
 #include <cstdint>
+#include <string>
 
 namespace bokeh::detail {
+
+// The rays both truths draw: the aperture a disk or a polygon (validate_aperture, with the
+// anamorphic aspect), 1..2^20 samples a pixel. False + `err` naming the bad one.
+bool check_truth_rays(const Kernel& aperture, float aspect, int spp, std::string& err);
 
 inline uint32_t reverse_bits(uint32_t x)
 {
