@@ -32,7 +32,9 @@
 //     (the pupil point a pixel comes from taken as s = R / |c/2|); the rings' cosine is
 //     tabulated per request against the distance from their centre.
 //  Samples past the light's reach on both sides of the axis are skipped before any
-//  lookup (the exact zero they would add).
+//  lookup (the exact zero they would add). A radially symmetric PSF (round aperture on
+//  the axis, no squeeze, rings centred, no surface noise) is computed over one octant and
+//  copied to the other seven.
 //  5. Each wavelength's PSF is normalised to unit energy and added with its RGB weights.
 // Limits: astigmatic and anamorphic PSFs carry the spherical aberration of the larger
 // axis' CoC scaled along the other; their fringes use the mean scale. The hole's inner
@@ -899,25 +901,52 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
         }
     };
 
+    // Pixel (px, py)'s mean over its ss x ss sub-samples.
+    auto pixel = [&](int px, int py, float o[3]) {
+        const int ss   = g.ss;
+        const double x = px - cx, y = cy - double(py);
+        double v[3]    = { 0.0, 0.0, 0.0 };
+        for (int j = 0; j < ss; ++j)
+            for (int i = 0; i < ss; ++i)
+                intensity(x - 0.5 + (i + 0.5) / ss, y - 0.5 + (j + 0.5) / ss, v);
+        for (int c = 0; c < 3; ++c)
+            o[c] = float(v[c] / (ss * ss));
+    };
+    // A round aperture on the axis, unsqueezed, with no off-centre pattern: the intensity
+    // is a function of the radius alone (the span, the rim and its fringes are the same at
+    // every angle), and the sub-samples of a pixel map onto those of its images under the
+    // square's eight symmetries. So the octant 0 <= dx <= dy (dy up) is computed and
+    // copied to the other seven: an eighth of the lookups, the same pixels but for the
+    // order of each pixel's sub-sample sum.
+    const bool radial = lens.aperture.round() && !g.barrel && g.m_inv[0][1] == 0.0 && g.m_inv[1][0] == 0.0
+                        && g.m_inv[0][0] == g.m_inv[1][1] && w == h && lens.surface_noise == 0.0
+                        && (g.onion_x == 0.0 && g.onion_y == 0.0);
     const int rows_per_chunk = 8;
-    const int nchunks        = (h + rows_per_chunk - 1) / rows_per_chunk;
+    if (radial)
+        parallel_for_chunks(0, cy + 1, rows_per_chunk, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int dy = int(y0); dy < int(y1); ++dy)
+                for (int dx = 0; dx <= dy; ++dx) {
+                    float o[3];
+                    pixel(cx + dx, cy - dy, o);
+                    const int images[8][2] = { { dx, dy },  { -dx, dy },  { dx, -dy }, { -dx, -dy },
+                                               { dy, dx },  { -dy, dx },  { dy, -dx }, { -dy, -dx } };
+                    for (const auto& im : images)
+                        std::copy_n(o, 3, &out.rgb[(size_t(cy - im[1]) * w + size_t(cx + im[0])) * 3]);
+                }
+        });
+    else
+        parallel_for_chunks(0, h, rows_per_chunk, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int64_t py = y0; py < y1; ++py)
+                for (int px = 0; px < w; ++px)
+                    pixel(px, int(py), &out.rgb[(size_t(py) * w + px) * 3]);
+        });
+    const int nchunks = (h + rows_per_chunk - 1) / rows_per_chunk;
     std::vector<std::array<double, 3>> chunk_sum(size_t(nchunks), { 0.0, 0.0, 0.0 });
     parallel_for_chunks(0, h, rows_per_chunk, nthreads, [&](int64_t y0, int64_t y1) {
         std::array<double, 3> acc{ 0.0, 0.0, 0.0 };
-        const int ss = g.ss;
-        for (int64_t py = y0; py < y1; ++py)
-            for (int px = 0; px < w; ++px) {
-                const double x = px - cx, y = cy - double(py);
-                double v[3]    = { 0.0, 0.0, 0.0 };
-                for (int j = 0; j < ss; ++j)
-                    for (int i = 0; i < ss; ++i)
-                        intensity(x - 0.5 + (i + 0.5) / ss, y - 0.5 + (j + 0.5) / ss, v);
-                float* o = &out.rgb[(size_t(py) * w + px) * 3];
-                for (int c = 0; c < 3; ++c) {
-                    o[c] = float(v[c] / (ss * ss));
-                    acc[size_t(c)] += o[c];
-                }
-            }
+        for (int64_t i = y0 * w; i < y1 * w; ++i)
+            for (int c = 0; c < 3; ++c)
+                acc[size_t(c)] += out.rgb[size_t(i) * 3 + size_t(c)];
         chunk_sum[size_t(y0 / rows_per_chunk)] = acc;
     });
     std::array<double, 3> total{ 0.0, 0.0, 0.0 };

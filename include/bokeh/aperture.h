@@ -54,6 +54,8 @@ public:
     double min_edge() const { return m_min_edge; }
     /// The catadioptric hole, a fraction of the edge distance (0 = none).
     double hole() const { return m_hole; }
+    /// Round: the edge distance is 1 at every angle (a hole is allowed).
+    bool round() const { return m_kind == Kind::Round; }
     bool inside(double x, double y) const;
     /// The cosine of the angle between the ray at `phi` and the edge's normal where the
     /// ray crosses it (1 for a circle; cos(psi) on a polygon's blade): a distance along
