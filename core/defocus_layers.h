@@ -23,9 +23,14 @@
 
 namespace bokeh::detail {
 
+// A sprite's PSFs: the two CoC bins around its CoC times the (up to) four field bins
+// around its field position.
+constexpr int kSpritePsfs = 8;
+
 // A highlight scattered with the lens's PSF (core/defocus_sprites.cpp): the share of a
-// pixel's premultiplied colour taken out of the layers, drawn as the crossfade of the PSFs
-// of the two CoC bins around its CoC (weights linear in log CoC).
+// pixel's premultiplied colour taken out of the layers, drawn as the blend of the PSFs of
+// the two CoC bins around its CoC (weights linear in log CoC) and the field bins around its
+// field position (bilinear).
 struct Sprite {
     int x = 0, y = 0;             // the pixel, full-resolution coordinates
     size_t at = 0;                // its index in the data window (flat frames)
@@ -34,9 +39,9 @@ struct Sprite {
                                   // split between two (the report counts the piece once)
     float coc_px = 0.0f;
     float rgb[3] = { 0, 0, 0 };   // premultiplied colour taken from the pixel
-    std::shared_ptr<const Psf> psf[2];
-    int psf_id[2]     = { -1, -1 };  // the PSFs' order of first use (a fixed order for merging)
-    float weight[2] = { 1.0f, 0.0f };
+    std::shared_ptr<const Psf> psf[kSpritePsfs];  // null past the ones in use
+    int psf_id[kSpritePsfs] = { -1, -1, -1, -1, -1, -1, -1, -1 };  // order of first use (fixed, for merging)
+    float weight[kSpritePsfs] = {};
 };
 
 struct SpriteSet {
@@ -159,7 +164,9 @@ struct FieldFrame {
     double cx = 0.0, cy = 0.0, half_diagonal = 1.0;
     bool used = true;
     FieldFrame(const OIIO::ImageSpec& spec, const LensCharacter& lens);
-    PsfRequest at(int x, int y, double coc_px) const;  // field at its cache bin's centre
+    /// The cache's field bins around pixel (x, y) (their centres, 1/8 of the half-diagonal
+    /// apart) and their bilinear weights: `n` of them (1 when the field is not used).
+    void bins_around(int x, int y, double fx[4], double fy[4], double w[4], int& n) const;
 };
 
 /// The lens of a defocus: o.lens with the defocus's own aperture, aspect and camera.

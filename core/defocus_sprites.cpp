@@ -12,8 +12,11 @@
 //   coverage and what it hides are unchanged.
 // * Shape: the PSFs of the cache's two CoC bins around the sprite's CoC (1/8 octave for
 //   |CoC| >= 1 px, 1/8 px below), crossfaded with weights linear in log2 |CoC| (linear in
-//   CoC below 1 px), at the field bin of the pixel (field = position from the display
-//   window's centre over its half-diagonal, y up). Each channel of a PSF sums to 1.
+//   CoC below 1 px), and between the four field bins around the pixel (1/8 of the
+//   half-diagonal apart, bilinear; field = position from the display window's centre over
+//   its half-diagonal, y up), so a sprite crossing a bin changes shape gradually. A lens
+//   with no field effect asks every PSF at the centre: two PSFs a sprite, else up to
+//   eight. Each channel of a PSF sums to 1.
 // * Occlusion: a sprite is added, colour only, into the layer of its depth after that
 //   layer is composited and before any nearer one is: "over" is linear, so this is
 //   exactly the sprite added into the layer's premultiplied colour (with zero alpha: the
@@ -33,9 +36,10 @@
 //   half the frame's, with the lens PSF at the output's CoC and pixel pitch, box-folded
 //   (box_folded) so each sits centred on its frame pixel; the layers are enlarged.
 // Limits: the sprite is drawn pixel by pixel over its PSFs' full squares (no span or
-// running-sum interior); out of focus, dim pixels keep the aperture (the lens's
-// rim and fringes show on highlights only); field bins are not interpolated (a sprite moving across a 1/8 field bin changes shape at once); the
-// `max_sprites` cut is hard; past the data window (clamp, mirror) the layers repeat the
+// running-sum interior; a lens with field effects draws up to eight); out of focus, dim
+// pixels keep the aperture (the lens's rim and fringes show on highlights only); the
+// crossfade of two CoC bins draws a sharp rim as two rims 9 % apart; past H = 1.3 the
+// field is held there; the `max_sprites` cut is hard; past the data window (clamp, mirror) the layers repeat the
 // highlight-less pixels, so highlights are not repeated there.
 
 #include <bokeh/defocus.h>
@@ -193,21 +197,33 @@ detail::FieldFrame::FieldFrame(const OIIO::ImageSpec& spec, const LensCharacter&
     half_diagonal = std::max(0.5, 0.5 * std::hypot(w, h));
 }
 
-PsfRequest detail::FieldFrame::at(int x, int y, double coc_px) const
+void detail::FieldFrame::bins_around(int x, int y, double fx[4], double fy[4], double w[4], int& n) const
 {
-    // At the centre of the cache's field bin (1/8 of the half-diagonal, optics.h).
-    PsfRequest r;
-    r.coc_px  = coc_px;
+    n = 1;
+    fx[0] = fy[0] = 0.0;
+    w[0]          = 1.0;
     if (!used)
-        return r;
-    // Overscan far past the display window: the PSF's field model stops at H = 1.5.
-    double fx = (x + 0.5 - cx) / half_diagonal, fy = (cy - (y + 0.5)) / half_diagonal;
-    const double h = std::hypot(fx, fy);
-    if (h > 1.4)
-        fx *= 1.4 / h, fy *= 1.4 / h;
-    r.field_x = std::round(8.0 * fx) / 8.0;
-    r.field_y = std::round(8.0 * fy) / 8.0;
-    return r;
+        return;
+    // Overscan far past the display window: held at H = 1.3, so the bins around stay
+    // within the PSF's field model (H <= 1.5).
+    double px = (x + 0.5 - cx) / half_diagonal, py = (cy - (y + 0.5)) / half_diagonal;
+    const double h = std::hypot(px, py);
+    if (h > 1.3)
+        px *= 1.3 / h, py *= 1.3 / h;
+    const double gx = 8.0 * px, gy = 8.0 * py;
+    const double ix = std::floor(gx), iy = std::floor(gy);
+    const double tx = gx - ix, ty = gy - iy;
+    n = 0;
+    for (int j = 0; j < 2; ++j)
+        for (int i = 0; i < 2; ++i) {
+            const double wij = (i ? tx : 1.0 - tx) * (j ? ty : 1.0 - ty);
+            if (!(wij > 0.0))
+                continue;
+            fx[n] = (ix + i) / 8.0;
+            fy[n] = (iy + j) / 8.0;
+            w[n]  = wij;
+            ++n;
+        }
 }
 
 bool detail::defocus_lens(const DefocusOptions& o, const OIIO::ImageSpec& spec, LensCharacter& lens,
@@ -262,22 +278,30 @@ float detail::sprite_share(const float* rgb, float threshold, float& luminance)
 bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int up, int nthreads,
                                std::string& err)
 {
-    // Each sprite's two requests, at their bins' centres (FieldFrame::at snaps the field to
-    // the cache's bins), so equal requests are equal bins: the distinct ones are built in
+    // Each sprite's requests, at their bins' centres (two CoC bins times the field bins
+    // around it), so equal requests are equal bins: the distinct ones are built in
     // parallel, each once, then read back from the cache.
     using Key = std::tuple<double, double, double>;
     std::map<Key, std::shared_ptr<const Psf>> wanted;
-    std::vector<std::array<PsfRequest, 2>> requests(set.sprites.size());
+    std::vector<std::array<Key, kSpritePsfs>> requests(set.sprites.size());
     for (size_t i = 0; i < set.sprites.size(); ++i) {
         Sprite& s = set.sprites[i];
-        double c0, c1, t;
-        bins_around(s.coc_px * float(up), c0, c1, t);  // the CoC in output pixels
-        s.weight[0]    = float(1.0 - t);
-        s.weight[1]    = float(t);
-        requests[i][0] = field.at(s.x, s.y, c0);
-        requests[i][1] = field.at(s.x, s.y, c1);
-        for (int j = 0; j < (t > 0.0 ? 2 : 1); ++j)
-            wanted.emplace(Key(requests[i][j].coc_px, requests[i][j].field_x, requests[i][j].field_y), nullptr);
+        double c[2], t;
+        bins_around(s.coc_px * float(up), c[0], c[1], t);  // the CoC in output pixels
+        double fx[4], fy[4], fw[4];
+        int nf;
+        field.bins_around(s.x, s.y, fx, fy, fw, nf);
+        int n = 0;
+        for (int b = 0; b < 2; ++b) {
+            const double wc = b == 0 ? 1.0 - t : t;
+            if (!(wc > 0.0))
+                continue;
+            for (int q = 0; q < nf; ++q, ++n) {
+                requests[i][size_t(n)] = Key(c[b], fx[q], fy[q]);
+                s.weight[n]            = float(wc * fw[q]);
+                wanted.emplace(requests[i][size_t(n)], nullptr);
+            }
+        }
     }
     std::vector<std::pair<const Key, std::shared_ptr<const Psf>>*> todo;
     for (auto& w : wanted)
@@ -303,11 +327,8 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
     std::map<const Psf*, int> ids;
     for (size_t i = 0; i < set.sprites.size(); ++i) {
         Sprite& s = set.sprites[i];
-        for (int j = 0; j < 2; ++j) {
-            if (j == 1 && !(s.weight[1] > 0.0f))
-                continue;
-            const PsfRequest& r = requests[i][size_t(j)];
-            s.psf[j]            = wanted.at(Key(r.coc_px, r.field_x, r.field_y));
+        for (int j = 0; j < kSpritePsfs && s.weight[j] > 0.0f; ++j) {
+            s.psf[j]            = wanted.at(requests[i][size_t(j)]);
             const int side      = std::max(s.psf[j]->width, s.psf[j]->height);
             set.extent_px = std::max(set.extent_px, up == 1 ? float(side / 2) : std::ceil(0.5f * float(side) / float(up)));
             s.psf_id[j]   = ids.emplace(s.psf[j].get(), int(ids.size())).first->second;
@@ -464,9 +485,9 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
     // source block each falls in.
     struct Drawn {
         int x, y, bx, by;
-        const Psf* psf[2];
-        int id[2];
-        float rgb[2][3];
+        const Psf* psf[kSpritePsfs];
+        std::array<int, kSpritePsfs> id;
+        float rgb[kSpritePsfs][3];
         bool counted;
     };
     std::vector<Drawn> list;
@@ -496,7 +517,7 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         while (b < 8 && 2 * b * 32 <= width)
             b *= 2;
         d.bx = floor_div(s.x, b), d.by = floor_div(s.y, b);
-        for (int j = 0; j < 2; ++j) {
+        for (int j = 0; j < kSpritePsfs; ++j) {
             d.psf[j] = s.psf[j].get();
             d.id[j]  = s.psf_id[j];
             for (int c = 0; c < 3; ++c)
@@ -506,28 +527,28 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
     }
     if (list.empty())
         return;
-    // Merge the sprites of a block that share both PSFs (their colours add: drawing is
+    // Merge the sprites of a block that share all their PSFs (their colours add: drawing is
     // linear), placed at the luminance-weighted mean position, rounded.
-    auto key = [](const Drawn& d) { return std::make_tuple(d.by, d.bx, d.id[0], d.id[1], d.y, d.x); };
+    auto key = [](const Drawn& d) { return std::make_tuple(d.by, d.bx, d.id, d.y, d.x); };
     std::sort(list.begin(), list.end(), [&](const Drawn& a, const Drawn& b) { return key(a) < key(b); });
     std::vector<Drawn> merged;
     for (size_t i = 0; i < list.size();) {
         size_t e = i + 1;
-        while (e < list.size() && list[e].by == list[i].by && list[e].bx == list[i].bx && list[e].id[0] == list[i].id[0]
-               && list[e].id[1] == list[i].id[1])
+        while (e < list.size() && list[e].by == list[i].by && list[e].bx == list[i].bx && list[e].id == list[i].id)
             ++e;
         Drawn d = list[i];
         if (e > i + 1) {
             double sx = 0.0, sy = 0.0, sw = 0.0;
             for (size_t j = i; j < e; ++j) {
-                const Drawn& o  = list[j];
-                const double lum = 0.2126 * (o.rgb[0][0] + o.rgb[1][0]) + 0.7152 * (o.rgb[0][1] + o.rgb[1][1])
-                                   + 0.0722 * (o.rgb[0][2] + o.rgb[1][2]);
+                const Drawn& o = list[j];
+                double lum     = 0.0;
+                for (int p = 0; p < kSpritePsfs; ++p)
+                    lum += 0.2126 * o.rgb[p][0] + 0.7152 * o.rgb[p][1] + 0.0722 * o.rgb[p][2];
                 const double wgt = std::max(lum, 1e-30);
                 sx += wgt * o.x, sy += wgt * o.y, sw += wgt;
                 d.counted = d.counted || o.counted;
                 if (j > i)
-                    for (int p = 0; p < 2; ++p)
+                    for (int p = 0; p < kSpritePsfs; ++p)
                         for (int c = 0; c < 3; ++c)
                             d.rgb[p][c] += o.rgb[p][c];
             }
@@ -551,7 +572,7 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         auto first = std::lower_bound(merged.begin(), merged.end(), floor_div(y0, up) - reach,
                                       [](const Drawn& d, int y) { return d.y < y; });
         for (auto it = first; it != merged.end() && it->y < floor_div(y1, up) + reach + 1; ++it)
-            for (int j = 0; j < 2; ++j)
+            for (int j = 0; j < kSpritePsfs; ++j)
                 if (it->psf[j]) {
                     const Psf& psf = *it->psf[j];
                     const int hw = (psf.width - (up - 1)) / 2, hh = (psf.height - (up - 1)) / 2;

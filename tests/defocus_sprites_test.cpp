@@ -248,6 +248,80 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
     EXPECT_LT(worst, 1e-5);
 }
 
+TEST(DefocusSprites, FieldBinsAreInterpolated)
+{
+    // A 1e6 light at CoC 16 px (a CoC bin's centre) on the display window's horizontal
+    // axis, with a cat's eye (a field effect). At x = 39 its field position lies 0.49 of
+    // the way from the centre's field bin to the next (1/8 of the half-diagonal): the
+    // sprite is 1e6 times the bilinear blend of lens_psf at the two bins (1e-5 of the
+    // peak). Moved a pixel a frame across the next bin (x = 36 .. 60), the sprite's shape
+    // (each frame against the one before, moved back by a pixel) changes by steps of
+    // nearly equal size: the largest step within 2x their mean (snapped to the nearest bin
+    // it would not change at all but at one jump).
+    const OIIO::ROI display(-48, 113, -48, 113);
+    auto frame = [&](int lx) {
+        return image(
+            97, 65,
+            [lx](int x, int y) {
+                Px p;
+                p.a = 0.0f;
+                p.z = 16.0f;
+                if (x == lx && y == 32)
+                    p.r = p.g = p.b = 1e6f, p.a = 1.0f;
+                return p;
+            },
+            display);
+    };
+    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    o.lens.catseye   = 0.8;
+    LensCharacter lens  = o.lens;
+    lens.fstop          = o.coc.lens.fstop;
+    lens.focal_mm       = o.coc.lens.focal_mm;
+    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / display.width();
+    const double half_diagonal = 0.5 * std::hypot(161.0, 161.0), cx = -48 + 80.5;
+    const double g  = 8.0 * (39 + 0.5 - cx) / half_diagonal;
+    const double t  = g - std::floor(g);
+    Psf a, b;
+    std::string err;
+    ASSERT_TRUE(lens_psf(a, lens, PsfRequest{ 16.0, std::floor(g) / 8.0, 0.0, 0 }, err)) << err;
+    ASSERT_TRUE(lens_psf(b, lens, PsfRequest{ 16.0, (std::floor(g) + 1.0) / 8.0, 0.0, 0 }, err)) << err;
+    ASSERT_EQ(a.width, b.width);
+    const OIIO::ImageBuf out = run(frame(39), o);
+    double worst = 0.0, peak = 0.0;
+    for (int c = 0; c < 3; ++c)
+        for (int y = -48; y < 113; ++y)
+            for (int x = -48; x < 113; ++x) {
+                const int px = x - 39 + a.width / 2, py = y - 32 + a.height / 2;
+                const bool inside = px >= 0 && px < a.width && py >= 0 && py < a.height;
+                const double want = inside ? 1e6 * ((1.0 - t) * a.at(px, py, c) + t * b.at(px, py, c)) : 0.0;
+                worst = std::max(worst, std::abs(at(out, x, y, c) - want));
+                peak  = std::max(peak, want);
+            }
+    std::printf("[ figures  ] field bins %.3f apart: largest difference %.2e of the peak\n", t, worst / peak);
+    EXPECT_LT(worst, 1e-5 * peak);
+
+    std::vector<OIIO::ImageBuf> frames;
+    for (int lx = 36; lx <= 60; ++lx)
+        frames.push_back(run(frame(lx), o));
+    std::vector<double> steps;
+    for (size_t i = 0; i + 1 < frames.size(); ++i) {
+        double sq = 0.0;
+        for (int y = 0; y < 65; ++y)
+            for (int dx = -32; dx <= 32; ++dx) {
+                const double d = at(frames[i + 1], 37 + int(i) + dx, y, 1) - at(frames[i], 36 + int(i) + dx, y, 1);
+                sq += d * d;
+            }
+        steps.push_back(std::sqrt(sq));
+    }
+    double mean = 0.0, largest = 0.0;
+    for (double d : steps)
+        mean += d / double(steps.size()), largest = std::max(largest, d);
+    std::printf("[ figures  ] a light moving across a field bin: shape steps mean %.3g, largest %.2f of the mean\n",
+                mean, largest / mean);
+    EXPECT_GT(mean, 0.0);
+    EXPECT_LT(largest, 2.0 * mean);
+}
+
 TEST(DefocusSprites, ExposureRampDoesNotPop)
 {
     // 128 lights, 1/8 octave apart from 2^-6 to 2^9.9, over a dim floor, CoCs 10 .. 24 px,
