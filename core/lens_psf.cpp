@@ -917,10 +917,11 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     // every angle), and the sub-samples of a pixel map onto those of its images under the
     // square's eight symmetries. So the octant 0 <= dx <= dy (dy up) is computed and
     // copied to the other seven: an eighth of the lookups, the same pixels but for the
-    // order of each pixel's sub-sample sum.
+    // order of each pixel's sub-sample sum. (Off the axis too, when nothing depends on the
+    // field but the CoC: no cat's eye, astigmatism or rings.)
     const bool radial = lens.aperture.round() && !g.barrel && g.m_inv[0][1] == 0.0 && g.m_inv[1][0] == 0.0
-                        && g.m_inv[0][0] == g.m_inv[1][1] && w == h && lens.surface_noise == 0.0
-                        && (g.onion_x == 0.0 && g.onion_y == 0.0);
+                        && g.m_inv[0][0] == g.m_inv[1][1] && w == h
+                        && (!modulated || (lens.surface_noise == 0.0 && g.onion_x == 0.0 && g.onion_y == 0.0));
     const int rows_per_chunk = 8;
     if (radial)
         parallel_for_chunks(0, cy + 1, rows_per_chunk, nthreads, [&](int64_t y0, int64_t y1) {
