@@ -84,6 +84,36 @@ constexpr float kLensLayerMaxCoc_px = 0.0f;
 // at 1e-4 the kernels shrink from 25..65 px to 3..25 px with no change in those figures.
 constexpr double kLensKernelTail = 1e-4;
 
+// The centred square a PSF is trimmed to: the smallest half-sizes rx, ry (shrunk together
+// from the PSF's own) outside which each channel holds at most `tail` of its light. A pixel
+// (dx, dy) from the centre leaves the square at shrink step s > min(hw - |dx|, hh - |dy|),
+// so one pass sums each channel's light by that shell and the running sum finds s.
+void trimmed_reach(const Psf& psf, double tail, int& rx, int& ry)
+{
+    const int hw = psf.width / 2, hh = psf.height / 2, shells = std::min(hw, hh) + 1;
+    std::vector<std::array<double, 3>> shell(size_t(shells), { 0.0, 0.0, 0.0 });
+    for (int y = 0; y < psf.height; ++y)
+        for (int x = 0; x < psf.width; ++x) {
+            const int sh = std::min(hw - std::abs(x - hw), hh - std::abs(y - hh));
+            for (int c = 0; c < 3; ++c)
+                shell[size_t(sh)][size_t(c)] += std::abs(double(psf.at(x, y, c)));
+        }
+    std::array<double, 3> outside{ 0.0, 0.0, 0.0 };
+    int s = 0;
+    while (s < shells - 1) {  // step s + 1 also leaves out shell s
+        bool ok = true;
+        for (int c = 0; c < 3; ++c)
+            ok = ok && outside[size_t(c)] + shell[size_t(s)][size_t(c)] <= tail;
+        if (!ok)
+            break;
+        for (int c = 0; c < 3; ++c)
+            outside[size_t(c)] += shell[size_t(s)][size_t(c)];
+        ++s;
+    }
+    rx = hw - s;
+    ry = hh - s;
+}
+
 double seconds_since(Clock::time_point t0)
 {
     return std::chrono::duration<double>(Clock::now() - t0).count();
@@ -420,21 +450,8 @@ bool detail::lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, co
             // square outside which each channel has at most kLensKernelTail of its light,
             // renormalised (the FFT's tiles grow with the kernel).
             const int hw = psf.width / 2, hh = psf.height / 2;
-            auto outside = [&](int rx, int ry) {
-                double worst = 0.0;
-                for (int c = 0; c < 3; ++c) {
-                    double o = 0.0;
-                    for (int y = 0; y < psf.height; ++y)
-                        for (int x = 0; x < psf.width; ++x)
-                            if (std::abs(x - hw) > rx || std::abs(y - hh) > ry)
-                                o += std::abs(double(psf.at(x, y, c)));
-                    worst = std::max(worst, o);
-                }
-                return worst;
-            };
-            int rx = hw, ry = hh;
-            while (rx > 0 && ry > 0 && outside(rx - 1, ry - 1) <= kLensKernelTail)
-                --rx, --ry;
+            int rx, ry;
+            trimmed_reach(psf, kLensKernelTail, rx, ry);
             std::vector<KernelWeights>& kernels = out[size_t(k)];
             kernels.assign(4, KernelWeights{});
             for (int c = 0; c < 4; ++c) {
