@@ -10,9 +10,9 @@
 //   The share of the colour goes to the sprite and leaves the layers (colour - share *
 //   colour stays), so it is counted once; the pixel's alpha stays in the layers, so its
 //   coverage and what it hides are unchanged.
-// * Shape: the PSFs of the cache's two CoC bins around the sprite's CoC (1/8 octave for
-//   |CoC| >= 1 px, 1/8 px below), crossfaded with weights linear in log2 |CoC| (linear in
-//   CoC below 1 px), and between the four field bins around the pixel (1/8 of the
+// * Shape: the PSFs of the cache's two CoC bins around the sprite's CoC (1/16 octave for
+//   |CoC| >= 1 px, kPsfCocBinsPerOctave; 1/8 px below), crossfaded with weights linear in
+//   log2 |CoC| (linear in CoC below 1 px), and between the four field bins around the pixel (1/8 of the
 //   half-diagonal apart, bilinear; field = position from the display window's centre over
 //   its half-diagonal, y up), so a sprite crossing a bin changes shape gradually. A lens
 //   with no field effect asks every PSF at the centre: two PSFs a sprite, else up to
@@ -38,7 +38,7 @@
 // Limits: the sprite is drawn pixel by pixel over its PSFs' full squares (no span or
 // running-sum interior; a lens with field effects draws up to eight); out of focus, dim
 // pixels keep the aperture (the lens's rim and fringes show on highlights only); the
-// crossfade of two CoC bins draws a sharp rim as two rims 9 % apart; past H = 1.3 the
+// crossfade of two CoC bins draws a sharp rim as two rims 4.4 % apart; past H = 1.3 the
 // field is held there; the `max_sprites` cut is hard; past the data window (clamp, mirror) the layers repeat the
 // highlight-less pixels, so highlights are not repeated there.
 
@@ -138,10 +138,11 @@ void bins_around(float c, double& c0, double& c1, double& t)
         t  = l - b0;
         return;
     }
-    const double l  = 8.0 * std::log2(a);
+    const double n  = kPsfCocBinsPerOctave;
+    const double l  = n * std::log2(a);
     const double b0 = std::floor(l);
-    c0 = sign * std::exp2(b0 / 8.0);
-    c1 = sign * std::exp2((b0 + 1.0) / 8.0);
+    c0 = sign * std::exp2(b0 / n);
+    c1 = sign * std::exp2((b0 + 1.0) / n);
     t  = l - b0;
 }
 

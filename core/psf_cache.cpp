@@ -2,8 +2,8 @@
 // lens_psf's PSFs kept by (CoC, field) bin, or by exact request, for one lens; and the
 // process's caches, one per lens, so the frames of a sequence build each PSF once.
 //
-// Bins: 1/8 octave in |CoC| from 1 px (1/8 px below, sign kept) and 1/8 of the
-// half-diagonal in field; a request takes its bin's PSF, built at the bin's centre (the
+// Bins: 1 / kPsfCocBinsPerOctave octave in |CoC| from 1 px (1/8 px below, sign kept) and
+// 1/8 of the half-diagonal in field; a request takes its bin's PSF, built at the bin's centre (the
 // sprites blend the bins around them: core/defocus_sprites.cpp). The shared caches hold
 // at most kSharedPsfCacheBytes over all lenses, the least recently used lens dropped
 // first; a PSF is the same for any thread count, so a warm cache changes no result.
@@ -24,7 +24,7 @@ std::tuple<int, int, int> bin_of(const PsfRequest& r)
 {
     const double a = std::abs(r.coc_px);
     const int c    = a < 1.0 ? int(std::lround(8.0 * r.coc_px))
-                             : (r.coc_px < 0 ? -1 : 1) * (100 + int(std::lround(8.0 * std::log2(a))));
+                             : (r.coc_px < 0 ? -1 : 1) * (100 + int(std::lround(kPsfCocBinsPerOctave * std::log2(a))));
     return { c, int(std::lround(8.0 * r.field_x)), int(std::lround(8.0 * r.field_y)) };
 }
 
@@ -32,7 +32,7 @@ PsfRequest centre_of(const std::tuple<int, int, int>& key)
 {
     PsfRequest r;
     const int c = std::get<0>(key);
-    r.coc_px    = std::abs(c) < 100 ? c / 8.0 : (c < 0 ? -1.0 : 1.0) * std::exp2((std::abs(c) - 100) / 8.0);
+    r.coc_px    = std::abs(c) < 100 ? c / 8.0 : (c < 0 ? -1.0 : 1.0) * std::exp2((std::abs(c) - 100) / double(kPsfCocBinsPerOctave));
     r.field_x   = std::get<1>(key) / 8.0;
     r.field_y   = std::get<2>(key) / 8.0;
     return r;
