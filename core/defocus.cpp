@@ -79,6 +79,9 @@ constexpr int kTile = 64;
 // A layer blurred with the lens's PSF goes by FFT, whose every call transforms its four
 // kernels and pays a margin of the kernel's reach: its tiles are 4 times wider.
 constexpr int kLensTile = 256;
+// Which of a lens layer's kernels (lens_layer_kernels: R, G, B, mean) blurs each channel of
+// its input (R, G, B, coverage, visibility).
+constexpr std::array<int, 5> kLensChannelKernels = { 0, 1, 2, 3, 3 };
 
 // Which tiles of each layer's grid (tile size kTile * reduction, from the output's
 // origin) must be computed: those holding a share of the layer, those the border rule
@@ -414,8 +417,10 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
                 layer = std::move(p);
             else if (lens_kernels.empty())
                 layer = convolve_spans(p, w, 1);
-            else  // R, G and B each with its own PSF; coverage and visibility with their mean
-                layer = convolve_fft(p, lens_kernels, { 0, 1, 2, 3, 3 }, 1);
+            else {  // R, G and B each with its own PSF; coverage (and visibility, when hidden) their mean
+                const std::vector<int> kernel_of(kLensChannelKernels.begin(), kLensChannelKernels.begin() + p.nc);
+                layer = convolve_fft(p, lens_kernels, kernel_of, 1);
+            }
             if (content.hidden)
                 divide_by_visibility(layer);
             if (content.hidden && gain.used) {
