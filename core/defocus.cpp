@@ -376,7 +376,6 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             gain.gy      = gy;
             gain.tile_px = t;
             gain.cols    = cols[size_t(k)];
-            gain.rows    = int(tiles[size_t(k)].size()) / cols[size_t(k)];
             gain.region.resize(tiles[size_t(k)].size());
             gain.inv_vis.resize(tiles[size_t(k)].size());
         }

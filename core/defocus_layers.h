@@ -205,14 +205,14 @@ bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Fram
 struct SpriteGain {
     bool used = false;
     int up    = 1;
-    int gx = 0, gy = 0, tile_px = 1, cols = 0, rows = 0;  // the layer's tile grid
+    int gx = 0, gy = 0, tile_px = 1, cols = 0;  // the layer's tile grid (rows: region.size() / cols)
     std::vector<OIIO::ROI> region;           // per tile
     std::vector<std::vector<float>> inv_vis; // per tile, over its region; empty: 1
     /// The tile holding frame pixel (x, y), or -1 past the grid.
     int tile_of(int x, int y) const
     {
         const int tx = floor_div(x - gx, tile_px), ty = floor_div(y - gy, tile_px);
-        return tx < 0 || ty < 0 || tx >= cols || ty >= rows ? -1 : ty * cols + tx;
+        return tx < 0 || ty < 0 || tx >= cols || ty * cols + tx >= int(region.size()) ? -1 : ty * cols + tx;
     }
 };
 
