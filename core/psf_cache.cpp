@@ -51,20 +51,7 @@ size_t psf_bytes(const Psf& p) { return sizeof(Psf) + p.rgb.size() * sizeof(floa
 
 std::shared_ptr<const Psf> PsfCache::get(const PsfRequest& req, std::string& err)
 {
-    const auto key = bin_of(req);
-    {
-        std::lock_guard<std::mutex> lock(m_mutex);
-        auto it = m_psfs.find(key);
-        if (it != m_psfs.end())
-            return it->second;
-    }
-    auto psf = std::make_shared<Psf>();
-    if (!lens_psf(*psf, m_lens, centre_of(key), err, m_nthreads))
-        return nullptr;
-    std::lock_guard<std::mutex> lock(m_mutex);
-    auto [it, added] = m_psfs.emplace(key, std::move(psf));
-    m_bytes += added ? psf_bytes(*it->second) : 0;
-    return it->second;
+    return get_exact(centre_of(bin_of(req)), err);
 }
 
 std::shared_ptr<const Psf> PsfCache::get_exact(const PsfRequest& req, std::string& err)
@@ -72,15 +59,15 @@ std::shared_ptr<const Psf> PsfCache::get_exact(const PsfRequest& req, std::strin
     const auto key = std::make_tuple(req.coc_px, req.field_x, req.field_y, req.size_px);
     {
         std::lock_guard<std::mutex> lock(m_mutex);
-        auto it = m_exact.find(key);
-        if (it != m_exact.end())
+        auto it = m_psfs.find(key);
+        if (it != m_psfs.end())
             return it->second;
     }
     auto psf = std::make_shared<Psf>();
     if (!lens_psf(*psf, m_lens, req, err, m_nthreads))
         return nullptr;
     std::lock_guard<std::mutex> lock(m_mutex);
-    auto [it, added] = m_exact.emplace(key, std::move(psf));
+    auto [it, added] = m_psfs.emplace(key, std::move(psf));
     m_bytes += added ? psf_bytes(*it->second) : 0;
     return it->second;
 }
@@ -88,7 +75,7 @@ std::shared_ptr<const Psf> PsfCache::get_exact(const PsfRequest& req, std::strin
 size_t PsfCache::size() const
 {
     std::lock_guard<std::mutex> lock(m_mutex);
-    return m_psfs.size() + m_exact.size();
+    return m_psfs.size();
 }
 
 size_t PsfCache::bytes() const

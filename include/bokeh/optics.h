@@ -162,7 +162,7 @@ public:
     std::shared_ptr<const Psf> get(const PsfRequest& req, std::string& err);
     /// The PSF of exactly `req` (not its bin's centre), built once; null + `err`.
     std::shared_ptr<const Psf> get_exact(const PsfRequest& req, std::string& err);
-    /// PSFs held (binned and exact), and their bytes.
+    /// PSFs held, and their bytes.
     size_t size() const;
     size_t bytes() const;
     /// The threads a PSF is built with (lens_psf's `nthreads`).
@@ -172,8 +172,8 @@ private:
     LensCharacter m_lens;
     std::atomic<int> m_nthreads;
     mutable std::mutex m_mutex;
-    std::map<std::tuple<int, int, int>, std::shared_ptr<const Psf>> m_psfs;
-    std::map<std::tuple<double, double, double, int>, std::shared_ptr<const Psf>> m_exact;
+    // By exact request (a bin's PSF is its centre's request).
+    std::map<std::tuple<double, double, double, int>, std::shared_ptr<const Psf>> m_psfs;
     size_t m_bytes = 0;
 };
 
