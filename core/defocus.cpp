@@ -376,8 +376,10 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             gain.gy      = gy;
             gain.tile_px = t;
             gain.cols    = cols[size_t(k)];
-            gain.region.resize(tiles[size_t(k)].size());
-            gain.inv_vis.resize(tiles[size_t(k)].size());
+            gain.s       = s;
+            gain.draw.resize(tiles[size_t(k)].size());
+            gain.low.resize(tiles[size_t(k)].size());
+            gain.visibility.resize(tiles[size_t(k)].size());
         }
         parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
             struct Counted {  // the tile counts as done however it returns
@@ -422,17 +424,15 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             }
             if (content.hidden)
                 divide_by_visibility(layer);
-            if (content.hidden && gain.used) {
+            if (content.hidden && gain.used) {  // the visibility (channel 4), kept for the sprites
                 const size_t i = size_t(todo[size_t(n)]);
-                gain.region[i] = region;
-                std::vector<float>& g = gain.inv_vis[i];
-                g.assign(size_t(region.npixels()), 1.0f);
-                for (int y = draw.ybegin; y < draw.yend; ++y)
-                    for (int x = draw.xbegin; x < draw.xend; ++x) {
-                        const float vis = sample_visibility(layer, need, gx, gy, s, x, y);
-                        g[size_t(y - region.ybegin) * size_t(region.width()) + size_t(x - region.xbegin)] =
-                            vis > 1e-6f ? 1.0f / vis : 0.0f;
-                    }
+                gain.draw[i]   = draw;
+                gain.low[i]    = need;
+                Plane& v       = gain.visibility[i];
+                v              = Plane(layer.w, layer.h, 1);
+                for (int y = 0; y < layer.h; ++y)
+                    for (int x = 0; x < layer.w; ++x)
+                        v.row(y)[x] = layer.row(y)[size_t(x) * size_t(layer.nc) + 4];
             }
             from_iris_space(layer, f.iris);
             Plane& target = per_layer ? (*per_layer)[size_t(k)] : out;

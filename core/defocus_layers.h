@@ -12,6 +12,7 @@
 #include <bokeh/defocus.h>
 
 #include "plane.h"
+#include "psf_runs.h"
 
 #include <bokeh/parallel.h>
 
@@ -40,6 +41,7 @@ struct Sprite {
     float coc_px = 0.0f;
     float rgb[3] = { 0, 0, 0 };   // premultiplied colour taken from the pixel
     std::shared_ptr<const Psf> psf[kSpritePsfs];  // null past the ones in use
+    std::shared_ptr<const PsfRuns> runs[kSpritePsfs];  // each psf as drawn (psf_runs.h)
     int psf_id[kSpritePsfs] = { -1, -1, -1, -1, -1, -1, -1, -1 };  // order of first use (fixed, for merging)
     float weight[kSpritePsfs] = {};
 };
@@ -200,20 +202,25 @@ bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Fram
 /// What a layer's sprites are multiplied by where they land: 1 over the layer's blurred
 /// visibility (composite_layers), as the layer's own colour is divided, so a sprite is the
 /// highlight's light in its layer exactly as the layer treats it. Kept only for the
-/// layer's tiles where a nearer layer hides some of it (elsewhere 1), each over its
-/// full-resolution region; read at frame pixels (output pixels / `up`) by add_psf.
+/// layer's tiles where a nearer layer hides some of it (elsewhere 1): the tile's reduced
+/// visibility, read at a sprite's pixels only as they are drawn (a layer's sprites cover a
+/// small part of its tiles).
 struct SpriteGain {
     bool used = false;
-    int up    = 1;
-    int gx = 0, gy = 0, tile_px = 1, cols = 0;  // the layer's tile grid (rows: region.size() / cols)
-    std::vector<OIIO::ROI> region;           // per tile
-    std::vector<std::vector<float>> inv_vis; // per tile, over its region; empty: 1
+    int up    = 1;  // output pixels a frame pixel
+    int gx = 0, gy = 0, tile_px = 1, cols = 0, s = 1;  // the layer's tile grid and reduction
+    std::vector<OIIO::ROI> draw;  // per tile: the frame pixels the layer reaches (else 1)
+    std::vector<OIIO::ROI> low;   // per tile: the reduced pixels `visibility` covers
+    std::vector<Plane> visibility;  // per tile: the blurred visibility, 1 channel; empty: 1
     /// The tile holding frame pixel (x, y), or -1 past the grid.
     int tile_of(int x, int y) const
     {
         const int tx = floor_div(x - gx, tile_px), ty = floor_div(y - gy, tile_px);
-        return tx < 0 || ty < 0 || tx >= cols || ty * cols + tx >= int(region.size()) ? -1 : ty * cols + tx;
+        return tx < 0 || ty < 0 || tx >= cols || ty * cols + tx >= int(draw.size()) ? -1 : ty * cols + tx;
     }
+    /// The gain at frame pixel (x, y): 1 / visibility, read as `sample` reads colour
+    /// (0 where it is under 1e-6), 1 where the layer is not hidden.
+    float at(int x, int y) const;
 };
 
 /// Whether layer k holds a share of any sprite.
@@ -298,15 +305,6 @@ inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, 
 {
     bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
              (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), out);
-}
-
-// The layer's visibility (channel 4) read as `sample` reads its colour.
-inline float sample_visibility(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y)
-{
-    float vis;
-    bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
-             (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), &vis, 4, 1);
-    return vis;
 }
 
 // The same at the centre of sub-pixel (sx, sy) of `up` x `up` in full-resolution pixel

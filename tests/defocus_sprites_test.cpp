@@ -72,6 +72,35 @@ float at(const OIIO::ImageBuf& img, int x, int y, int c)
     return static_cast<const float*>(img.pixeladdr(x, y))[c];
 }
 
+// A sprite is drawn as ramps within 1e-3 of each PSF pixel's own value (below 1e-6 of the
+// channel's peak, of that level) and literal runs, each PSF then rescaled to its exact sum
+// (core/psf_runs.h): `got` against `want` in units of that allowance's reference, so the
+// bound 2e-3 holds the ramps' error plus the rescale's.
+double ramp_error(double got, double want, double peak)
+{
+    return std::abs(got - want) / std::max(std::abs(want), 1e-6 * peak);
+}
+constexpr double kRampBound = 2e-3;
+
+// The PSF a sprite of `o` at CoC `coc_px` is drawn with, on the axis, over an output
+// `width_px` pixels wide, and its largest value.
+Psf sprite_psf(const DefocusOptions& o, int width_px, double coc_px, float& peak)
+{
+    LensCharacter lens  = o.lens;
+    lens.fstop          = o.coc.lens.fstop;
+    lens.focal_mm       = o.coc.lens.focal_mm;
+    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / width_px;
+    PsfRequest req;
+    req.coc_px = coc_px;
+    Psf psf;
+    std::string err;
+    EXPECT_TRUE(lens_psf(psf, lens, req, err)) << err;
+    peak = 0.0f;
+    for (float v : psf.rgb)
+        peak = std::max(peak, v);
+    return psf;
+}
+
 double channel_sum(const OIIO::ImageBuf& img, int c)
 {
     double s = 0.0;
@@ -200,7 +229,7 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
 {
     // A 1e6 pixel at CoC 32 px (a bin centre: no crossfade) in the display window's centre
     // (field 0), on transparent black: one sprite, each channel holding 1e6 (1e-5), and
-    // every pixel equal to 1e6 times lens_psf's (1e-5 of the peak).
+    // every pixel equal to 1e6 times lens_psf's (ramp_error).
     const OIIO::ROI display(-48, 113, -48, 113);
     const OIIO::ImageBuf src = image(
         65, 65,
@@ -220,18 +249,9 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
     EXPECT_EQ(rep.sprites, 1);
     EXPECT_FLOAT_EQ(rep.sprite_min_coc_px, 32.0f);
 
-    LensCharacter lens = o.lens;
-    lens.fstop          = o.coc.lens.fstop;
-    lens.focal_mm       = o.coc.lens.focal_mm;
-    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / display.width();
-    PsfRequest req;
-    req.coc_px = 32.0;
-    Psf psf;
-    std::string err;
-    ASSERT_TRUE(lens_psf(psf, lens, req, err)) << err;
-    float peak = 0.0f;
-    for (float v : psf.rgb)
-        peak = std::max(peak, v);
+    float peak;
+    const Psf psf = sprite_psf(o, display.width(), 32.0, peak);
+    ASSERT_GT(psf.width, 0);
     double worst = 0.0;
     for (int c = 0; c < 3; ++c) {
         EXPECT_NEAR(channel_sum(out, c) / 1e6, 1.0, 1e-5) << "channel " << c;
@@ -240,12 +260,58 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
                 const int px = x - 32 + psf.width / 2, py = y - 32 + psf.height / 2;
                 const bool inside = px >= 0 && px < psf.width && py >= 0 && py < psf.height;
                 const double want = inside ? 1e6 * psf.at(px, py, c) : 0.0;
-                worst = std::max(worst, std::abs(at(out, x, y, c) - want) / (1e6 * peak));
+                worst = std::max(worst, ramp_error(at(out, x, y, c), want, 1e6 * peak));
             }
     }
-    std::printf("[ figures  ] lone pixel: PSF %dx%d, largest difference %.2e of the peak\n", psf.width,
+    std::printf("[ figures  ] lone pixel: PSF %dx%d, largest difference %.2e of the pixel's value\n", psf.width,
                 psf.height, worst);
-    EXPECT_LT(worst, 1e-5);
+    EXPECT_LT(worst, kRampBound);
+}
+
+TEST(DefocusSprites, ASpriteCutByTheOutputsEdgeKeepsItsShape)
+{
+    // The lone light of the test above, 3 px from the left and 5 px from the top of an
+    // output that does not grow past the data window: the sprite's ramps and runs are cut
+    // at the edges, and what is left is lens_psf's pixels there (ramp_error), nothing more.
+    const OIIO::ImageBuf src = image(65, 65, [](int x, int y) {
+        Px p;
+        p.a = 0.0f;
+        p.z = 32.0f;
+        if (x == 3 && y == 5)
+            p.r = p.g = p.b = 1e6f, p.a = 1.0f;
+        return p;
+    });
+    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    o.lens.diffraction = DiffractionModel::EdgeLaw;
+    o.grow             = false;
+    const OIIO::ImageBuf out = run(src, o);
+    ASSERT_EQ(out.roi().xbegin, 0);
+    ASSERT_EQ(out.roi().xend, 65);
+    ASSERT_EQ(out.roi().ybegin, 0);
+    ASSERT_EQ(out.roi().yend, 65);
+
+    // The field: 29 px left and 27 px up of the centre, 0.63 of the half-diagonal; an
+    // achromat with no field effect asks every PSF on the axis.
+    float peak;
+    const Psf psf = sprite_psf(o, 65, 32.0, peak);
+    ASSERT_GT(psf.width, 0);
+    double worst = 0.0, inside_sum = 0.0, got_sum = 0.0;
+    for (int c = 0; c < 3; ++c)
+        for (int y = 0; y < 65; ++y)
+            for (int x = 0; x < 65; ++x) {
+                const int px = x - 3 + psf.width / 2, py = y - 5 + psf.height / 2;
+                const bool inside = px >= 0 && px < psf.width && py >= 0 && py < psf.height;
+                const double want = inside ? 1e6 * psf.at(px, py, c) : 0.0;
+                worst = std::max(worst, ramp_error(at(out, x, y, c), want, 1e6 * peak));
+                inside_sum += want;
+                got_sum += at(out, x, y, c);
+            }
+    std::printf("[ figures  ] sprite cut at the output's edge: largest difference %.2e of the pixel's value, "
+                "%.3f of its light kept\n",
+                worst, got_sum / 3e6);
+    EXPECT_LT(worst, kRampBound);
+    EXPECT_NEAR(got_sum / inside_sum, 1.0, kRampBound);
+    EXPECT_LT(got_sum / 3e6, 0.5);  // most of it fell past the edges
 }
 
 TEST(DefocusSprites, FieldBinsAreInterpolated)
@@ -253,7 +319,7 @@ TEST(DefocusSprites, FieldBinsAreInterpolated)
     // A 1e6 light at CoC 16 px (a CoC bin's centre) on the display window's horizontal
     // axis, with a cat's eye (a field effect). At x = 39 its field position lies 0.49 of
     // the way from the centre's field bin to the next (1/8 of the half-diagonal): the
-    // sprite is 1e6 times the bilinear blend of lens_psf at the two bins (1e-5 of the
+    // sprite is 1e6 times the bilinear blend of lens_psf at the two bins (ramp_error of the
     // peak). Moved a pixel a frame across the next bin (x = 36 .. 60), the sprite's shape
     // (each frame against the one before, moved back by a pixel) changes by steps of
     // nearly equal size: the largest step within 2x their mean (snapped to the nearest bin
@@ -293,12 +359,18 @@ TEST(DefocusSprites, FieldBinsAreInterpolated)
             for (int x = -48; x < 113; ++x) {
                 const int px = x - 39 + a.width / 2, py = y - 32 + a.height / 2;
                 const bool inside = px >= 0 && px < a.width && py >= 0 && py < a.height;
-                const double want = inside ? 1e6 * ((1.0 - t) * a.at(px, py, c) + t * b.at(px, py, c)) : 0.0;
-                worst = std::max(worst, std::abs(at(out, x, y, c) - want));
-                peak  = std::max(peak, want);
+                peak = std::max(peak, inside ? 1e6 * std::max(a.at(px, py, c), b.at(px, py, c)) : 0.0);
             }
-    std::printf("[ figures  ] field bins %.3f apart: largest difference %.2e of the peak\n", t, worst / peak);
-    EXPECT_LT(worst, 1e-5 * peak);
+    for (int c = 0; c < 3; ++c)
+        for (int y = -48; y < 113; ++y)
+            for (int x = -48; x < 113; ++x) {
+                const int px = x - 39 + a.width / 2, py = y - 32 + a.height / 2;
+                const bool inside = px >= 0 && px < a.width && py >= 0 && py < a.height;
+                const double want = inside ? 1e6 * ((1.0 - t) * a.at(px, py, c) + t * b.at(px, py, c)) : 0.0;
+                worst = std::max(worst, ramp_error(at(out, x, y, c), want, peak));
+            }
+    std::printf("[ figures  ] field bins %.3f apart: largest difference %.2e of the pixel's value\n", t, worst);
+    EXPECT_LT(worst, kRampBound);
 
     std::vector<OIIO::ImageBuf> frames;
     for (int lx = 36; lx <= 60; ++lx)
@@ -866,18 +938,9 @@ TEST(DefocusSprites, SupersampledLonePixelIsTheFinerPsf)
     const OIIO::ImageBuf out = run(src, o, &rep);
     EXPECT_EQ(rep.sprites, 1);
 
-    LensCharacter lens = o.lens;
-    lens.fstop          = o.coc.lens.fstop;
-    lens.focal_mm       = o.coc.lens.focal_mm;
-    lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / (2 * display.width());
-    PsfRequest req;
-    req.coc_px = 64.0;
-    Psf psf;
-    std::string err;
-    ASSERT_TRUE(lens_psf(psf, lens, req, err)) << err;
-    float peak = 0.0f;
-    for (float v : psf.rgb)
-        peak = std::max(peak, v);
+    float peak;
+    const Psf psf = sprite_psf(o, 2 * display.width(), 64.0, peak);
+    ASSERT_GT(psf.width, 0);
     // Output pixel (X, Y) covers [X/2, X/2 + 1/2) in frame units; the frame pixel 32's
     // centre is output coordinate 65, the corner of output pixels 64 and 65.
     auto folded = [&](int X, int Y, int c) {
@@ -895,11 +958,12 @@ TEST(DefocusSprites, SupersampledLonePixelIsTheFinerPsf)
         EXPECT_NEAR(channel_sum(out, c) / 4e6, 1.0, 1e-5) << "channel " << c;
         for (int y = 2 * -48; y < 2 * 113; ++y)
             for (int x = 2 * -48; x < 2 * 113; ++x)
-                worst = std::max(worst, std::abs(at(out, x, y, c) - 4e6 * folded(x, y, c)) / (4e6 * peak));
+                worst = std::max(worst, ramp_error(at(out, x, y, c), 4e6 * folded(x, y, c), 4e6 * peak));
     }
-    std::printf("[ figures  ] supersampled lone pixel: PSF %dx%d at CoC 64, largest difference %.2e of the peak\n",
+    std::printf("[ figures  ] supersampled lone pixel: PSF %dx%d at CoC 64, largest difference %.2e of the "
+                "pixel's value\n",
                 psf.width, psf.height, worst);
-    EXPECT_LT(worst, 1e-5);
+    EXPECT_LT(worst, kRampBound);
     // Centred: the light's centroid is the frame pixel's centre, output coordinate 65.
     double sx = 0.0, sy = 0.0, sw = 0.0;
     const OIIO::ROI r = out.roi();
