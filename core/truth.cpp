@@ -16,6 +16,9 @@
 // each 16 x 16 block of cells keeps its samples' CoC range, and a pixel's rays walk only
 // the range of the blocks they can reach (on the merged LowResLeftView passes, 2.6 cells
 // a ray instead of 15.3, the same pixels: build/bin/truth_measure, docs/methods/truth.md).
+// The `unknown` share (TruthOptions::unknown) is ours: a ray adds its transmittance where
+// it enters space the file does not record, behind an opaque pixel's last sample or past
+// the data window (docs/methods/truth.md).
 // Limits as truth.h says; cost is rays x cells crossed, the cells growing with the CoC
 // range, stopping at the first opaque surface; about 200 ns a ray on one core, mostly the
 // sampler and the walk's set-up.
@@ -46,6 +49,9 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // Transmittance at or below which float stores the accumulated opacity as 1 (1 - 2^-25
 // rounds to 1.0f): a ray stops there (deep.h's cull threshold).
 constexpr double kOpaqueTransmittance = 1.0 / 33554432.0;
+// A pixel whose samples let through at most this share of what lies behind them hides
+// it from the camera: a ray crossing that space meets what the file does not record.
+constexpr float kUnseenBehind = 1e-3f;
 // The inverse CDF of a polygon sector's angle is tabulated at this many steps.
 constexpr int kAngleSteps = 4096;
 
@@ -63,6 +69,9 @@ struct TruthSample {
 struct Cell {
     uint32_t first = 0, count = 0;
     float coc_min = 0.0f, coc_max = 0.0f;  // over its samples' fronts and backs
+    // The A transmittance through all its samples: how much of what lies behind them the
+    // camera saw.
+    float through = 1.0f;
 };
 
 struct Scene {
@@ -190,6 +199,7 @@ bool build_scene(Scene& sc, const OIIO::ImageBuf& tidy, const CocOfDepth& coc_of
                     }
                     prev_c = t.coc_back;
                     prev_z = t.zback;
+                    cell.through *= 1.0f - std::clamp(t.alpha[3], 0.0f, 1.0f);
                     if (k == 0) {
                         cell.coc_min = t.coc;
                         cell.coc_max = t.coc_back;
@@ -270,6 +280,7 @@ double depth_of_coc(const TruthSample& t, float target, const CocOfDepth& coc_of
 struct RayState {
     double acc[4];
     double T[4];
+    double unknown = 0.0;  // the share of the ray's light that crossed unrecorded space
     int64_t cells = 0;
     void reset()
     {
@@ -277,6 +288,7 @@ struct RayState {
             acc[c] = 0.0;
             T[c]   = 1.0;
         }
+        unknown = 0.0;
     }
     bool opaque() const
     {
@@ -349,8 +361,14 @@ void trace(const Scene& sc, float lo, float hi, double px, double py, double sx,
     };
     clip(px, dx, d.xbegin, d.xend);
     clip(py, dy, d.ybegin, d.yend);
-    if (!(ca <= cb))
-        return;
+    // Past the window the file records nothing: a ray that starts there could meet
+    // something before it enters, and one that leaves carries its transmittance out.
+    if (!(ca <= cb) || ca > lo) {
+        r.unknown += 1.0;
+        if (!(ca <= cb))
+            return;
+    }
+    const bool leaves = cb < hi;
     // The first interval is open below unless the window cut it, the last open above.
     const float lower = ca > lo ? float(ca) : -std::numeric_limits<float>::infinity();
     const float upper = cb < hi ? float(cb) : std::numeric_limits<float>::infinity();
@@ -367,17 +385,32 @@ void trace(const Scene& sc, float lo, float hi, double px, double py, double sx,
         const bool last     = c_next >= cb;
         const float c_out   = last ? upper : float(c_next);
         ++r.cells;
-        if (!visit_cell(sc, sc.cell(ix, iy), c_in, c_out, coc_of, r) || last)
+        const Cell& cell = sc.cell(ix, iy);
+        if (!visit_cell(sc, cell, c_in, c_out, coc_of, r))
             return;
+        // Past the last sample of a cell the camera could not see through: space the file
+        // does not record (a renderer keeps samples until a pixel is opaque; behind a
+        // partly transparent stack it would have kept what was there).
+        if (cell.count && c_out > cell.coc_max && cell.through <= kUnseenBehind)
+            r.unknown += r.T[3];
+        if (last) {
+            if (leaves)
+                r.unknown += r.T[3];
+            return;
+        }
         if (cx <= cy) {
             ix += stepx;
-            if (ix < d.xbegin || ix >= d.xend)
+            if (ix < d.xbegin || ix >= d.xend) {
+                r.unknown += r.T[3];
                 return;
+            }
             cx = next_x();
         } else {
             iy += stepy;
-            if (iy < d.ybegin || iy >= d.yend)
+            if (iy < d.ybegin || iy >= d.yend) {
+                r.unknown += r.T[3];
                 return;
+            }
             cy = next_y();
         }
         c_in = c_out;
@@ -531,9 +564,12 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
         g.yend += gy;
         out = OIIO::roi_intersection(g, OIIO::roi_union(display, sc.data));
     }
-    out.chbegin = 0;
-    out.chend   = 4;
-    OIIO::ImageSpec ospec = derived_spec(spec, { "R", "G", "B", "A" }, out);
+    const int nc = opt.unknown ? 5 : 4;
+    out.chbegin  = 0;
+    out.chend    = nc;
+    OIIO::ImageSpec ospec = derived_spec(spec, opt.unknown ? std::vector<std::string>{ "R", "G", "B", "A", "unknown" }
+                                                           : std::vector<std::string>{ "R", "G", "B", "A" },
+                                         out);
     ospec.deep            = false;
     OIIO::ImageBuf result(ospec);
 
@@ -564,6 +600,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                 for (int x = out.xbegin; x < out.xend; ++x) {
                     const uint32_t px_seed = detail::pixel_seed(opt.seed, x, y);
                     double sum[2][4]       = {};
+                    double unknown         = 0.0;
                     float lo, hi;
                     sc.range_near(x - reach_x, x + reach_x, y - reach_y, y + reach_y, lo, hi);
                     for (int half = 0; half < 2 && lo <= hi; ++half) {
@@ -577,10 +614,13 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                             ++part.rays;
                             for (int c = 0; c < 4; ++c)
                                 sum[half][c] += ray.acc[c];
+                            unknown += std::min(1.0, ray.unknown);
                         }
                     }
+                    if (nc == 5)
+                        row[size_t(x - out.xbegin) * 5 + 4] = float(unknown * inv_n);
                     for (int c = 0; c < 4; ++c) {
-                        row[size_t(x - out.xbegin) * 4 + size_t(c)] = float((sum[0][c] + sum[1][c]) * inv_n);
+                        row[size_t(x - out.xbegin) * size_t(nc) + size_t(c)] = float((sum[0][c] + sum[1][c]) * inv_n);
                         if (n_second > 0)
                             part.noise.add(sum[0][c] / n_first, sum[1][c] / n_second);
                     }

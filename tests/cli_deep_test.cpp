@@ -92,6 +92,15 @@ TEST(CliDeep, DeepDefocusFlatAndDeepOut)
     expect_clean_failure(bokehtool(format("--scene lights:width=32:height=18 --defocus:method=truth -o {}/t.exr", dir)),
                          "deep", dir + "/t.exr");
     expect_clean_failure(bokehtool(format("{} --defocus:spp=16 -o {}/t.exr", a, dir)), "spp", dir + "/t.exr");
+    expect_clean_failure(bokehtool(format("{} --defocus:unknown=1 -o {}/t.exr", a, dir)), "unknown", dir + "/t.exr");
+    // unknown=1: a fifth channel, the share of each pixel's rays that crossed what the file
+    // does not record.
+    r = bokehtool(format("{} --defocus:math=direct:scale=3:method=truth:spp=16:unknown=1 -o {}/unknown.exr", a, dir));
+    ASSERT_EQ(r.status, 0) << r.err << r.out;
+    OIIO::ImageBuf u;
+    ASSERT_TRUE(bokeh::read_image(u, dir + "/unknown.exr", err)) << err;
+    ASSERT_EQ(u.nchannels(), 5);
+    EXPECT_EQ(u.spec().channel_name(4), "unknown");
     expect_clean_failure(bokehtool(format("{} --defocus:method=truth:bloom=2 -o {}/t.exr", a, dir)), "bloom",
                          dir + "/t.exr");
 }

@@ -131,6 +131,37 @@ double rms_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b, int dx =
     return std::sqrt(sq / double(n));
 }
 
+// The lens of the foreground-edge tests: 50 mm f/2 on a 2 mm wide back, depth in mm,
+// focused at 1000, 1024 rays a pixel; over 64 px, depth 700 has a CoC of about -18 px.
+bokeh::TruthOptions edge_lens()
+{
+    bokeh::TruthOptions o;
+    o.coc.lens.focal_mm        = 50.0;
+    o.coc.lens.fstop           = 2.0;
+    o.coc.lens.sensor_width_mm = 2.0;
+    o.coc.lens.depth_unit_mm   = 1.0;
+    o.coc.lens.focus_distance  = 1000.0;
+    o.spp                      = 1024;
+    return o;
+}
+
+// The share of pixel x's rays that miss an opaque card covering x < edge at CoC c < 0 and
+// reach focus at their own pixel: the rays from P = x + a through aperture offset s meet
+// the card's depth at P - s c and miss it where P.x - s.x c >= edge. The disk (radius 1/2)
+// beyond a chord at s.x = t: (acos(2t) - 2t sqrt(1 - 4t^2)) / pi, averaged over a in [0, 1).
+double missed_card(int x, int edge, double c)
+{
+    auto segment = [](double t) {
+        const double q = std::clamp(2.0 * t, -1.0, 1.0);
+        return (std::acos(q) - q * std::sqrt(1.0 - q * q)) / kPi;
+    };
+    double share         = 0.0;
+    constexpr int kSteps = 1000;
+    for (int i = 0; i < kSteps; ++i)
+        share += segment((edge - (x + (i + 0.5) / kSteps)) / -c) / kSteps;
+    return share;
+}
+
 }  // namespace
 
 // The sampler covers the aperture with uniform density: a 1024 x 1024 grid of the unit
@@ -407,35 +438,17 @@ TEST(Truth, RevealsHiddenBackground)
                 p = { { 0, 0, 1, 1, 1000, 1000 } };  // visible blue
         }
     const OIIO::ImageBuf deep = framed_deep(kW, kH, px);
-    bokeh::TruthOptions o;
-    o.coc.lens.focal_mm        = 50.0;
-    o.coc.lens.fstop           = 2.0;
-    o.coc.lens.sensor_width_mm = 2.0;
-    o.coc.lens.depth_unit_mm   = 1.0;
-    o.coc.lens.focus_distance  = 1000.0;
-    o.spp                      = 1024;
-    const double coc_front     = bokeh::thin_lens_coc_px(o.coc.lens, 700.0, kW);  // about -18 px
+    const bokeh::TruthOptions o = edge_lens();
+    const double c              = bokeh::thin_lens_coc_px(o.coc.lens, 700.0, kW);  // about -18 px
     OIIO::ImageBuf out;
     bokeh::TruthReport rep;
     ASSERT_TRUE(bokeh::defocus_truth(out, deep, o, &rep, 2)) << out.geterror();
-    // Expected green at pixel x: the rays from P = x + a through aperture offset s meet the
-    // foreground's depth at P - s c (c < 0) and miss it where P.x - s.x c >= 32, then meet
-    // the background at P (CoC 0), green there. The disk (radius 1/2) beyond a chord at s.x
-    // = t: (acos(2t) - 2t sqrt(1 - 4t^2)) / pi, averaged over a in [0, 1).
-    auto segment = [](double t) {
-        const double q = std::clamp(2.0 * t, -1.0, 1.0);
-        return (std::acos(q) - q * std::sqrt(1.0 - q * q)) / kPi;
-    };
-    const double c = coc_front;
-    double worst   = 0.0;
+    // Expected green at pixel x: the share of its rays that miss the red card and meet
+    // the background at their own pixel (CoC 0), green there.
+    double worst = 0.0;
     for (int x = kEdge - 12; x < kEdge; ++x) {
-        double expected = 0.0;
-        constexpr int kSteps = 1000;
-        for (int i = 0; i < kSteps; ++i) {
-            const double P = x + (i + 0.5) / kSteps;
-            expected += segment((kEdge - P) / -c) / kSteps;  // s.x >= (32 - P) / (-c)
-        }
-        const double g = out.getchannel(x, kH / 2, 0, 1);
+        const double expected = missed_card(x, kEdge, c);
+        const double g        = out.getchannel(x, kH / 2, 0, 1);
         worst          = std::max(worst, std::abs(g - expected));
         if (x >= kEdge - 3)
             std::cout << "x " << x << ": green " << g << ", expected " << expected << "\n";
@@ -456,6 +469,57 @@ TEST(Truth, RevealsHiddenBackground)
     for (int x = kEdge - 12; x < kEdge; ++x)
         flat_green = std::max(flat_green, flat_out.getchannel(x, kH / 2, 0, 1));
     EXPECT_EQ(flat_green, 0.0f);
+}
+
+// The `unknown` channel: the share of a pixel's rays that cross space the file does not
+// record. The scene above without its hidden green: an opaque red card (CoC about -18 px)
+// over the left half, the blue wall at focus on the right only. A ray from a left pixel
+// that misses the card goes on behind the card's pixels, where nothing is recorded: its
+// share is the closed form of the test above, and those rays see nothing (alpha 1 - it).
+// A right pixel's rays either meet the card or stay over the wall: 0, exactly. Rays that
+// start past the frame's edge (the card's blur reaches 9 px) count too. RGBA is the same
+// bits with the channel or without.
+TEST(Truth, UnknownIsTheShareOfRaysBehindWhatTheFileHides)
+{
+    constexpr int kW = 64, kH = 24, kEdge = 32;
+    std::vector<Pixel> px(size_t(kW) * kH);
+    for (int y = 0; y < kH; ++y)
+        for (int x = 0; x < kW; ++x)
+            px[size_t(y) * kW + x] = x < kEdge ? Pixel{ { 1, 0, 0, 1, 700, 700 } } : Pixel{ { 0, 0, 1, 1, 1000, 1000 } };
+    const OIIO::ImageBuf deep = framed_deep(kW, kH, px);
+    bokeh::TruthOptions o     = edge_lens();
+    o.unknown                 = true;
+    OIIO::ImageBuf out, plain;
+    ASSERT_TRUE(bokeh::defocus_truth(out, deep, o, nullptr, 2)) << out.geterror();
+    ASSERT_EQ(out.nchannels(), 5);
+    EXPECT_EQ(out.spec().channel_name(4), "unknown");
+    bokeh::TruthOptions without = o;
+    without.unknown             = false;
+    ASSERT_TRUE(bokeh::defocus_truth(plain, deep, without, nullptr, 2)) << plain.geterror();
+    ASSERT_EQ(plain.nchannels(), 4);
+    for (int y = out.roi().ybegin; y < out.roi().yend; ++y)
+        for (int x = out.roi().xbegin; x < out.roi().xend; ++x)
+            for (int c = 0; c < 4; ++c) {
+                ASSERT_EQ(out.getchannel(x, y, 0, c), plain.getchannel(x, y, 0, c)) << x << "," << y;
+            }
+
+    const double c = bokeh::thin_lens_coc_px(o.coc.lens, 700.0, kW);
+    double worst = 0.0, worst_alpha = 0.0;
+    for (int x = kEdge - 8; x < kEdge; ++x) {
+        const double expected = missed_card(x, kEdge, c);
+        const double u = out.getchannel(x, kH / 2, 0, 4), a = out.getchannel(x, kH / 2, 0, 3);
+        worst          = std::max(worst, std::abs(u - expected));
+        worst_alpha    = std::max(worst_alpha, std::abs(a - (1.0 - expected)));
+        if (x == kEdge - 1) {
+            EXPECT_GT(u, 0.3);
+        }
+    }
+    std::cout << "unknown: largest error against the closed form " << worst << ", alpha's " << worst_alpha << "\n";
+    EXPECT_LT(worst, 0.02);
+    EXPECT_LT(worst_alpha, 0.02);
+    for (int x = kEdge; x < kW - 12; ++x)
+        EXPECT_EQ(out.getchannel(x, kH / 2, 0, 4), 0.0f) << "x " << x;
+    EXPECT_GT(out.getchannel(1, kH / 2, 0, 4), 0.2f);  // its rays start past the left edge
 }
 
 // Per-pixel seeds and fixed chunks: the same bits for 1 and 2 threads.
@@ -623,12 +687,7 @@ TEST(Truth, VolumeCutOnTheShapedCurve)
     for (int y = 0; y < kH; ++y)
         for (int x = 0; x < kEdge; ++x)
             px[size_t(y) * kW + x] = { { kAlpha, kAlpha, kAlpha, kAlpha, kZ0, kZ1 } };
-    bokeh::TruthOptions o;
-    o.coc.lens.focal_mm        = 50.0;
-    o.coc.lens.fstop           = 2.0;
-    o.coc.lens.sensor_width_mm = 2.0;
-    o.coc.lens.depth_unit_mm   = 1.0;
-    o.coc.lens.focus_distance  = 1000.0;
+    bokeh::TruthOptions o      = edge_lens();
     o.coc.infocus_range        = 200.0;
     o.coc.front_gain           = 0.7;
     o.coc.back_gain            = 1.3;

@@ -67,6 +67,13 @@ struct TruthOptions {
     /// flat defocus grows it); false: the output covers the data window.
     bool grow = true;
     NonFinitePolicy nonfinite = NonFinitePolicy::Zero;
+    /// Add a fifth channel, "unknown": per pixel, the mean over its rays of the share of
+    /// their light that crossed space the deep image does not record: behind the samples
+    /// of a pixel the camera could not see through (transmittance 1e-3 or less), or past
+    /// the data window; the ray's transmittance there, summed along it, at most 1. 0 where
+    /// the file holds everything the rays can meet; elsewhere the truth shows what the
+    /// file leaves out (a hole where a render would have had a hidden surface).
+    bool unknown = false;
     /// Called with the fraction done (0..1), from one thread at a time, in rising order.
     std::function<void(float)> progress;
 };

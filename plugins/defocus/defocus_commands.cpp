@@ -41,7 +41,7 @@ bool defocus_command(CommandContext& c)
         return c.fail(flat.geterror());
     const OIIO::ImageBuf& src = diagnostic && in.buf->deep() ? flat : *in.buf;
     const std::string& method = bokeh::defocus_method_named(c.options);
-    for (const char* name : { "spp", "seed" })
+    for (const char* name : { "spp", "seed", "unknown" })
         if (c.options.given(name) && method != "truth")
             return c.fail(format("{}= is for method=truth", name));
     if (o.supersample > 1 && what != "image" && what != "deep")
@@ -67,6 +67,7 @@ bool defocus_command(CommandContext& c)
         t.nonfinite = o.nonfinite;
         t.spp       = c.options.get_int("spp");
         t.seed      = uint32_t(c.options.get_int("seed"));
+        t.unknown   = c.options.get_bool("unknown");
         t.progress  = c.progress;
         bokeh::TruthReport report;
         ok = bokeh::defocus_truth(*out.buf, *in.buf, t, &report, c.nthreads);
@@ -157,6 +158,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("step", 0.25, 1.0 / 64.0, 8.0, "reference: CoC quantisation step px"),
         OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
         OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
+        OptionSpec::Bool("unknown", false,
+                         "truth: add a channel 'unknown', each pixel's share of light from space the deep "
+                         "image does not record (behind its samples)"),
     };
     // The lens and the aperture in their shared spelling (--scene's geometric truth takes
     // them too), at their places in the list: after output=, and after maxcoc=.

@@ -16,10 +16,11 @@ OUTDIR/<task>.svg with two panels:
 
 It also prints, per task, a Markdown table of the Pareto-front points for the docs.
 
-Tasks with rows "METHOD vs truth" and "METHOD vs truth (mask)" (bokeh-bench --task deep)
-go into one chart instead, OUTDIR/deep_truth.png and .svg: a panel per frame, each
-method's PSNR against the thin-lens truth over the frame (filled) and over the
-disocclusion mask (hollow) against its median time, and the truth at its own time and
+Tasks with rows "METHOD vs truth", "METHOD vs truth (mask)" and "METHOD vs truth (held)"
+(bokeh-bench --task deep) go into one chart instead, OUTDIR/deep_truth.png and .svg: a
+panel per frame, each method's PSNR against the thin-lens truth over the frame (filled),
+the disocclusion mask (hollow) and the held pixels (a bar) against its median time, and
+the truth at its own time and
 noise floor (the "truth N spp" row; a dotted line); with a Markdown table per frame.
 Methods are compared at equal kernel size: a small kernel is no substitute for a large
 one, so a front across sizes would mostly list the smallest size of the fastest method.
@@ -446,6 +447,7 @@ def draw_task(plt, ticker, task, rows, base, suffix, size_label=SIZE_LABEL):
 
 TRUTH_SUFFIX = " vs truth"
 MASK_SUFFIX = " vs truth (mask)"
+HELD_SUFFIX = " vs truth (held)"
 
 
 def is_truth_task(task_rows):
@@ -455,9 +457,9 @@ def is_truth_task(task_rows):
 
 def draw_truth(plt, ticker, frames, base, suffix):
     """Write base.png and base.svg: per deep frame, each method's PSNR against the truth
-    over the frame (filled) and over the disocclusion mask (hollow, joined to it) against
-    its median time, and the truth itself at its time and noise floor. Return the
-    Markdown tables."""
+    over the frame (filled), over the disocclusion mask (hollow) and over the held pixels
+    (a bar), joined, against its median time, and the truth itself at its time and noise
+    floor. Return the Markdown tables."""
     colours = [c for i, c in enumerate(plt.get_cmap("tab10").colors) if i != 7]
     markers = "o^sDvP"
     fig, axes = plt.subplots(1, len(frames), figsize=(6.2 * len(frames), 5.2), squeeze=False)
@@ -467,13 +469,14 @@ def draw_truth(plt, ticker, frames, base, suffix):
         for r in rows:
             m = r["method"]
             name = (m[:-len(MASK_SUFFIX)] if m.endswith(MASK_SUFFIX)
+                    else m[:-len(HELD_SUFFIX)] if m.endswith(HELD_SUFFIX)
                     else m[:-len(TRUTH_SUFFIX)] if m.endswith(TRUTH_SUFFIX) else None)
             if name is not None and name not in methods:
                 methods.append(name)
         truth = [r for r in rows if r["method"].startswith("truth ")]
         values, lines = [], [f"### {task}", "",
-                             "| method | median ms | PSNR vs truth, frame | disocclusion mask |",
-                             "|---|---:|---:|---:|"]
+                             "| method | median ms | PSNR vs truth, frame | disocclusion mask | held |",
+                             "|---|---:|---:|---:|---:|"]
         for name in methods:
             if name not in seen:
                 seen.append(name)
@@ -481,12 +484,13 @@ def draw_truth(plt, ticker, frames, base, suffix):
             colour, marker = colours[i % len(colours)], markers[i % len(markers)]
             frame = next((r for r in rows if r["method"] == name + TRUTH_SUFFIX), None)
             mask = next((r for r in rows if r["method"] == name + MASK_SUFFIX), None)
-            pts = [p for p in (frame, mask) if p]
+            held = next((r for r in rows if r["method"] == name + HELD_SUFFIX), None)
+            pts = [p for p in (frame, mask, held) if p]
             if not pts:
                 continue
-            if frame and mask:
-                ax.plot([frame["ms"]] * 2, [frame["psnr"], mask["psnr"]], color=colour,
-                        linewidth=1, zorder=2)
+            if len(pts) > 1:
+                ax.plot([pts[0]["ms"]] * 2, [min(p["psnr"] for p in pts), max(p["psnr"] for p in pts)],
+                        color=colour, linewidth=1, zorder=2)
             if frame:
                 h, = ax.plot([frame["ms"]], [frame["psnr"]], marker=marker, color=colour,
                              markersize=8, linestyle="none", zorder=3)
@@ -494,16 +498,19 @@ def draw_truth(plt, ticker, frames, base, suffix):
             if mask:
                 ax.plot([mask["ms"]], [mask["psnr"]], marker=marker, color=colour, markersize=8,
                         markerfacecolor="white", markeredgewidth=1.6, linestyle="none", zorder=3)
+            if held:
+                ax.plot([held["ms"]], [held["psnr"]], marker="_", color=colour, markersize=14,
+                        markeredgewidth=2.2, linestyle="none", zorder=3)
             values += pts
             fmt = lambda r: f"{r['psnr']:.1f}" if r else ""
-            lines.append(f"| {name} | {ms_text(pts[0]['ms'])} | {fmt(frame)} | {fmt(mask)} |")
+            lines.append(f"| {name} | {ms_text(pts[0]['ms'])} | {fmt(frame)} | {fmt(mask)} | {fmt(held)} |")
         for t in truth:
             h, = ax.plot([t["ms"]], [t["psnr"]], marker="*", color="black", markersize=13,
                          linestyle="none", zorder=3)
             handles.setdefault(f"{t['method']}: its noise floor, at its time", h)
             ax.axhline(t["psnr"], color="0.35", linestyle=":", linewidth=1.1, zorder=1)
             values.append(t)
-            lines.append(f"| {t['method']} (its noise) | {ms_text(t['ms'])} | {t['psnr']:.1f} | |")
+            lines.append(f"| {t['method']} (its noise) | {ms_text(t['ms'])} | {t['psnr']:.1f} | | |")
         ax.set_xscale("log")
         log_ticks(ax.xaxis, ticker, [v["ms"] for v in values])
         lo = min(v["psnr"] for v in values)
@@ -523,8 +530,11 @@ def draw_truth(plt, ticker, frames, base, suffix):
     h_frame, = axes[0][0].plot([], [], marker="o", color="0.4", linestyle="none")
     h_mask, = axes[0][0].plot([], [], marker="o", color="0.4", markerfacecolor="white",
                                linestyle="none")
-    labels = list(handles) + ["filled: over the frame", "hollow: over the disocclusion mask"]
-    fig.legend(list(handles.values()) + [h_frame, h_mask], labels, loc="lower center",
+    h_held, = axes[0][0].plot([], [], marker="_", color="0.4", markersize=14, markeredgewidth=2.2,
+                               linestyle="none")
+    labels = list(handles) + ["filled: over the frame", "hollow: over the disocclusion mask",
+                              "bar: over the held pixels (the file records all their rays meet)"]
+    fig.legend(list(handles.values()) + [h_frame, h_mask, h_held], labels, loc="lower center",
                ncol=3, fontsize=9, frameon=False, numpoints=1)
     fig.suptitle("deep defocus against the thin-lens truth: accuracy vs time"
                  + (f" {suffix}" if suffix else ""), fontsize=13)

@@ -71,16 +71,40 @@ struct TruthPictures {
     struct Result {
         std::string name;
         OIIO::ImageBuf image;
-        double frame_db = 0.0, mask_db = 0.0;
+        double frame_db = 0.0, mask_db = 0.0, held_db = 0.0;
     };
     std::vector<Result> results;
 };
 
+// PSNR of `got` against `truth` over the pixels `in` marks (per pixel of roi): outside
+// them `got` is set to the truth, so the mean squared error over the frame is theirs times
+// their share of the frame.
+double psnr_over(const OIIO::ImageBuf& got, const OIIO::ImageBuf& truth, const std::vector<uint8_t>& in,
+                 const OIIO::ROI& roi, int threads)
+{
+    const int64_t n = std::count(in.begin(), in.end(), uint8_t(1));
+    OIIO::ImageBuf masked = got;
+    for (int y = roi.ybegin; y < roi.yend; ++y)
+        for (int x = roi.xbegin; x < roi.xend; ++x)
+            if (!in[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)]) {
+                float v[4];
+                truth.getpixel(x, y, v, 4);
+                masked.setpixel(x, y, v, 4);
+            }
+    bokeh::ImageError e;
+    std::string why;
+    bokeh::compare(e, masked, truth, why, {}, threads);
+    return e.psnr_db + 10.0 * std::log10(n > 0 ? double(n) / double(roi.npixels()) : 1.0);
+}
+
 // The truth of `shot` and every method against it (the layered methods with a black
-// border: the rays see nothing past the frame), over the frame and over the disocclusion
-// mask: the pixels where the truth of the deep image and the truth of its flatten differ by
-// more than 0.01, what the flat image hides. Each method is timed (its median with that
-// border) so the CSV's rows put accuracy against time. False + message on stderr.
+// border: the rays see nothing past the frame), over the frame, over the disocclusion
+// mask (the pixels where the truth of the deep image and the truth of its flatten differ
+// by more than 0.01, what the flat image hides) and over the held pixels (the truth's
+// `unknown` 0: no ray of theirs crosses space the file does not record, behind an opaque
+// pixel or past the frame). A second truth with another seed gives the floor over each.
+// Each method is timed (its median with that border) so the CSV's rows put accuracy
+// against time. False + message on stderr.
 bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std::string>& rows, TruthPictures& pic)
 {
     const int t = args.threads;
@@ -88,37 +112,60 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
     to.coc      = shot.lens.coc;
     to.aperture = shot.lens.aperture;
     to.spp      = args.reps >= 5 ? 256 : 64;
+    to.unknown  = true;
     pic.spp     = to.spp;
-    OIIO::ImageBuf truth_flat, flat_deep;
+    OIIO::ImageBuf truth_flat, flat_deep, truth_seed2;
     bokeh::TruthReport tr;
     OIIO::Timer timer;
     const bool ok = bokeh::defocus_truth(pic.truth, *shot.deep, to, &tr, t);
     const double truth_ms = timer() * 1e3;
-    if (!ok || !bokeh::deepen(flat_deep, *shot.flat, 1.0f, t) || !bokeh::defocus_truth(truth_flat, flat_deep, to, nullptr, t)) {
-        std::fprintf(stderr, "bokeh-bench: deep: %s: truth: %s%s\n", shot.name.c_str(), pic.truth.geterror().c_str(),
-                     truth_flat.geterror().c_str());
+    bokeh::TruthOptions same = to, other = to;  // the flatten's truth draws the same rays
+    same.unknown = other.unknown = false;
+    other.seed                   = to.seed + 1;
+    if (!ok || !bokeh::deepen(flat_deep, *shot.flat, 1.0f, t) || !bokeh::defocus_truth(truth_flat, flat_deep, same, nullptr, t)
+        || !bokeh::defocus_truth(truth_seed2, *shot.deep, other, nullptr, t)) {
+        std::fprintf(stderr, "bokeh-bench: deep: %s: truth: %s%s%s\n", shot.name.c_str(), pic.truth.geterror().c_str(),
+                     truth_flat.geterror().c_str(), truth_seed2.geterror().c_str());
         return false;
     }
-    const OIIO::ROI roi = pic.truth.roi();
+    OIIO::ROI roi = pic.truth.roi();
+    roi.chbegin   = 0;
+    roi.chend     = 4;  // R, G, B, A (the truth's fifth channel is `unknown`)
     const OIIO::ImageBuf tr4 = rgba_of(pic.truth, roi), tf4 = rgba_of(truth_flat, roi);
     pic.mask.assign(size_t(roi.npixels()), 0);
-    int64_t in_mask = 0;
+    std::vector<uint8_t> held(size_t(roi.npixels()), 0);
+    int64_t in_mask = 0, in_held = 0;
     for (int y = roi.ybegin; y < roi.yend; ++y)
         for (int x = roi.xbegin; x < roi.xend; ++x) {
-            float a[4], b[4];
-            tr4.getpixel(x, y, a, 4);
+            float a[5], b[4];
+            pic.truth.getpixel(x, y, a, 5);
             tf4.getpixel(x, y, b, 4);
             bool differs = false;
             for (int c = 0; c < 4; ++c)
                 differs |= std::abs(a[c] - b[c]) > 0.01f;
-            pic.mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)] = differs;
+            const size_t i = size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin);
+            pic.mask[i]    = differs;
+            held[i]        = a[4] == 0.0f;
             in_mask += differs;
+            in_held += held[i];
         }
     std::printf("%s: truth: %d rays a pixel, %.0f ms, CoC %.1f .. %.1f px, noise %.1f dB; disocclusion mask %lld px "
-                "(%.1f %%)\n",
+                "(%.1f %%); held %lld px (%.1f %%)\n",
                 shot.name.c_str(), to.spp, truth_ms, tr.min_coc_px, tr.max_coc_px, tr.noise_psnr_db, (long long)in_mask,
-                100.0 * double(in_mask) / double(roi.npixels()));
+                100.0 * double(in_mask) / double(roi.npixels()), (long long)in_held,
+                100.0 * double(in_held) / double(roi.npixels()));
     rows.push_back(format("deep {},truth {} spp,,0,{},{:.3f},1,,{:.2f},", shot.name, to.spp, t, truth_ms, tr.noise_psnr_db));
+    {  // the floor over each set of pixels: two truths' difference (3 dB below one truth's noise)
+        const OIIO::ImageBuf s2 = rgba_of(truth_seed2, roi);
+        std::vector<uint8_t> all(held.size(), 1);
+        const double f = psnr_over(s2, tr4, all, roi, t), m = psnr_over(s2, tr4, pic.mask, roi, t),
+                     h = psnr_over(s2, tr4, held, roi, t);
+        std::printf("  %-30s %9.0f ms  vs truth: frame %.2f dB, disocclusion mask %.2f dB, held %.2f dB\n",
+                    "another seed's truth", truth_ms, f, m, h);
+        for (const auto& [suffix, db] : { std::make_pair("", f), std::make_pair(" (mask)", m), std::make_pair(" (held)", h) })
+            rows.push_back(format("deep {},another seed's truth vs truth{},,0,{},{:.3f},1,,{:.2f},", shot.name, suffix, t,
+                                  truth_ms, db));
+    }
 
     struct Method {
         std::string name;
@@ -148,33 +195,23 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
         warm.push_back(!reference);
     }
     const std::vector<double> ms = interleaved_medians_ms(fns, reps, warm);
-    const double share = in_mask > 0 ? double(in_mask) / double(roi.npixels()) : 1.0;
     for (size_t i = 0; i < methods.size(); ++i) {
         if (!outs[i].initialized())
             return false;
         const OIIO::ImageBuf got = rgba_of(outs[i], roi);
-        bokeh::ImageError frame, inside;
+        bokeh::ImageError frame;
         std::string why;
         bokeh::compare(frame, got, tr4, why, {}, t);
-        // The mask's error: outside it the result is set to the truth, so the mean squared
-        // error over the frame is the mask's times its share of the frame.
-        OIIO::ImageBuf masked = got;
-        for (int y = roi.ybegin; y < roi.yend; ++y)
-            for (int x = roi.xbegin; x < roi.xend; ++x)
-                if (!pic.mask[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)]) {
-                    float v[4];
-                    tr4.getpixel(x, y, v, 4);
-                    masked.setpixel(x, y, v, 4);
-                }
-        bokeh::compare(inside, masked, tr4, why, {}, t);
-        const double mask_db = inside.psnr_db + 10.0 * std::log10(share);
-        std::printf("  %-30s %9.0f ms  vs truth: frame %.2f dB, disocclusion mask %.2f dB\n", methods[i].name.c_str(),
-                    ms[i], frame.psnr_db, mask_db);
+        const double mask_db = psnr_over(got, tr4, pic.mask, roi, t), held_db = psnr_over(got, tr4, held, roi, t);
+        std::printf("  %-30s %9.0f ms  vs truth: frame %.2f dB, disocclusion mask %.2f dB, held %.2f dB\n",
+                    methods[i].name.c_str(), ms[i], frame.psnr_db, mask_db, held_db);
         rows.push_back(format("deep {},{} vs truth,,0,{},{:.3f},{},{}", shot.name, methods[i].name, t, ms[i], reps[i],
                               error_fields(frame)));
         rows.push_back(format("deep {},{} vs truth (mask),,0,{},{:.3f},{},,{:.2f},", shot.name, methods[i].name, t, ms[i],
                               reps[i], mask_db));
-        pic.results.push_back({ methods[i].name, got, frame.psnr_db, mask_db });
+        rows.push_back(format("deep {},{} vs truth (held),,0,{},{:.3f},{},,{:.2f},", shot.name, methods[i].name, t, ms[i],
+                              reps[i], held_db));
+        pic.results.push_back({ methods[i].name, got, frame.psnr_db, mask_db, held_db });
     }
     return true;
 }
