@@ -268,11 +268,18 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             // Each piece's layers, and what the pixel leaves visible of each layer (the
             // divisor of its blurred content, as the flat method's visibility):
             //   self_k:   pieces shared between k - 1 and k are seen through their nearer
-            //             shares, 1 - sum T (1 - u) a, T what the earlier pieces of layer
-            //             k - 1 leave (the alpha those shares composite to there; a product
-            //             of 1 - (1 - u) a instead counts a piece hidden behind another
-            //             again, and two close, nearly opaque samples drew a table top of
-            //             representativeDeepImage at 1.5x its coverage);
+            //             shares, 1 - sum T (1 - u) a, T what the earlier pieces of layer k
+            //             leave in front of the piece's share there. With T of layer k, a
+            //             pixel's layers composited unblurred are its flatten exactly (any
+            //             pieces, shares and alphas: a random trial of 20000 pixels agreed
+            //             to 4e-16, where T of layer k - 1 erred by up to 0.09): a piece whose
+            //             nearer share a nearer surface hides in k - 1 (a cone's edge over a
+            //             wall 1.6 px of CoC behind it, LowResLeftView) keeps its share in k
+            //             at its own level, so the wall goes on behind the cone's blurred edge
+            //             instead of cracking (alpha 0.89 over 6 px where the truth is
+            //             opaque). A product of 1 - (1 - u) a instead counts a piece hidden
+            //             behind another again, and two close, nearly opaque samples drew a
+            //             table top of representativeDeepImage at 1.5x its coverage;
             //   hidden_k: what lies wholly in nearer layers covers 1 - prod(1 - a) of the
             //             pixel; where the pixel holds nothing in layer k itself, that part
             //             of layer k is unknown, and layer k is continued under it (a surface
@@ -313,7 +320,8 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                 const float alpha = std::clamp(pc.rgba[3], 0.0f, 1.0f);
                 const bool split  = upper > 0.0f && upper < 1.0f && size_t(lower) + 1 < K;
                 if (split)
-                    self[size_t(lower) + 1] = std::max(0.0f, self[size_t(lower) + 1] - T[lower] * (1.0f - upper) * alpha);
+                    self[size_t(lower) + 1] =
+                        std::max(0.0f, self[size_t(lower) + 1] - T[size_t(lower) + 1] * (1.0f - upper) * alpha);
                 const size_t wholly_nearer_from = size_t(lower) + (upper > 0.0f ? 2 : 1);
                 if (wholly_nearer_from < K)
                     nearer_t[wholly_nearer_from] *= 1.0f - alpha;

@@ -180,6 +180,50 @@ TEST(DeepDefocus, OneDepthEqualsTheFlatDefocusOfItsDeepen)
     }
 }
 
+TEST(DeepDefocus, UniformStacksComeOutAsTheirFlatten)
+{
+    // Every pixel the same stack of samples, each at its own CoC (shared between the two
+    // rungs around it, several sharing a rung): every layer is uniform, so the blur leaves
+    // it as it is, and the layers composited must give back the stack's flatten. This is
+    // the pixel-level rule of the layers' visibility (a share seen through what lies in
+    // front of it in its own layer); through the nearer layer's instead, these stacks
+    // erred by up to 0.016 (0.09 over 20000 random stacks).
+    uint32_t state = 12345;
+    auto uniform = [&state]() {
+        state = state * 1664525u + 1013904223u;
+        return float(state >> 8) / float(1u << 24);
+    };
+    double worst = 0.0;
+    for (int trial = 0; trial < 40; ++trial) {
+        std::vector<Smp> stack;
+        const int n = 1 + trial % 3;
+        for (int i = 0; i < n; ++i) {
+            const float a = uniform() < 0.4f ? 1.0f : uniform();
+            stack.push_back({ a * uniform(), a * uniform(), a * uniform(), a, -12.0f + 24.0f * uniform() });
+        }
+        std::sort(stack.begin(), stack.end(), [](const Smp& p, const Smp& q) { return p.z < q.z; });
+        float flat[4] = { 0, 0, 0, 0 }, t = 1.0f;
+        for (const Smp& m : stack) {
+            const float v[4] = { m.r, m.g, m.b, m.a };
+            for (int c = 0; c < 4; ++c)
+                flat[c] += t * v[c];
+            t *= 1.0f - m.a;
+        }
+        const OIIO::ImageBuf deep = deep_image(48, 48, [&](int, int) { return stack; });
+        for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Auto }) {
+            DefocusOptions o = direct_options(m);
+            o.border         = Border::Clamp;
+            o.layers         = m == DefocusMethod::Layers ? 4 : 0;  // few rungs: more sharing
+            OIIO::ImageBuf out;
+            ASSERT_TRUE(defocus(out, deep, o)) << out.geterror();
+            for (int c = 0; c < 4; ++c)
+                worst = std::max(worst, double(std::abs(out.getchannel(24, 24, 0, c) - flat[c])));
+        }
+    }
+    std::cout << "uniform stacks: largest difference from the flatten " << worst << "\n";
+    EXPECT_LT(worst, 2e-5);
+}
+
 TEST(DeepDefocus, EnergyOfPointsAndVolumesIsKept)
 {
     // A lone bright point and a lone volume spanning CoCs 2..30 (cut at every rung it
