@@ -371,7 +371,6 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
         SpriteGain gain;
         if (f.sprites && !f.deep() && layer_has_sprites(f, m, k)) {
             gain.used    = true;
-            gain.up      = up;
             gain.gx      = gx;
             gain.gy      = gy;
             gain.tile_px = t;

@@ -207,7 +207,6 @@ bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Fram
 /// small part of its tiles).
 struct SpriteGain {
     bool used = false;
-    int up    = 1;  // output pixels a frame pixel
     int gx = 0, gy = 0, tile_px = 1, cols = 0, s = 1;  // the layer's tile grid and reduction
     std::vector<OIIO::ROI> draw;  // per tile: the frame pixels the layer reaches (else 1)
     std::vector<OIIO::ROI> low;   // per tile: the reduced pixels `visibility` covers

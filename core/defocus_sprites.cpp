@@ -356,10 +356,10 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
                                std::string& err)
 {
     // Each sprite's requests, at their bins' centres (two CoC bins times the field bins
-    // around it), so equal requests are equal bins: the distinct ones are built in
-    // parallel, each once, then read back from the cache.
+    // around it), so equal requests are equal bins: the distinct ones are fetched from the
+    // cache in parallel, each once, and made ready to draw (drawn_psf).
     using Key = std::tuple<double, double, double>;
-    std::map<Key, std::shared_ptr<const Psf>> wanted;
+    std::map<Key, DrawnPsf> wanted;
     std::vector<std::array<Key, kSpritePsfs>> requests(set.sprites.size());
     for (size_t i = 0; i < set.sprites.size(); ++i) {
         Sprite& s = set.sprites[i];
@@ -376,11 +376,11 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
             for (int q = 0; q < nf; ++q, ++n) {
                 requests[i][size_t(n)] = Key(c[b], fx[q], fy[q]);
                 s.weight[n]            = float(wc * fw[q]);
-                wanted.emplace(requests[i][size_t(n)], nullptr);
+                wanted.emplace(requests[i][size_t(n)], DrawnPsf{});
             }
         }
     }
-    std::vector<std::pair<const Key, std::shared_ptr<const Psf>>*> todo;
+    std::vector<std::pair<const Key, DrawnPsf>*> todo;
     for (auto& w : wanted)
         todo.push_back(&w);
     std::vector<std::string> errors(todo.size());
@@ -388,29 +388,20 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
         for (int64_t i = b; i < e; ++i) {
             PsfRequest r;
             std::tie(r.coc_px, r.field_x, r.field_y) = todo[size_t(i)]->first;
-            todo[size_t(i)]->second = cache.get(r, errors[size_t(i)]);
+            if (const std::shared_ptr<const Psf> psf = cache.get(r, errors[size_t(i)]))
+                todo[size_t(i)]->second = drawn_psf(psf, up);
         }
     });
     for (size_t i = 0; i < todo.size(); ++i)
-        if (!todo[i]->second) {
+        if (!todo[i]->second.psf) {
             err = errors[i];
             return false;
         }
-    // Each PSF as drawn (box-folded at up 2) and as ramps and runs, in parallel; kept while
-    // the cache's PSF lives (drawn_psf).
-    std::vector<DrawnPsf> drawn(todo.size());
-    parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t b, int64_t e) {
-        for (int64_t i = b; i < e; ++i)
-            drawn[size_t(i)] = drawn_psf(todo[size_t(i)]->second, up);
-    });
-    std::map<const Psf*, const DrawnPsf*> drawn_of;
-    for (size_t i = 0; i < todo.size(); ++i)
-        drawn_of.emplace(todo[i]->second.get(), &drawn[i]);
     std::map<const Psf*, int> ids;
     for (size_t i = 0; i < set.sprites.size(); ++i) {
         Sprite& s = set.sprites[i];
         for (int j = 0; j < kSpritePsfs && s.weight[j] > 0.0f; ++j) {
-            const DrawnPsf& d = *drawn_of.at(wanted.at(requests[i][size_t(j)]).get());
+            const DrawnPsf& d = wanted.at(requests[i][size_t(j)]);
             s.psf[j]          = d.psf;
             s.runs[j]         = d.runs;
             const int side    = std::max(s.psf[j]->width, s.psf[j]->height);
@@ -556,8 +547,7 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
     // source block each falls in.
     struct Drawn {
         int x, y, bx, by;
-        const Psf* psf[kSpritePsfs];
-        const PsfRuns* runs[kSpritePsfs];
+        const PsfRuns* runs[kSpritePsfs];  // null past the ones in use
         std::array<int, kSpritePsfs> id;
         float rgb[kSpritePsfs][3];
         bool counted;
@@ -590,11 +580,10 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
             b *= 2;
         d.bx = floor_div(s.x, b), d.by = floor_div(s.y, b);
         for (int j = 0; j < kSpritePsfs; ++j) {
-            d.psf[j]  = s.psf[j].get();
             d.runs[j] = s.runs[j].get();
             d.id[j]   = s.psf_id[j];
             for (int c = 0; c < 3; ++c)
-                d.rgb[j][c] = s.psf[j] ? s.rgb[c] * share * s.weight[j] : 0.0f;
+                d.rgb[j][c] = s.runs[j] ? s.rgb[c] * share * s.weight[j] : 0.0f;
         }
         list.push_back(d);
     }
@@ -652,11 +641,10 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         RunBand band(region.xbegin, region.xend, y0, y1);
         for (auto it = first; it != last; ++it)
             for (int j = 0; j < kSpritePsfs; ++j)
-                if (it->psf[j]) {
-                    const Psf& psf = *it->psf[j];
-                    const int hw = (psf.width - (up - 1)) / 2, hh = (psf.height - (up - 1)) / 2;
+                if (const PsfRuns* runs = it->runs[j]) {
+                    const int hw = (runs->width - (up - 1)) / 2, hh = (runs->height - (up - 1)) / 2;
                     const float k[3] = { it->rgb[j][0] * scale, it->rgb[j][1] * scale, it->rgb[j][2] * scale };
-                    band.add(*it->runs[j], it->x * up - hw, it->y * up - hh, k);
+                    band.add(*runs, it->x * up - hw, it->y * up - hh, k);
                 }
         // Into the layer, times the gain at each pixel's frame pixel (read only in tiles
         // the layer's visibility is kept for).
@@ -664,17 +652,8 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         for (int y = y0; y < y1; ++y) {
             float* row   = target.row(y - region.ybegin);
             const int fy = floor_div(y, up);
-            int tile_x0 = 0, tile_x1 = 0;  // frame columns of the tile last looked up
-            bool kept = false;
             band.flush_row(y, [&](int x, const float* rgb) {
-                const int fx = floor_div(x, up);
-                if (gained && (fx < tile_x0 || fx >= tile_x1)) {
-                    tile_x0      = gain->gx + floor_div(fx - gain->gx, gain->tile_px) * gain->tile_px;
-                    tile_x1      = tile_x0 + gain->tile_px;
-                    const int t  = gain->tile_of(fx, fy);
-                    kept         = t >= 0 && gain->visibility[size_t(t)].px;
-                }
-                const float g = kept ? gain->at(fx, fy) : 1.0f;
+                const float g = gained ? gain->at(floor_div(x, up), fy) : 1.0f;
                 float* d      = row + size_t(x - region.xbegin) * 4;
                 d[0] += g * rgb[0];
                 d[1] += g * rgb[1];
