@@ -150,7 +150,7 @@ RunBand::RunBand(int x0, int x1, int y0, int y1)
         own_.assign(need, 0.0);
         lit_ = own_.data();
     } else {
-        t_band.in_use = true;
+        t_band.in_use = thread_buffer_ = true;
         if (t_band.px.size() < need)
             t_band.px.assign(need, 0.0);
         lit_ = t_band.px.data();
@@ -164,7 +164,7 @@ RunBand::~RunBand()
         if (lo_[r] < hi_[r])
             for (size_t i = size_t(lo_[r]) * 3; i < size_t(hi_[r]) * 3; ++i)
                 lit_[r * stride_ + i] = d2_[r * stride_ + i] = 0.0;
-    if (own_.empty())
+    if (thread_buffer_)
         t_band.in_use = false;
 }
 

@@ -40,8 +40,6 @@ struct PsfRuns {
     std::vector<Ramp> ramps;
     std::vector<Literal> literals;
     std::vector<float> values;
-    /// Pixel writes a draw costs: literal pixels plus four per ramp (tests, the bench).
-    int64_t cost() const { return int64_t(values.size() / 3) + 4 * int64_t(ramps.size()); }
 };
 
 /// Encode `psf`, ramps within `tolerance` (relative) of it.
@@ -89,7 +87,8 @@ private:
     void touch(int r, int lo, int hi);
     int x0_, x1_, y0_, y1_;
     size_t stride_;  // doubles a row: (columns + 2) * 3
-    std::vector<double> own_;  // the buffer when the thread's is in use
+    bool thread_buffer_ = false;  // lit_ and d2_ are the thread's buffer (else own_)
+    std::vector<double> own_;     // the buffer when the thread's is in use
     double* lit_;    // literal pixels
     double* d2_;     // ramps' second differences
     std::vector<int> lo_, hi_;  // per row, the touched columns (relative to x0)
