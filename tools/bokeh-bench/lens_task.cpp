@@ -154,16 +154,14 @@ bool run_lens_task(const BenchArgs& a, std::vector<std::string>& rows)
                                   a.threads, plain_ms, a.reps, error_fields(ep)));
             rows.push_back(format("lens {},achromat sprites vs scatter reference,,{},{},{:.3f},{},{}", name,
                                   a.width, a.threads, lens_ms, a.reps, error_fields(el)));
-            rows.push_back(format("lens {},achromat sprites warm,,{},{},{:.3f},{},{}", name, a.width, a.threads,
-                                  warm_ms, a.reps, no_error));
         } else {
             rows.push_back(format("lens {},plain default,,{},{},{:.3f},{},{}", name, a.width, a.threads, plain_ms,
                                   a.reps, no_error));
             rows.push_back(format("lens {},achromat sprites ({} sprites),,{},{},{:.3f},{},{}", name, rep.sprites,
                                   a.width, a.threads, lens_ms, a.reps, no_error));
-            rows.push_back(format("lens {},achromat sprites warm,,{},{},{:.3f},{},{}", name, a.width, a.threads,
-                                  warm_ms, a.reps, no_error));
         }
+        rows.push_back(format("lens {},achromat sprites warm,,{},{},{:.3f},{},{}", name, a.width, a.threads,
+                              warm_ms, a.reps, no_error));
         rows.push_back(format("lens {},achromat sprites supersample 2,,{},{},{:.3f},{},{}", name, a.width,
                               a.threads, fine_ms, a.reps, no_error));
         std::printf("%-10s %-24s %10.1f %10.1f %7.2f %10.1f %7.2f %10.1f %7.2f %8lld %12s %12s\n", name.c_str(),
