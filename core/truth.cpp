@@ -1,5 +1,6 @@
-// truth.cpp — the thin-lens truth of a deep image (truth.h): rays over pixel area x
-// aperture, walked through the deep image's pixel cells in depth order.
+// truth.cpp — the thin-lens truth of a deep image (truth.h): rays from each pixel's centre
+// (or its area) over the aperture, walked through the deep image's pixel cells in depth
+// order.
 //
 // Sources: the thin-lens geometry of ../shared/DEEP.md ("The thin-lens truth from a deep
 // image"), with the flat defocus's orientation (core/defocus.cpp, aperture_weights); the
@@ -580,6 +581,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     const detail::SobolTable& table = detail::sobol_table();
     const int n_first = (opt.spp + 1) / 2, n_second = opt.spp / 2;
     const double inv_n = 1.0 / opt.spp;
+    const bool area    = opt.pixel == TruthPixel::Area;
 
     struct Part {
         detail::HalvesNoise noise;
@@ -610,7 +612,8 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
                             seq.next(u);
                             const auto s = aperture(u[0], u[1]);
                             ray.reset();
-                            trace(sc, lo, hi, x + u[2], y + u[3], s[0], s[1], coc_of, ray);
+                            trace(sc, lo, hi, x + (area ? u[2] : 0.5), y + (area ? u[3] : 0.5), s[0], s[1],
+                                  coc_of, ray);
                             ++part.rays;
                             for (int c = 0; c < 4; ++c)
                                 sum[half][c] += ray.acc[c];
@@ -641,9 +644,9 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     const double values = double(out.npixels()) * 4.0;
     total.noise.figures(n_first, n_second, values, rep.noise_rmse, rep.noise_psnr_db);
     rep.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    rep.summary = format("truth: CoC {:.1f} .. {:.1f} px, {} spp, {} rays, {:.1f} cells a ray, noise RMS {:.3g} "
-                         "({:.1f} dB), output {}x{}, {:.2f} s{}",
-                         rep.min_coc_px, rep.max_coc_px, opt.spp, rep.rays,
+    rep.summary = format("truth: CoC {:.1f} .. {:.1f} px, {} spp from the pixel's {}, {} rays, {:.1f} cells a ray, "
+                         "noise RMS {:.3g} ({:.1f} dB), output {}x{}, {:.2f} s{}",
+                         rep.min_coc_px, rep.max_coc_px, opt.spp, area ? "area" : "centre", rep.rays,
                          rep.rays ? double(rep.cells_visited) / double(rep.rays) : 0.0, rep.noise_rmse,
                          rep.noise_psnr_db, out.width(), out.height(), rep.seconds,
                          rep.repairs.total() ? format(", {} bad samples repaired", rep.repairs.total())

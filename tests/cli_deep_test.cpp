@@ -93,6 +93,11 @@ TEST(CliDeep, DeepDefocusFlatAndDeepOut)
                          "deep", dir + "/t.exr");
     expect_clean_failure(bokehtool(format("{} --defocus:spp=16 -o {}/t.exr", a, dir)), "spp", dir + "/t.exr");
     expect_clean_failure(bokehtool(format("{} --defocus:unknown=1 -o {}/t.exr", a, dir)), "unknown", dir + "/t.exr");
+    expect_clean_failure(bokehtool(format("{} --defocus:pixel=area -o {}/t.exr", a, dir)), "pixel", dir + "/t.exr");
+    // pixel=area: the rays start over each pixel's square (the default, its centre).
+    r = bokehtool(format("-v {} --defocus:math=direct:scale=3:method=truth:spp=16:pixel=area -o {}/area.exr", a, dir));
+    ASSERT_EQ(r.status, 0) << r.err << r.out;
+    EXPECT_NE(r.out.find("from the pixel's area"), std::string::npos) << r.out;
     // unknown=1: a fifth channel, the share of each pixel's rays that crossed what the file
     // does not record.
     r = bokehtool(format("{} --defocus:math=direct:scale=3:method=truth:spp=16:unknown=1 -o {}/unknown.exr", a, dir));

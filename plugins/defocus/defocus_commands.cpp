@@ -41,7 +41,7 @@ bool defocus_command(CommandContext& c)
         return c.fail(flat.geterror());
     const OIIO::ImageBuf& src = diagnostic && in.buf->deep() ? flat : *in.buf;
     const std::string& method = bokeh::defocus_method_named(c.options);
-    for (const char* name : { "spp", "seed", "unknown" })
+    for (const char* name : { "spp", "seed", "unknown", "pixel" })
         if (c.options.given(name) && method != "truth")
             return c.fail(format("{}= is for method=truth", name));
     if (o.supersample > 1 && what != "image" && what != "deep")
@@ -68,6 +68,7 @@ bool defocus_command(CommandContext& c)
         t.spp       = c.options.get_int("spp");
         t.seed      = uint32_t(c.options.get_int("seed"));
         t.unknown   = c.options.get_bool("unknown");
+        t.pixel     = c.options.get_string("pixel") == "area" ? bokeh::TruthPixel::Area : bokeh::TruthPixel::Centre;
         t.progress  = c.progress;
         bokeh::TruthReport report;
         ok = bokeh::defocus_truth(*out.buf, *in.buf, t, &report, c.nthreads);
@@ -158,6 +159,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("step", 0.25, 1.0 / 64.0, 8.0, "reference: CoC quantisation step px"),
         OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
         OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
+        OptionSpec::Choice("pixel", { "centre", "area" },
+                           "truth: where a pixel's rays start; centre: the deep pixel already holds its area's "
+                           "average (nearer the physics); area: over the pixel's square as well"),
         OptionSpec::Bool("unknown", false,
                          "truth: add a channel 'unknown', each pixel's share of light from space the deep "
                          "image does not record (behind its samples)"),

@@ -6,7 +6,8 @@
 // no CoC limit):
 //   geometric truth     its own noise (the two half renders' difference: truth.h)
 //   deep truth          defocus_truth of the scene's deep image (make_deep_scene), the
-//                       same rays (same spp and seed); and with other rays (seed 2)
+//                       same rays (same spp and seed); and with other rays (seed 2), from
+//                       the pixels' centres (the default) and from their area
 //   deep reference/auto the deep defocus (one layer per CoC step / the budget's layers)
 //   flat truth          defocus_truth of the sharp scene deepened (no hidden surfaces)
 //   flat reference/auto the flat defocus of the sharp scene
@@ -179,9 +180,13 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
         };
         bokeh::TruthOptions other = to;
         other.seed                = 2;
+        bokeh::TruthOptions other_area = other;
+        other_area.pixel               = bokeh::TruthPixel::Area;
         if (!run("deep truth", [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deep, to, nullptr, t); })
             || !run("deep truth (other rays)",
                     [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deep, other, nullptr, t); })
+            || !run("deep truth (other, area)",
+                    [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deep, other_area, nullptr, t); })
             || !run("deep reference", defocus_with(deep, bokeh::DefocusMethod::Reference))
             || !run("deep auto", defocus_with(deep, bokeh::DefocusMethod::Auto))
             || !run("flat truth", [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deepened, to, nullptr, t); })
@@ -202,7 +207,10 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
         // keeps errors wider than 4 px, as a background missing behind a foreground is.
         auto cut = [&](const OIIO::ImageBuf& img) { return IBA::cut(rgba_of(img), interior); };
         const OIIO::ImageBuf geo4 = cut(geo), geo_blocks = blocks_of(geo4, geo4.roi());
-        const OIIO::ImageBuf deep_truth = cut(stages[0].out), flat_truth = cut(stages[4].out);
+        auto stage_named = [&](const std::string& n) -> const OIIO::ImageBuf& {
+            return std::find_if(stages.begin(), stages.end(), [&](const Stage& s) { return s.name == n; })->out;
+        };
+        const OIIO::ImageBuf deep_truth = cut(stage_named("deep truth")), flat_truth = cut(stage_named("flat truth"));
         const int iw = interior.width(), ih = interior.height(), bw = iw / 4, bh = ih / 4;
         std::vector<uint8_t> mask(size_t(iw) * size_t(ih), 0), block_mask(size_t(bw) * size_t(bh), 0);
         int64_t in_mask = 0;
