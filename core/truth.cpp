@@ -21,7 +21,7 @@
 // it enters space the file does not record, behind an opaque pixel's last sample or past
 // the data window (docs/methods/truth.md).
 // Limits as truth.h says; cost is rays x cells crossed, the cells growing with the CoC
-// range, stopping at the first opaque surface; about 200 ns a ray on one core, mostly the
+// range, stopping at the first opaque surface; 120-160 ns a ray on one core, mostly the
 // sampler and the walk's set-up.
 
 #include <bokeh/parallel.h>

@@ -7,7 +7,8 @@
 //   geometric truth     its own noise (the two half renders' difference: truth.h)
 //   deep truth          defocus_truth of the scene's deep image (make_deep_scene), the
 //                       same rays (same spp and seed); and with other rays (seed 2), from
-//                       the pixels' centres (the default) and from their area
+//                       the pixels' centres (the default) and, "pixel area", from their
+//                       squares (TruthPixel::Area)
 //   deep reference/auto the deep defocus (one layer per CoC step / the budget's layers)
 //   flat truth          defocus_truth of the sharp scene deepened (no hidden surfaces)
 //   flat reference/auto the flat defocus of the sharp scene
@@ -185,7 +186,7 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
         if (!run("deep truth", [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deep, to, nullptr, t); })
             || !run("deep truth (other rays)",
                     [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deep, other, nullptr, t); })
-            || !run("deep truth (other, area)",
+            || !run("deep truth (pixel area)",
                     [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deep, other_area, nullptr, t); })
             || !run("deep reference", defocus_with(deep, bokeh::DefocusMethod::Reference))
             || !run("deep auto", defocus_with(deep, bokeh::DefocusMethod::Auto))
