@@ -45,6 +45,11 @@
 // result depends on its coordinates and the options only: bit-identical for any thread
 // count.
 //
+// Solid surfaces: an opaque point sample (alpha at least 1 - 1e-3) is met over half the
+// CoC gap to the nearest opaque point of each 4-neighbour pixel, where that gap is at most
+// 1 px, so a ray cannot slip between the tiles of a surface seen at a grazing angle
+// (core/truth.cpp, kConnectedCocPx).
+//
 // Limits: exact for the scene the file encodes — surfaces seen only from the side of the
 // aperture (silhouettes' flanks) are not in it; alpha is opacity spread over the cell, not
 // sub-pixel coverage; samples a renderer culled behind opaque ones cannot be revealed.
