@@ -57,7 +57,8 @@ using Clock = std::chrono::steady_clock;
 // is then taken for the same surface's nearer ribbon. A ribbon must go on under its
 // neighbours for its blur radius |CoC| / 2; over that distance a surface whose CoC changes
 // by up to 0.5 px a pixel changes its CoC by |CoC| / 4. Measured on the lights scene
-// against its thin-lens truth (bokeh-bench --task truth-chain --scenes lights, 4x4 blocks,
+// against its thin-lens truth (rays started over the pixel's area, pixel=area; bokeh-bench
+// --task truth-chain --scenes lights, 4x4 blocks,
 // disocclusion mask): a flat window of 0.5 / 1 / 2 / 4 px gave 34.5 / 35.4 / 36.8 / 36.8 dB,
 // the share changes nothing there; without it a steep sloped plane over a recorded wall
 // shows the wall through its ribbons (DeepDefocus.ASlopedSurfaceOverARecordedWallStaysOpaque).

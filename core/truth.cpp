@@ -23,7 +23,7 @@
 // (TruthPixel) and the joined opaque points (kConnectedCocPx): both measured against the
 // built-in scenes' geometric truth.
 // Limits as truth.h says; cost is rays x cells crossed, the cells growing with the CoC
-// range, stopping at the first opaque surface; 120-160 ns a ray on one core, mostly the
+// range, stopping at the first opaque surface; 140-210 ns a ray on one core, mostly the
 // sampler and the walk's set-up.
 
 #include <bokeh/parallel.h>
@@ -67,7 +67,7 @@ constexpr int kAngleSteps = 4096;
 // 4-neighbour whose gap is at most kConnectedCocPx: a ray crossing between two such
 // pixels meets one of them. A ray moves at most half a pixel sideways per pixel of CoC, so
 // where the two are different surfaces, what lies behind them loses a sliver at most half a
-// pixel wide at the aperture's rim. Partly transparent samples (coverage of an edge, a
+// pixel wide (times the aspect, vertically) at the aperture's rim. Partly transparent samples (coverage of an edge, a
 // small light, smoke) are not tiles of a solid surface and stay points: connected too, the
 // lights scene's fairy lights took rays from the wall around them, 1.6 dB further from
 // its geometric truth (4 x 4 blocks, 1024 rays a pixel).
@@ -266,8 +266,8 @@ bool build_scene(Scene& sc, const OIIO::ImageBuf& tidy, const CocOfDepth& coc_of
 
 // Each opaque point sample's reach (kConnectedCocPx): half its CoC gap to the nearest
 // opaque point of each 4-neighbour pixel, where that gap is at most kConnectedCocPx; the
-// cells' CoC bounds, and so the blocks' ranges, then include it.
-void connect_point_samples(Scene& sc, int nthreads)
+// cells' CoC bounds, and so the blocks' ranges, then include it. Returns the largest reach.
+float connect_point_samples(Scene& sc, int nthreads)
 {
     const int w = sc.data.width(), h = sc.data.height();
     parallel_for_chunks(0, int64_t(h), 8, nthreads, [&](int64_t y0, int64_t y1) {
@@ -299,13 +299,17 @@ void connect_point_samples(Scene& sc, int nthreads)
                 }
             }
     });
-    for (Cell& cell : sc.cells)
+    float largest = 0.0f;
+    for (Cell& cell : sc.cells) {
         for (uint32_t k = 0; k < cell.count; ++k) {
             const TruthSample& t = sc.samples[cell.first + k];
             cell.coc_min         = std::min(cell.coc_min, t.coc - t.reach);
             cell.coc_max         = std::max(cell.coc_max, t.coc_back + t.reach);
             cell.reach_max       = std::max(cell.reach_max, t.reach);
         }
+        largest = std::max(largest, cell.reach_max);
+    }
+    return largest;
 }
 
 // --- one ray -------------------------------------------------------------------------
@@ -617,7 +621,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     Scene sc;
     if (!build_scene(sc, tidy, coc_of, nthreads, err))
         return fail(err);
-    connect_point_samples(sc, nthreads);
+    const float largest_reach = connect_point_samples(sc, nthreads);
     sc.build_tiles();
     rep.min_coc_px = sc.coc_lo;
     rep.max_coc_px = sc.coc_hi;
@@ -647,7 +651,9 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     const ApertureSampler aperture(opt.aperture, opt.aspect);
     // How far from its pixel a ray can go: half the largest CoC (the aperture's offsets are
     // within 1/2 px per px of CoC, times the aspect in y), plus the pixel.
-    const int reach_x = int(std::ceil(0.5f * extreme)) + 1, reach_y = int(std::ceil(0.5f * extreme * opt.aspect)) + 1;
+    // The walk's CoC range includes the samples' reach (kConnectedCocPx).
+    const float walked = extreme + largest_reach;
+    const int reach_x = int(std::ceil(0.5f * walked)) + 1, reach_y = int(std::ceil(0.5f * walked * opt.aspect)) + 1;
     const detail::SobolTable& table = detail::sobol_table();
     const int n_first = (opt.spp + 1) / 2, n_second = opt.spp / 2;
     const double inv_n = 1.0 / opt.spp;

@@ -89,6 +89,7 @@ TEST(CliDeep, DeepDefocusFlatAndDeepOut)
     ASSERT_EQ(r.status, 0) << r.err << r.out;
     EXPECT_NE(r.out.find("defocus truth"), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("noise"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("from the pixel's centre"), std::string::npos) << r.out;  // the default start
     expect_clean_failure(bokehtool(format("--scene lights:width=32:height=18 --defocus:method=truth -o {}/t.exr", dir)),
                          "deep", dir + "/t.exr");
     expect_clean_failure(bokehtool(format("{} --defocus:spp=16 -o {}/t.exr", a, dir)), "spp", dir + "/t.exr");

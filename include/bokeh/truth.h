@@ -12,7 +12,7 @@
 // line in (x, y, w) and crosses the deep image's pixel cells (each pixel's frustum slice,
 // [i, i+1) x [j, j+1)) in order of depth. Each ray walks those cells by a DDA over c,
 // taking a point sample of a cell when its CoC lies in the c-interval the ray spends in
-// the cell, and the part of a volume sample [Z, ZBack) whose depths map into that interval
+// the cell (an opaque point: when its reach does, below), and the part of a volume sample [Z, ZBack) whose depths map into that interval
 // (alpha' = 1 - (1 - alpha)^(dz / (ZBack - Z)), by expm1/log1p, the OpenEXR split rule),
 // composited front to back with "over" until the transmittance of every alpha is 2^-25 or
 // less (what float stores as an opacity of 1; the samples left out change the result by
@@ -32,8 +32,8 @@
 // filters the image by the pixel a second time once the aperture is open. Against the
 // built-in scenes' geometric truth (thin-lens rays against the surfaces themselves, over
 // the pixel's area: the physics), 960x540, 1024 rays a pixel, 4 x 4 block averages, the
-// centre is nearer: edges 46.1 dB against 45.1, lights 51.3 against 49.2
-// (docs/methods/truth.md has the commands). At a zero aperture both are the flatten.
+// centre is nearer: edges 46.1 dB against 45.1, lights 51.2 against 49.0
+// (docs/methods/truth.md has the commands and figures). At a zero aperture both are the flatten.
 //
 // Sampling: per output pixel, a 4-D Sobol' sequence (Joe and Kuo's direction numbers)
 // with hash-based Owen scrambling (Burley, "Practical Hash-based Owen Scrambling", JCGT
@@ -50,7 +50,7 @@
 // 1 px, so a ray cannot slip between the tiles of a surface seen at a grazing angle
 // (core/truth.cpp, kConnectedCocPx).
 //
-// Limits: exact for the scene the file encodes — surfaces seen only from the side of the
+// Limits: exact for the scene the file encodes (its opaque points joined as above) — surfaces seen only from the side of the
 // aperture (silhouettes' flanks) are not in it; alpha is opacity spread over the cell, not
 // sub-pixel coverage; samples a renderer culled behind opaque ones cannot be revealed.
 // The aperture is the continuous shape (KernelEdge is ignored); disk and polygon only.

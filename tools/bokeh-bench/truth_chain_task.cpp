@@ -209,7 +209,8 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
         auto cut = [&](const OIIO::ImageBuf& img) { return IBA::cut(rgba_of(img), interior); };
         const OIIO::ImageBuf geo4 = cut(geo), geo_blocks = blocks_of(geo4, geo4.roi());
         auto stage_named = [&](const std::string& n) -> const OIIO::ImageBuf& {
-            return std::find_if(stages.begin(), stages.end(), [&](const Stage& s) { return s.name == n; })->out;
+            const auto it = std::find_if(stages.begin(), stages.end(), [&](const Stage& s) { return s.name == n; });
+            return it != stages.end() ? it->out : stages.front().out;  // every name asked for is run above
         };
         const OIIO::ImageBuf deep_truth = cut(stage_named("deep truth")), flat_truth = cut(stage_named("flat truth"));
         const int iw = interior.width(), ih = interior.height(), bw = iw / 4, bh = ih / 4;
