@@ -561,6 +561,36 @@ TEST(Truth, ASteepOpaqueSurfaceHasNoCracks)
     EXPECT_GT(t.green, 0.01);  // a partly transparent slope is not joined: its cracks stay
 }
 
+// Two opaque surfaces side by side, the right one's CoC higher by a step, over a recorded
+// green wall at CoC +4: rays that cross from the right surface's pixels to the left one's
+// between their two depths meet neither. A step of at most 1 px (kConnectedCocPx) is taken
+// for one surface's slope and joined: no green; a step of 1.5 px is two surfaces, and the
+// wall shows between them. Measured: green 0 at 0.8 px; up to 0.089 at 1.5 px.
+TEST(Truth, OnlyCloseDepthsAreJoined)
+{
+    constexpr int kW = 32, kH = 16, kStepAt = kW / 2;
+    auto greenest = [&](float step) {
+        std::vector<Pixel> px(size_t(kW) * kH);
+        for (int y = 0; y < kH; ++y)
+            for (int x = 0; x < kW; ++x) {
+                const float c            = x < kStepAt ? -6.0f : -6.0f + step;
+                px[size_t(y) * kW + x] = { { 1, 0, 0, 1, c, c }, { 0, 1, 0, 1, 4, 4 } };
+            }
+        bokeh::TruthOptions o = direct_options(1024);
+        o.grow                = false;
+        OIIO::ImageBuf out;
+        EXPECT_TRUE(bokeh::defocus_truth(out, framed_deep(kW, kH, px), o, nullptr, 2)) << out.geterror();
+        double g = 0.0;
+        for (int x = kStepAt - 3; x < kStepAt + 3; ++x)
+            g = std::max(g, double(out.getchannel(x, kH / 2, 0, 1)));
+        return g;
+    };
+    const double joined = greenest(0.8f), apart = greenest(1.5f);
+    std::cout << "green at the step: " << joined << " (0.8 px), " << apart << " (1.5 px)\n";
+    EXPECT_EQ(joined, 0.0);
+    EXPECT_GT(apart, 0.01);
+}
+
 // From the pixels' centres, a CoC below 1 px keeps every ray in its own pixel's cell (the
 // aperture's offset at most half the CoC): the result is the tidy flatten, as at a zero
 // aperture, whatever the samples' reach.
