@@ -101,6 +101,30 @@ Psf sprite_psf(const DefocusOptions& o, int width_px, double coc_px, float& peak
     return psf;
 }
 
+// A lone light of 1e6 (alpha 1) at (lx, ly), CoC `coc_px`, on a w x h transparent black
+// frame of CoC `coc_px`.
+OIIO::ImageBuf lone_light(int w, int h, int lx, int ly, float coc_px, OIIO::ROI full = {})
+{
+    return image(
+        w, h,
+        [=](int x, int y) {
+            Px p;
+            p.a = 0.0f;
+            p.z = coc_px;
+            if (x == lx && y == ly)
+                p.r = p.g = p.b = 1e6f, p.a = 1.0f;
+            return p;
+        },
+        full);
+}
+
+// Channel c of `psf` at offset (dx, dy) from its centre; 0 outside it.
+double psf_at(const Psf& psf, int dx, int dy, int c)
+{
+    const int px = dx + psf.width / 2, py = dy + psf.height / 2;
+    return px >= 0 && px < psf.width && py >= 0 && py < psf.height ? double(psf.at(px, py, c)) : 0.0;
+}
+
 double channel_sum(const OIIO::ImageBuf& img, int c)
 {
     double s = 0.0;
@@ -231,17 +255,7 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
     // (field 0), on transparent black: one sprite, each channel holding 1e6 (1e-5), and
     // every pixel equal to 1e6 times lens_psf's (ramp_error).
     const OIIO::ROI display(-48, 113, -48, 113);
-    const OIIO::ImageBuf src = image(
-        65, 65,
-        [](int x, int y) {
-            Px p;
-            p.a = 0.0f;
-            p.z = 32.0f;
-            if (x == 32 && y == 32)
-                p.r = p.g = p.b = 1e6f, p.a = 1.0f;
-            return p;
-        },
-        display);
+    const OIIO::ImageBuf src = lone_light(65, 65, 32, 32, 32.0f, display);
     DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
     o.lens.diffraction = DiffractionModel::EdgeLaw;
     DefocusReport rep;
@@ -256,12 +270,8 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
     for (int c = 0; c < 3; ++c) {
         EXPECT_NEAR(channel_sum(out, c) / 1e6, 1.0, 1e-5) << "channel " << c;
         for (int y = -48; y < 113; ++y)
-            for (int x = -48; x < 113; ++x) {
-                const int px = x - 32 + psf.width / 2, py = y - 32 + psf.height / 2;
-                const bool inside = px >= 0 && px < psf.width && py >= 0 && py < psf.height;
-                const double want = inside ? 1e6 * psf.at(px, py, c) : 0.0;
-                worst = std::max(worst, ramp_error(at(out, x, y, c), want, 1e6 * peak));
-            }
+            for (int x = -48; x < 113; ++x)
+                worst = std::max(worst, ramp_error(at(out, x, y, c), 1e6 * psf_at(psf, x - 32, y - 32, c), 1e6 * peak));
     }
     std::printf("[ figures  ] lone pixel: PSF %dx%d, largest difference %.2e of the pixel's value\n", psf.width,
                 psf.height, worst);
@@ -273,14 +283,7 @@ TEST(DefocusSprites, ASpriteCutByTheOutputsEdgeKeepsItsShape)
     // The lone light of the test above, 3 px from the left and 5 px from the top of an
     // output that does not grow past the data window: the sprite's ramps and runs are cut
     // at the edges, and what is left is lens_psf's pixels there (ramp_error), nothing more.
-    const OIIO::ImageBuf src = image(65, 65, [](int x, int y) {
-        Px p;
-        p.a = 0.0f;
-        p.z = 32.0f;
-        if (x == 3 && y == 5)
-            p.r = p.g = p.b = 1e6f, p.a = 1.0f;
-        return p;
-    });
+    const OIIO::ImageBuf src = lone_light(65, 65, 3, 5, 32.0f);
     DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
     o.lens.diffraction = DiffractionModel::EdgeLaw;
     o.grow             = false;
@@ -299,9 +302,7 @@ TEST(DefocusSprites, ASpriteCutByTheOutputsEdgeKeepsItsShape)
     for (int c = 0; c < 3; ++c)
         for (int y = 0; y < 65; ++y)
             for (int x = 0; x < 65; ++x) {
-                const int px = x - 3 + psf.width / 2, py = y - 5 + psf.height / 2;
-                const bool inside = px >= 0 && px < psf.width && py >= 0 && py < psf.height;
-                const double want = inside ? 1e6 * psf.at(px, py, c) : 0.0;
+                const double want = 1e6 * psf_at(psf, x - 3, y - 5, c);
                 worst = std::max(worst, ramp_error(at(out, x, y, c), want, 1e6 * peak));
                 inside_sum += want;
                 got_sum += at(out, x, y, c);
@@ -325,19 +326,7 @@ TEST(DefocusSprites, FieldBinsAreInterpolated)
     // nearly equal size: the largest step within 2x their mean (snapped to the nearest bin
     // it would not change at all but at one jump).
     const OIIO::ROI display(-48, 113, -48, 113);
-    auto frame = [&](int lx) {
-        return image(
-            97, 65,
-            [lx](int x, int y) {
-                Px p;
-                p.a = 0.0f;
-                p.z = 16.0f;
-                if (x == lx && y == 32)
-                    p.r = p.g = p.b = 1e6f, p.a = 1.0f;
-                return p;
-            },
-            display);
-    };
+    auto frame = [&](int lx) { return lone_light(97, 65, lx, 32, 16.0f, display); };
     DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
     o.lens.catseye   = 0.8;
     LensCharacter lens  = o.lens;
@@ -920,17 +909,7 @@ TEST(DefocusSprites, SupersampledLonePixelIsTheFinerPsf)
     // centred on the frame pixel's centre (the corner of its 2 x 2 output pixels): each
     // output pixel within 1e-5 of the peak, each channel's sum 4e6 (1e-5).
     const OIIO::ROI display(-48, 113, -48, 113);
-    const OIIO::ImageBuf src = image(
-        65, 65,
-        [](int x, int y) {
-            Px p;
-            p.a = 0.0f;
-            p.z = 32.0f;
-            if (x == 32 && y == 32)
-                p.r = p.g = p.b = 1e6f, p.a = 1.0f;
-            return p;
-        },
-        display);
+    const OIIO::ImageBuf src = lone_light(65, 65, 32, 32, 32.0f, display);
     DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
     o.lens.diffraction = DiffractionModel::EdgeLaw;
     o.supersample      = 2;
@@ -946,11 +925,8 @@ TEST(DefocusSprites, SupersampledLonePixelIsTheFinerPsf)
     auto folded = [&](int X, int Y, int c) {
         double v = 0.0;
         for (int dy = 0; dy < 2; ++dy)
-            for (int dx = 0; dx < 2; ++dx) {
-                const int px = X - dx - 64 + psf.width / 2, py = Y - dy - 64 + psf.height / 2;
-                if (px >= 0 && px < psf.width && py >= 0 && py < psf.height)
-                    v += 0.25 * psf.at(px, py, c);
-            }
+            for (int dx = 0; dx < 2; ++dx)
+                v += 0.25 * psf_at(psf, X - dx - 64, Y - dy - 64, c);
         return v;
     };
     double worst = 0.0;
