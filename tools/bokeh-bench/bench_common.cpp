@@ -5,6 +5,7 @@
 #include <bokeh/resample.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <vector>
 
@@ -17,6 +18,26 @@ namespace bokeh_bench {
 std::string error_fields(const bokeh::ImageError& e)
 {
     return OIIO::Strutil::fmt::format("{:.6g},{:.2f},{:.6g}", e.rmse_linear, e.psnr_db, e.max_abs);
+}
+
+double masked_psnr(const OIIO::ImageBuf& got, const OIIO::ImageBuf& ref, const std::vector<uint8_t>& in,
+                   const OIIO::ROI& roi, int threads)
+{
+    const int64_t n = std::count(in.begin(), in.end(), uint8_t(1));
+    if (n == 0)
+        return -1.0;
+    OIIO::ImageBuf masked = got;
+    for (int y = roi.ybegin; y < roi.yend; ++y)
+        for (int x = roi.xbegin; x < roi.xend; ++x)
+            if (!in[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)]) {
+                float v[4];
+                ref.getpixel(x, y, v, 4);
+                masked.setpixel(x, y, v, 4);
+            }
+    bokeh::ImageError e;
+    std::string why;
+    bokeh::compare(e, masked, ref, why, {}, threads);
+    return e.psnr_db + 10.0 * std::log10(double(n) / double(roi.npixels()));
 }
 
 OIIO::ROI most_varied_crop(const OIIO::ImageBuf& img, int w, int h, int threads)

@@ -5,6 +5,7 @@
 
 #include <bokeh/metrics.h>
 
+#include <cstdint>
 #include <string>
 #include <utility>
 #include <vector>
@@ -21,6 +22,13 @@ inline constexpr const char* kCsvHeader
 
 /// The last three columns for `e`.
 std::string error_fields(const bokeh::ImageError& e);
+
+/// PSNR (compare's, over R, G, B, A) of `got` against `ref` over the pixels `in` marks
+/// (a byte per pixel of `roi`, row by row, 1 = in): outside them `got` is taken as `ref`,
+/// so the mean squared error over `roi` is theirs times their share of it, which the PSNR
+/// then undoes. -1 when none is marked.
+double masked_psnr(const OIIO::ImageBuf& got, const OIIO::ImageBuf& ref, const std::vector<uint8_t>& in,
+                   const OIIO::ROI& roi, int threads);
 
 /// The crop (at most w x h, inside `img`'s data window) where brightness varies most: a
 /// light and the gradient around it. Searched on 8 x 8 blocks of R + G + B.

@@ -76,27 +76,6 @@ struct TruthPictures {
     std::vector<Result> results;
 };
 
-// PSNR of `got` against `truth` over the pixels `in` marks (per pixel of roi): outside
-// them `got` is set to the truth, so the mean squared error over the frame is theirs times
-// their share of the frame.
-double psnr_over(const OIIO::ImageBuf& got, const OIIO::ImageBuf& truth, const std::vector<uint8_t>& in,
-                 const OIIO::ROI& roi, int threads)
-{
-    const int64_t n = std::count(in.begin(), in.end(), uint8_t(1));
-    OIIO::ImageBuf masked = got;
-    for (int y = roi.ybegin; y < roi.yend; ++y)
-        for (int x = roi.xbegin; x < roi.xend; ++x)
-            if (!in[size_t(y - roi.ybegin) * size_t(roi.width()) + size_t(x - roi.xbegin)]) {
-                float v[4];
-                truth.getpixel(x, y, v, 4);
-                masked.setpixel(x, y, v, 4);
-            }
-    bokeh::ImageError e;
-    std::string why;
-    bokeh::compare(e, masked, truth, why, {}, threads);
-    return e.psnr_db + 10.0 * std::log10(n > 0 ? double(n) / double(roi.npixels()) : 1.0);
-}
-
 // The truth of `shot` and every method against it (the layered methods with a black
 // border: the rays see nothing past the frame), over the frame, over the disocclusion
 // mask (the pixels where the truth of the deep image and the truth of its flatten differ
@@ -158,8 +137,8 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
     {  // the floor over each set of pixels: two truths' difference (3 dB below one truth's noise)
         const OIIO::ImageBuf s2 = rgba_of(truth_seed2, roi);
         std::vector<uint8_t> all(held.size(), 1);
-        const double f = psnr_over(s2, tr4, all, roi, t), m = psnr_over(s2, tr4, pic.mask, roi, t),
-                     h = psnr_over(s2, tr4, held, roi, t);
+        const double f = masked_psnr(s2, tr4, all, roi, t), m = masked_psnr(s2, tr4, pic.mask, roi, t),
+                     h = masked_psnr(s2, tr4, held, roi, t);
         std::printf("  %-30s %9.0f ms  vs truth: frame %.2f dB, disocclusion mask %.2f dB, held %.2f dB\n",
                     "another seed's truth", truth_ms, f, m, h);
         for (const auto& [suffix, db] : { std::make_pair("", f), std::make_pair(" (mask)", m), std::make_pair(" (held)", h) })
@@ -202,7 +181,7 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
         bokeh::ImageError frame;
         std::string why;
         bokeh::compare(frame, got, tr4, why, {}, t);
-        const double mask_db = psnr_over(got, tr4, pic.mask, roi, t), held_db = psnr_over(got, tr4, held, roi, t);
+        const double mask_db = masked_psnr(got, tr4, pic.mask, roi, t), held_db = masked_psnr(got, tr4, held, roi, t);
         std::printf("  %-30s %9.0f ms  vs truth: frame %.2f dB, disocclusion mask %.2f dB, held %.2f dB\n",
                     methods[i].name.c_str(), ms[i], frame.psnr_db, mask_db, held_db);
         rows.push_back(format("deep {},{} vs truth,,0,{},{:.3f},{},{}", shot.name, methods[i].name, t, ms[i], reps[i],

@@ -17,12 +17,14 @@
 // the frame's edge and the others cannot. The disocclusion mask: interior pixels where the
 // deep truth and the flat truth differ by more than 0.01 in R, G, B or A (what the flat
 // image hides and the lens sees); its PSNR sets every pixel outside it to the truth and
-// scales the error by the mask's share (as deep_task.cpp). Both again over 4 x 4 block
+// scales the error by the mask's share (bench_common.h, masked_psnr). Both again over 4 x 4 block
 // averages of the interior: tiny HDR lights make the truths noisy (a ray meets a light or
 // misses it), and averaging 16 pixels cuts that independent noise by 12 dB while keeping
 // the errors wider than 4 px (a background missing or invented behind a foreground).
 
 #include "truth_chain_task.h"
+
+#include "bench_common.h"
 
 #include <bokeh/deep.h>
 #include <bokeh/defocus.h>
@@ -70,31 +72,6 @@ OIIO::ImageBuf blocks_of(const OIIO::ImageBuf& img, const OIIO::ROI& roi)
             out.setpixel(x, y, v, 4);
         }
     return out;
-}
-
-// PSNR of `a` against `ref` over the pixels `mask` holds (-1 when none): the others set
-// to the reference, the error scaled by the mask's share (as deep_task.cpp).
-double masked_psnr(const OIIO::ImageBuf& a, const OIIO::ImageBuf& ref, const std::vector<uint8_t>& mask, int t)
-{
-    const int w = ref.spec().width, h = ref.spec().height;
-    OIIO::ImageBuf m = a;
-    int64_t n = 0;
-    for (int y = 0; y < h; ++y)
-        for (int x = 0; x < w; ++x) {
-            if (mask[size_t(y) * size_t(w) + size_t(x)]) {
-                ++n;
-                continue;
-            }
-            float v[4];
-            ref.getpixel(x, y, v, 4);
-            m.setpixel(x, y, v, 4);
-        }
-    if (n == 0)
-        return -1.0;
-    bokeh::ImageError e;
-    std::string why;
-    bokeh::compare(e, m, ref, why, {}, t);
-    return e.psnr_db + 10.0 * std::log10(double(n) / double(int64_t(w) * h));
 }
 
 }  // namespace
@@ -236,8 +213,8 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
             std::string why;
             bokeh::compare(e, px, geo4, why, {}, t);
             bokeh::compare(eb, blocks, geo_blocks, why, {}, t);
-            return Figures{ e.psnr_db, masked_psnr(px, geo4, mask, t), eb.psnr_db,
-                            masked_psnr(blocks, geo_blocks, block_mask, t) };
+            return Figures{ e.psnr_db, masked_psnr(px, geo4, mask, geo4.roi(), t), eb.psnr_db,
+                            masked_psnr(blocks, geo_blocks, block_mask, geo_blocks.roi(), t) };
         };
         auto row = [&](const std::string& stage, const Figures& f, double secs) {
             std::printf("%-8s %-26s %7.2f %7.2f %7.2f %7.2f %8.2f\n", name.c_str(), stage.c_str(), f.frame, f.mask,
