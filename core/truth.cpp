@@ -73,11 +73,6 @@ constexpr int kAngleSteps = 4096;
 // its geometric truth (4 x 4 blocks, 1024 rays a pixel).
 constexpr float kConnectedCocPx = 1.0f;
 
-// A point sample that hides what lies behind it (kConnectedCocPx).
-template <class Sample> bool opaque_point(const Sample& t)
-{
-    return !(t.zback > t.z) && t.alpha[3] >= 1.0f - kUnseenBehind;
-}
 
 // --- the scene -----------------------------------------------------------------------
 
@@ -90,6 +85,12 @@ struct TruthSample {
     float alpha[4];    // R, G, B, A
     float colour[3];
 };
+
+// A point sample that hides what lies behind it (kConnectedCocPx).
+bool opaque_point(const TruthSample& t)
+{
+    return !(t.zback > t.z) && t.alpha[3] >= 1.0f - kUnseenBehind;
+}
 
 struct Cell {
     uint32_t first = 0, count = 0;
