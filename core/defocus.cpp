@@ -31,6 +31,10 @@
 //   as the lens's PSF into the layer of their depth (composite_layers, after the layer);
 //   the in-focus layer is blurred with the lens's PSF instead of the
 //   aperture (by FFT, in tiles of kLensTile reduced pixels).
+// * Sub-aperture views (core/defocus_views.cpp): the aperture cut into n x n cells, the
+//   layers composited once a cell and the results averaged, so a blurred silhouette hides
+//   what lies behind it along its own rays (one compositing multiplies whole-aperture
+//   averages).
 // * Gather (core/defocus_gather.cpp; SEEDS.md section 2, seed 001, as published): blurred copies of the image at a
 //   few representative CoCs (4 behind focus, 3 in front; large ones in 1/2 and 1/4
 //   buffers), per-pixel smoothstep blend between the two levels around its CoC, a back-
@@ -353,121 +357,150 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     for (size_t k = 0; k < tiles.size() && o.progress; ++k)
         all_tiles += tile_weight(k)
                      * double(std::count_if(tiles[k].begin(), tiles[k].end(), [](uint8_t t) { return t != 0; }));
-    ProgressCounter progress(o.progress, all_tiles, progress_from);
-    for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
-        const float c = m.coc_px[size_t(k)];
-        const std::vector<KernelWeights>& lens_kernels = lens[size_t(k)];
-        const int cells       = lens_kernels.empty() ? kTile : kLensTile;
-        const int s           = m.reduction[size_t(k)], t = cells * s;
-        const KernelWeights w = lens_kernels.empty() ? aperture_weights(o, c, s, nthreads) : lens_kernels[3];
-        std::vector<int> todo;
-        for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
-            if (tiles[size_t(k)][i])
-                todo.push_back(int(i));
-        const double weight = tile_weight(size_t(k));
-        // Lens character on a flat frame: the layer's sprites are divided by its visibility
-        // as its colour is (a deep frame's layers are continued only under the same
-        // surface, composite_layers' deep visibility; its sprites are not).
-        SpriteGain gain;
-        if (f.sprites && !f.deep() && layer_has_sprites(f, m, k)) {
-            gain.used    = true;
-            gain.gx      = gx;
-            gain.gy      = gy;
-            gain.tile_px = t;
-            gain.cols    = cols[size_t(k)];
-            gain.s       = s;
-            gain.draw.resize(tiles[size_t(k)].size());
-            gain.low.resize(tiles[size_t(k)].size());
-            gain.visibility.resize(tiles[size_t(k)].size());
-        }
-        parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
-            struct Counted {  // the tile counts as done however it returns
-                ProgressCounter& p;
-                double units;
-                ~Counted() { p.add(units); }
-            } counted{ progress, weight };
-            const int tx = todo[size_t(n)] % cols[size_t(k)], ty = todo[size_t(n)] / cols[size_t(k)];
-            const OIIO::ROI region = OIIO::roi_intersection(
-                OIIO::ROI(gx + tx * t, gx + (tx + 1) * t, gy + ty * t, gy + (ty + 1) * t), f.out);
-            // The tile's reduced pixels, one more each side for bilinear reads.
-            const OIIO::ROI low(tx * cells - 1, floor_div(region.xend - 1 - gx, s) + 2,
-                                ty * cells - 1, floor_div(region.yend - 1 - gy, s) + 2);
-            // Only where the layer's pixels reach: past its pixels' bounding box grown by
-            // the kernel the layer is exactly 0 (so compositing it changes nothing). One
-            // reduced pixel more keeps the bilinear reads at the edge exact.
-            const TileContent content = tile_content(f, m, k, grown(low, w.rx, w.ry), gx, gy, s);
-            if (content.held.xbegin >= content.held.xend)
-                return;
-            const OIIO::ROI need = OIIO::roi_intersection(grown(content.held, w.rx + 1, w.ry + 1), low);
-            if (need.xbegin >= need.xend || need.ybegin >= need.yend)
-                return;
-            // Full-resolution pixels whose bilinear taps lie in `need` (the others read
-            // only zeros), or all of the region's where `need` is the tile's edge.
-            auto first_px = [&](int lo, int g, int r0) { return lo == r0 ? std::numeric_limits<int>::min() : g + lo * s + s / 2; };
-            auto end_px   = [&](int hi, int g, int r1) { return hi == r1 ? std::numeric_limits<int>::max() : g + (hi - 1) * s + s / 2 + 1; };
-            const OIIO::ROI draw = OIIO::roi_intersection(
-                OIIO::ROI(first_px(need.xbegin, gx, low.xbegin), end_px(need.xend, gx, low.xend),
-                          first_px(need.ybegin, gy, low.ybegin), end_px(need.yend, gy, low.yend)),
-                region);
-            if (draw.xbegin >= draw.xend || draw.ybegin >= draw.yend)
-                return;
-            Plane p     = layer_input(f, m, k, grown(need, w.rx, w.ry), gx, gy, s, content.hidden);
-            Plane layer;
-            if (w.is_identity())
-                layer = std::move(p);
-            else if (lens_kernels.empty())
-                layer = convolve_spans(p, w, 1);
-            else {  // R, G and B each with its own PSF; coverage (and visibility, when hidden) their mean
-                const std::vector<int> kernel_of(kLensChannelKernels.begin(), kLensChannelKernels.begin() + p.nc);
-                layer = convolve_fft(p, lens_kernels, kernel_of, 1);
+    // Sub-aperture views: each composites the layers over its own copy of `out`, and
+    // `out` becomes their mean weighted by their shares ("over" is linear in what it is
+    // laid on). The aperture's kernels are made once a layer and cut per view.
+    const std::vector<ApertureView> views = per_layer ? std::vector<ApertureView>{ ApertureView{} }
+                                                      : aperture_views(o, nthreads);
+    ProgressCounter progress(o.progress, all_tiles * double(views.size()), progress_from);
+    std::vector<KernelWeights> full(m.coc_px.size());
+    for (size_t k = 0; k < full.size(); ++k)
+        if (lens[k].empty())
+            full[k] = aperture_weights(o, m.coc_px[k], m.reduction[k], nthreads);
+    Plane under(1, 1, 4), mean(1, 1, 4);
+    if (views.size() > 1) {
+        under = Plane(out.w, out.h, out.nc);
+        std::copy_n(out.px.get(), out.size(), under.px.get());
+        mean = Plane(out.w, out.h, out.nc);
+        std::fill_n(mean.px.get(), mean.size(), 0.0f);
+    }
+    for (const ApertureView& view : views) {
+        if (views.size() > 1)
+            std::copy_n(under.px.get(), under.size(), out.px.get());
+        for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
+            const float c = m.coc_px[size_t(k)];
+            const std::vector<KernelWeights>& lens_kernels = lens[size_t(k)];
+            const int cells       = lens_kernels.empty() ? kTile : kLensTile;
+            const int s           = m.reduction[size_t(k)], t = cells * s;
+            const KernelWeights w = lens_kernels.empty() ? view_kernel(full[size_t(k)], view, c, o.aspect, s) : lens_kernels[3];
+            std::vector<int> todo;
+            for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
+                if (tiles[size_t(k)][i])
+                    todo.push_back(int(i));
+            const double weight = tile_weight(size_t(k));
+            // Lens character on a flat frame: the layer's sprites are divided by its visibility
+            // as its colour is (a deep frame's layers are continued only under the same
+            // surface, composite_layers' deep visibility; its sprites are not).
+            SpriteGain gain;
+            if (f.sprites && !f.deep() && layer_has_sprites(f, m, k)) {
+                gain.used    = true;
+                gain.gx      = gx;
+                gain.gy      = gy;
+                gain.tile_px = t;
+                gain.cols    = cols[size_t(k)];
+                gain.s       = s;
+                gain.draw.resize(tiles[size_t(k)].size());
+                gain.low.resize(tiles[size_t(k)].size());
+                gain.visibility.resize(tiles[size_t(k)].size());
             }
-            if (content.hidden)
-                divide_by_visibility(layer);
-            if (content.hidden && gain.used) {  // the visibility (channel 4), kept for the sprites
-                const size_t i = size_t(todo[size_t(n)]);
-                gain.draw[i]   = draw;
-                gain.low[i]    = need;
-                Plane& v       = gain.visibility[i];
-                v              = Plane(layer.w, layer.h, 1);
-                for (int y = 0; y < layer.h; ++y)
-                    for (int x = 0; x < layer.w; ++x)
-                        v.row(y)[x] = layer.row(y)[size_t(x) * size_t(layer.nc) + 4];
-            }
-            from_iris_space(layer, f.iris);
-            Plane& target = per_layer ? (*per_layer)[size_t(k)] : out;
-            if (up == 1) {
-                for (int y = draw.ybegin; y < draw.yend; ++y) {
-                    float* dst = target.row(y - gy) + size_t(draw.xbegin - gx) * 4;
-                    for (int x = draw.xbegin; x < draw.xend; ++x, dst += 4) {
-                        float l[4];
-                        sample(layer, need, gx, gy, s, x, y, l);
-                        const float behind = 1.0f - l[3];
-                        for (int c4 = 0; c4 < 4; ++c4)
-                            dst[c4] = l[c4] + behind * dst[c4];
-                    }
+            parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
+                struct Counted {  // the tile counts as done however it returns
+                    ProgressCounter& p;
+                    double units;
+                    ~Counted() { p.add(units); }
+                } counted{ progress, weight };
+                const int tx = todo[size_t(n)] % cols[size_t(k)], ty = todo[size_t(n)] / cols[size_t(k)];
+                const OIIO::ROI region = OIIO::roi_intersection(
+                    OIIO::ROI(gx + tx * t, gx + (tx + 1) * t, gy + ty * t, gy + (ty + 1) * t), f.out);
+                // The tile's reduced pixels, one more each side for bilinear reads.
+                const OIIO::ROI low(tx * cells - 1, floor_div(region.xend - 1 - gx, s) + 2,
+                                    ty * cells - 1, floor_div(region.yend - 1 - gy, s) + 2);
+                // Only where the layer's pixels reach: past its pixels' bounding box grown by
+                // the kernel the layer is exactly 0 (so compositing it changes nothing). One
+                // reduced pixel more keeps the bilinear reads at the edge exact.
+                const TileContent content = tile_content(f, m, k, grown(low, w.rx, w.ry), gx, gy, s);
+                if (content.held.xbegin >= content.held.xend)
+                    return;
+                const OIIO::ROI need = OIIO::roi_intersection(grown(content.held, w.rx + 1, w.ry + 1), low);
+                if (need.xbegin >= need.xend || need.ybegin >= need.yend)
+                    return;
+                // Full-resolution pixels whose bilinear taps lie in `need` (the others read
+                // only zeros), or all of the region's where `need` is the tile's edge.
+                auto first_px = [&](int lo, int g, int r0) { return lo == r0 ? std::numeric_limits<int>::min() : g + lo * s + s / 2; };
+                auto end_px   = [&](int hi, int g, int r1) { return hi == r1 ? std::numeric_limits<int>::max() : g + (hi - 1) * s + s / 2 + 1; };
+                const OIIO::ROI draw = OIIO::roi_intersection(
+                    OIIO::ROI(first_px(need.xbegin, gx, low.xbegin), end_px(need.xend, gx, low.xend),
+                              first_px(need.ybegin, gy, low.ybegin), end_px(need.yend, gy, low.yend)),
+                    region);
+                if (draw.xbegin >= draw.xend || draw.ybegin >= draw.yend)
+                    return;
+                Plane p     = layer_input(f, m, k, grown(need, w.rx, w.ry), gx, gy, s, content.hidden);
+                Plane layer;
+                if (w.is_identity())
+                    layer = std::move(p);
+                else if (lens_kernels.empty())
+                    layer = convolve_spans(p, w, 1);
+                else {  // R, G and B each with its own PSF; coverage (and visibility, when hidden) their mean
+                    const std::vector<int> kernel_of(kLensChannelKernels.begin(), kLensChannelKernels.begin() + p.nc);
+                    layer = convolve_fft(p, lens_kernels, kernel_of, 1);
                 }
-                return;
-            }
-            // Pseudo-high resolution: the up x up output pixels of each pixel, each its own
-            // bilinear read (the layer is zero past `need`'s margin, so `draw` still holds
-            // every output pixel the layer touches).
-            for (int y = draw.ybegin; y < draw.yend; ++y)
-                for (int sy = 0; sy < up; ++sy) {
-                    float* dst = target.row((y - gy) * up + sy) + size_t(draw.xbegin - gx) * size_t(up) * 4;
-                    for (int x = draw.xbegin; x < draw.xend; ++x)
-                        for (int sx = 0; sx < up; ++sx, dst += 4) {
+                if (content.hidden)
+                    divide_by_visibility(layer);
+                if (content.hidden && gain.used) {  // the visibility (channel 4), kept for the sprites
+                    const size_t i = size_t(todo[size_t(n)]);
+                    gain.draw[i]   = draw;
+                    gain.low[i]    = need;
+                    Plane& v       = gain.visibility[i];
+                    v              = Plane(layer.w, layer.h, 1);
+                    for (int y = 0; y < layer.h; ++y)
+                        for (int x = 0; x < layer.w; ++x)
+                            v.row(y)[x] = layer.row(y)[size_t(x) * size_t(layer.nc) + 4];
+                }
+                from_iris_space(layer, f.iris);
+                Plane& target = per_layer ? (*per_layer)[size_t(k)] : out;
+                if (up == 1) {
+                    for (int y = draw.ybegin; y < draw.yend; ++y) {
+                        float* dst = target.row(y - gy) + size_t(draw.xbegin - gx) * 4;
+                        for (int x = draw.xbegin; x < draw.xend; ++x, dst += 4) {
                             float l[4];
-                            sample_sub(layer, need, gx, gy, s, x, y, up, sx, sy, l);
+                            sample(layer, need, gx, gy, s, x, y, l);
                             const float behind = 1.0f - l[3];
                             for (int c4 = 0; c4 < 4; ++c4)
                                 dst[c4] = l[c4] + behind * dst[c4];
                         }
+                    }
+                    return;
                 }
-        });
-        // Lens character: the layer's highlights, before any nearer layer hides them.
-        if (f.sprites)
-            draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads, &gain);
+                // Pseudo-high resolution: the up x up output pixels of each pixel, each its own
+                // bilinear read (the layer is zero past `need`'s margin, so `draw` still holds
+                // every output pixel the layer touches).
+                for (int y = draw.ybegin; y < draw.yend; ++y)
+                    for (int sy = 0; sy < up; ++sy) {
+                        float* dst = target.row((y - gy) * up + sy) + size_t(draw.xbegin - gx) * size_t(up) * 4;
+                        for (int x = draw.xbegin; x < draw.xend; ++x)
+                            for (int sx = 0; sx < up; ++sx, dst += 4) {
+                                float l[4];
+                                sample_sub(layer, need, gx, gy, s, x, y, up, sx, sy, l);
+                                const float behind = 1.0f - l[3];
+                                for (int c4 = 0; c4 < 4; ++c4)
+                                    dst[c4] = l[c4] + behind * dst[c4];
+                            }
+                    }
+            });
+            // Lens character: the layer's highlights, before any nearer layer hides them.
+            if (f.sprites)
+                draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads, &gain);
+        }
+        if (views.size() > 1) {
+            const float share = float(view.share);
+            parallel_for_chunks(0, int64_t(out.size()), 1 << 16, nthreads, [&](int64_t b, int64_t e) {
+                for (int64_t i = b; i < e; ++i)
+                    mean.px[size_t(i)] += share * out.px[size_t(i)];
+            });
+        }
     }
+    if (views.size() > 1)
+        std::copy_n(mean.px.get(), mean.size(), out.px.get());
     return true;
 }
 
@@ -750,6 +783,19 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
     if (o.supersample > 1 && o.method == DefocusMethod::Gather) {
         err = "supersample enlarges layers as they are composited; the gather method has none (use "
               "method=layers, auto or reference)";
+        return false;
+    }
+    if (o.aperture_views < 1 || o.aperture_views > 8) {
+        err = format("views {} is outside 1..8", o.aperture_views);
+        return false;
+    }
+    if (o.aperture_views > 1 && o.method == DefocusMethod::Gather) {
+        err = "views cut the aperture for the layers' compositing; the gather method has no layers (use "
+              "method=layers, auto or reference)";
+        return false;
+    }
+    if (o.aperture_views > 1 && o.deep_output) {
+        err = "views average flat compositings; a deep result keeps one sample a layer (use output=image)";
         return false;
     }
     if (o.supersample > 1 && o.deep_output) {

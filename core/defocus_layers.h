@@ -245,6 +245,23 @@ bool scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, const OIIO
 /// a turn in front of focus (core/defocus.cpp).
 KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads);
 
+/// One sub-aperture of DefocusOptions::aperture_views: cell (i, j) of an n x n grid over
+/// the pupil's bounding square, and its share of the aperture's light (the views' shares
+/// sum to 1). n = 1: the whole aperture.
+struct ApertureView {
+    int n = 1, i = 0, j = 0;
+    double share = 1.0;
+};
+
+/// The views the options ask for, those that hold some of the aperture
+/// (core/defocus_views.cpp).
+std::vector<ApertureView> aperture_views(const DefocusOptions& o, int nthreads);
+
+/// `full`, the aperture at signed CoC `coc_px` over reduction s (aperture_weights),
+/// restricted to view `v` and scaled to sum 1; `full` itself for the whole aperture, an
+/// in-focus layer, or a kernel too small to hold any of the view.
+KernelWeights view_kernel(const KernelWeights& full, const ApertureView& v, float coc_px, float aspect, int s);
+
 /// Colour and coverage (channels 0-3) over the visibility in channel 4, in place; 0 where
 /// the visibility is 0.
 void divide_by_visibility(Plane& p);

@@ -230,15 +230,18 @@ TEST(DefocusSprites, EnergyIsCountedOnce)
 {
     // Sum of each colour channel out = in within 1e-4 (relative), with sprites on: the
     // sprites' share left the layers. Stated with the plain defocus alongside (its own
-    // conservation on this scene is the floor).
+    // conservation on this scene is the floor). In 3 x 3 sub-aperture views too: each
+    // view draws the whole PSF, and the views' shares sum to 1.
     const OIIO::ImageBuf src = lights_scene();
+    for (int views : { 1, 3 })
     for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat, LensPreset::Uncorrected }) {
-        SCOPED_TRACE(lens_preset_name(preset));
-        DefocusOptions o = with_lens(direct(), preset);
+        SCOPED_TRACE(lens_preset_name(preset) + std::string(views > 1 ? ", 3 x 3 views" : ""));
+        DefocusOptions o = with_lens(direct(), preset), p = direct();
         o.lens.diffraction = DiffractionModel::EdgeLaw;
+        o.aperture_views = p.aperture_views = views;
         DefocusReport rep;
         const OIIO::ImageBuf out   = run(src, o, &rep);
-        const OIIO::ImageBuf plain = run(src, direct());
+        const OIIO::ImageBuf plain = run(src, p);
         EXPECT_EQ(rep.sprites, 12) << "every light is a whole sprite (20 > 2 x threshold)";
         for (int c = 0; c < 3; ++c) {
             const double in = channel_sum(src, c), lens = channel_sum(out, c), base = channel_sum(plain, c);

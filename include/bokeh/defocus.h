@@ -65,6 +65,14 @@ struct DefocusOptions {
     NonFinitePolicy nonfinite = NonFinitePolicy::Zero;
     /// Reference: CoC values are quantised to this step (px) to count as one layer.
     float reference_step_px = 0.25f;
+    /// Layered methods and the reference, flat output: the aperture cut into views x views
+    /// sub-apertures (an n x n grid over its bounding square), the layers composited for
+    /// each on its own and the results averaged by the sub-apertures' shares of the light.
+    /// A blurred nearer layer then hides a farther one only for the rays that pass it on
+    /// the same side, as a lens does: one pass takes the product of two whole-aperture
+    /// averages, which shows at a defocused silhouette over a defocused background. Cost
+    /// about views^2 compositings, each sub-kernel about 1 / views of the rows. 1: off.
+    int aperture_views = 1;
     /// A deep input's result as a deep image: one sample a layer per pixel, each a volume
     /// over its layer's depth range; its flatten is the flat result.
     bool deep_output = false;

@@ -56,7 +56,7 @@ bool defocus_command(CommandContext& c)
         if (what != "image")
             return c.fail(format("method=truth gives an image, not output={}", what));
         for (const char* name : { "layers", "reduction", "budget", "bloom", "bloomgain", "iris", "zdilate",
-                                  "step", "border" })
+                                  "step", "border", "views" })
             if (c.options.given(name))
                 return c.fail(format("{}= does not apply to method=truth", name));
         bokeh::TruthOptions t;
@@ -157,6 +157,10 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Choice("nonfinite", { "zero", "error" },
                            "NaN/Inf: colour -> 0, depth -> far (counted, warned); or fail"),
         OptionSpec::Float("step", 0.25, 1.0 / 64.0, 8.0, "reference: CoC quantisation step px"),
+        OptionSpec::Int("views", 1, 1, 8,
+                        "layers, reference: the aperture cut into views x views sub-apertures, the layers "
+                        "composited for each (a blurred silhouette hides the background along its own rays; "
+                        "cost about views^2)"),
         OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
         OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
         OptionSpec::Choice("pixel", { "centre", "area" },

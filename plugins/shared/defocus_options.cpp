@@ -182,6 +182,7 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
     o.nonfinite = v.get_string("nonfinite") == "error" ? NonFinitePolicy::Error
                                                        : NonFinitePolicy::Zero;
     o.reference_step_px = float(v.get_float("step"));
+    o.aperture_views    = v.get_int("views");
 
     // Lens character: on when any of its options (lens_option_specs, highlights=,
     // sprites=, supersample=) is given.
