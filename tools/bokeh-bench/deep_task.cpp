@@ -7,7 +7,8 @@
 // Errors: our flatten against OIIO's where OIIO is exact (tidy, sorted input), the merge's
 // flatten against OIIO's merge's (OIIO culls hidden samples, which a flatten cannot see),
 // each defocus against the deep reference (one full-resolution layer per CoC step), and,
-// on both frames, every defocus method (deep and of the flatten, timed) against the
+// on both frames, every defocus method (deep and of the flatten, timed; the deep ones also
+// in sub-aperture views, layers=30 views=2 and the reference in 4 x 4) against the
 // thin-lens truth over the frame and over the disocclusion mask ("vs truth" rows; chart.py
 // draws them); with --images, deep_sheet.png shows LowResLeftView's results beside it.
 
@@ -150,10 +151,13 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
         std::string name;
         const OIIO::ImageBuf* src;
         bokeh::DefocusMethod method;
+        int layers = 0, views = 1;  // DefocusOptions::layers, aperture_views
     };
     const std::vector<Method> methods = {
         { "deep reference", shot.deep, bokeh::DefocusMethod::Reference },
         { "deep auto", shot.deep, bokeh::DefocusMethod::Auto },
+        { "deep layers=30 views=2", shot.deep, bokeh::DefocusMethod::Layers, 30, 2 },
+        { "deep reference views=4", shot.deep, bokeh::DefocusMethod::Reference, 0, 4 },
         { "flat reference of the flatten", shot.flat, bokeh::DefocusMethod::Reference },
         { "flat auto of the flatten", shot.flat, bokeh::DefocusMethod::Auto },
     };
@@ -164,6 +168,8 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
     for (size_t i = 0; i < methods.size(); ++i) {
         bokeh::DefocusOptions o = shot.lens;
         o.method                = methods[i].method;
+        o.layers                = methods[i].layers;
+        o.aperture_views        = methods[i].views;
         o.border                = bokeh::Border::Black;
         fns.push_back([&, o, i] {
             if (!bokeh::defocus(outs[i], *methods[i].src, o, nullptr, t))
