@@ -153,6 +153,7 @@ DEFOCUS_CASES = [
     {"focus": "60,30", "method": "gather"},
     {"focus": 2, "fstop": 2, "kernel": "polygon", "blades": 7, "aspect": 1.5, "budget": "30dB"},
     {"focus": 6, "fstop": 2, "method": "reference"},
+    {"focus": 6, "fstop": 2, "layers": 24, "views": 2},
 ]
 
 
