@@ -363,7 +363,9 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     const std::vector<ApertureView> views = per_layer ? std::vector<ApertureView>{ ApertureView{} }
                                                       : aperture_views(o, nthreads);
     ProgressCounter progress(o.progress, all_tiles * double(views.size()), progress_from);
-    std::vector<KernelWeights> full(m.coc_px.size());
+    // With one view each layer's kernel is made as its turn comes (a reference of
+    // thousands of layers would otherwise hold them all).
+    std::vector<KernelWeights> full(views.size() > 1 ? m.coc_px.size() : 0);
     for (size_t k = 0; k < full.size(); ++k)
         if (lens[k].empty())
             full[k] = aperture_weights(o, m.coc_px[k], m.reduction[k], nthreads);
@@ -382,7 +384,9 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             const std::vector<KernelWeights>& lens_kernels = lens[size_t(k)];
             const int cells       = lens_kernels.empty() ? kTile : kLensTile;
             const int s           = m.reduction[size_t(k)], t = cells * s;
-            const KernelWeights w = lens_kernels.empty() ? view_kernel(full[size_t(k)], view, c, o.aspect, s) : lens_kernels[3];
+            const KernelWeights w = !lens_kernels.empty() ? lens_kernels[3]
+                                    : full.empty()        ? aperture_weights(o, c, s, nthreads)
+                                                          : view_kernel(full[size_t(k)], view, c, o.aspect, s);
             std::vector<int> todo;
             for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
                 if (tiles[size_t(k)][i])
@@ -489,7 +493,8 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             });
             // Lens character: the layer's highlights, before any nearer layer hides them.
             if (f.sprites)
-                draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads, &gain);
+                draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads, &gain,
+                                   &view == &views.front());
         }
         if (views.size() > 1) {
             const float share = float(view.share);
@@ -789,6 +794,11 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
         err = format("views {} is outside 1..8", o.aperture_views);
         return false;
     }
+    if (o.aperture_views > 1 && o.aperture.shape != KernelShape::Disk && o.aperture.shape != KernelShape::Polygon
+        && o.aperture.shape != KernelShape::Box) {
+        err = "views cut the pupil of a disk, polygon or box aperture; this one has no pupil edge to cut within";
+        return false;
+    }
     if (o.aperture_views > 1 && o.method == DefocusMethod::Gather) {
         err = "views cut the aperture for the layers' compositing; the gather method has no layers (use "
               "method=layers, auto or reference)";
@@ -1080,6 +1090,10 @@ bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, c
     Plane out;
     if (src.initialized() && src.deep()) {
         dst.errorfmt("defocus scatter reference: a flat image only (--flatten a deep one)");
+        return false;
+    }
+    if (opts.aperture_views > 1) {
+        dst.errorfmt("defocus scatter reference: every pixel is scattered with the whole aperture; views do not apply");
         return false;
     }
     if (!prepare(f, src, o, rep, nthreads, err) || !scatter_reference(out, f, o, src.spec(), nthreads, err)) {

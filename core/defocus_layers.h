@@ -227,9 +227,11 @@ bool layer_has_sprites(const Frame& f, const Membership& m, int k);
 
 /// Add the sprites of layer k (share by `m` for flat frames, their own layer for deep
 /// ones) into `target` (RGBA over f.out; colour only: a sprite is the light of a pixel
-/// whose coverage stays in the layer), times `gain` where given.
+/// whose coverage stays in the layer), times `gain` where given. `counted`: add them to
+/// the set's drawn count (false for the second and later sub-aperture views, which draw
+/// the same sprites again).
 void draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads,
-                        const SpriteGain* gain = nullptr);
+                        const SpriteGain* gain = nullptr, bool counted = true);
 
 /// The report's sprite figures from `set` (null: lens character off), and its summary
 /// part (", N sprites, CoC a .. b px, t s"; empty when off).

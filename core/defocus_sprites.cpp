@@ -538,7 +538,7 @@ bool detail::layer_has_sprites(const Frame& f, const Membership& m, int k)
 }
 
 void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads,
-                                const SpriteGain* gain)
+                                const SpriteGain* gain, bool counted)
 {
     if (!f.sprites || f.sprites->sprites.empty())
         return;
@@ -662,7 +662,8 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         }
     });
     // A sprite shared between two layers is drawn in both but counted once, in the first.
-    f.sprites->drawn += std::count_if(merged.begin(), merged.end(), [](const Drawn& d) { return d.counted; });
+    if (counted)
+        f.sprites->drawn += std::count_if(merged.begin(), merged.end(), [](const Drawn& d) { return d.counted; });
     f.sprites->seconds += seconds_since(t0);
 }
 

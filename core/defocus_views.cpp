@@ -25,7 +25,9 @@
 // were even across it (an anti-aliased edge pixel's is not): one depth's views differ from
 // the whole aperture's blur by up to 3.4e-3 on an 11 px hexagon. The cells are a square
 // grid, not the aperture's own shape (a polygon's corners fall in cells of their own, with
-// small shares); views of lens character draw each highlight's whole PSF in every view.
+// small shares; cells under 1e-4 of the light are dropped); a Gaussian aperture, with no
+// pupil edge, is refused; views of lens character draw each highlight's whole PSF in every
+// view (counted once).
 
 #include "defocus_layers.h"
 
@@ -64,11 +66,13 @@ std::vector<ApertureView> aperture_views(const DefocusOptions& o, int nthreads)
     const int n = o.aperture_views;
     if (n <= 1)
         return { ApertureView{} };
-    // Each cell's share of the aperture, read off its kernel 255 px across (a kernel
-    // pixel is 1/128 of the pupil).
-    constexpr float kShareCoc_px = 255.0f;
-    const KernelWeights big = aperture_weights(o, kShareCoc_px, 1, nthreads);
-    const double ux = 2.0 / kShareCoc_px, uy = ux / o.aspect;
+    // Each cell's share of the aperture, read off its kernel 255 px across its longer
+    // side (a kernel pixel is 1/128 of the pupil) and at least 64 px across its shorter
+    // (an anamorphic squeeze of up to 20 keeps 1/32 of the pupil a pixel).
+    const double squeeze = std::max(double(o.aspect), 1.0 / o.aspect);
+    const float share_coc_px = float(std::max(255.0 / squeeze, 64.0) * (o.aspect < 1.0f ? squeeze : 1.0));
+    const KernelWeights big = aperture_weights(o, share_coc_px, 1, nthreads);
+    const double ux = 2.0 / share_coc_px, uy = ux / o.aspect;
     std::vector<ApertureView> views;
     double total = 0.0;
     for (int j = 0; j < n; ++j)
@@ -78,9 +82,15 @@ std::vector<ApertureView> aperture_views(const DefocusOptions& o, int nthreads)
                 for (int dx = -big.rx; dx <= big.rx; ++dx)
                     v.share += big.at(dx, dy) * view_share(v, dx, dy, ux, uy);
             total += v.share;
-            if (v.share > 1e-9)  // a cell in a central hole or past a polygon's corner
-                views.push_back(v);
+            views.push_back(v);
         }
+    // A cell in a central hole, or past a polygon's corner with a sliver of it, would cost
+    // a whole compositing for under 1e-4 of the light: its share goes to the others.
+    views.erase(std::remove_if(views.begin(), views.end(), [&](const ApertureView& v) { return v.share < 1e-4 * total; }),
+                views.end());
+    total = 0.0;
+    for (const ApertureView& v : views)
+        total += v.share;
     for (ApertureView& v : views)
         v.share /= total;
     return views;

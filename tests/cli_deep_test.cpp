@@ -213,6 +213,8 @@ TEST(CliDeep, BadInputFailsCleanly)
     expect_clean_failure(bokehtool(format("{} --defocus:views=2:output=deep -o {}", a, out)),
                          "a deep result keeps one sample a layer", out);
     expect_clean_failure(bokehtool(format("{} --defocus:views=9 -o {}", a, out)), "views", out);
+    expect_clean_failure(bokehtool(format("{} --defocus:views=2:output=coc -o {}", a, out)),
+                         "views= composites the layers per sub-aperture; output=coc", out);
     expect_clean_failure(bokehtool(format("{} --defocus:method=truth:views=2 -o {}", a, out)),
                          "views= does not apply to method=truth", out);
     expect_clean_failure(bokehtool(format("--scene lights:width=32:height=18 --defocus:output=deep -o {}", out)),

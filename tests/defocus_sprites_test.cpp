@@ -233,21 +233,23 @@ TEST(DefocusSprites, EnergyIsCountedOnce)
     // conservation on this scene is the floor). In 3 x 3 sub-aperture views too: each
     // view draws the whole PSF, and the views' shares sum to 1.
     const OIIO::ImageBuf src = lights_scene();
-    for (int views : { 1, 3 })
-    for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat, LensPreset::Uncorrected }) {
-        SCOPED_TRACE(lens_preset_name(preset) + std::string(views > 1 ? ", 3 x 3 views" : ""));
-        DefocusOptions o = with_lens(direct(), preset), p = direct();
-        o.lens.diffraction = DiffractionModel::EdgeLaw;
-        o.aperture_views = p.aperture_views = views;
-        DefocusReport rep;
-        const OIIO::ImageBuf out   = run(src, o, &rep);
-        const OIIO::ImageBuf plain = run(src, p);
-        EXPECT_EQ(rep.sprites, 12) << "every light is a whole sprite (20 > 2 x threshold)";
-        for (int c = 0; c < 3; ++c) {
-            const double in = channel_sum(src, c), lens = channel_sum(out, c), base = channel_sum(plain, c);
-            std::printf("[ figures  ] energy %-11s channel %d: in %.6g, sprites %.6g (%.2e), plain %.6g (%.2e)\n",
-                        lens_preset_name(preset), c, in, lens, lens / in - 1.0, base, base / in - 1.0);
-            EXPECT_NEAR(lens / in, 1.0, 1e-4);
+    for (int views : { 1, 3 }) {
+        for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat, LensPreset::Uncorrected }) {
+            SCOPED_TRACE(lens_preset_name(preset) + std::string(views > 1 ? ", 3 x 3 views" : ""));
+            DefocusOptions o = with_lens(direct(), preset), p = direct();
+            o.lens.diffraction = DiffractionModel::EdgeLaw;
+            o.aperture_views = p.aperture_views = views;
+            DefocusReport rep;
+            const OIIO::ImageBuf out   = run(src, o, &rep);
+            const OIIO::ImageBuf plain = run(src, p);
+            EXPECT_EQ(rep.sprites, 12) << "every light is a whole sprite (20 > 2 x threshold)";
+            EXPECT_EQ(rep.sprites_drawn, 12) << "each view draws them; the report counts them once";
+            for (int c = 0; c < 3; ++c) {
+                const double in = channel_sum(src, c), lens = channel_sum(out, c), base = channel_sum(plain, c);
+                std::printf("[ figures  ] energy %-11s channel %d: in %.6g, sprites %.6g (%.2e), plain %.6g (%.2e)\n",
+                            lens_preset_name(preset), c, in, lens, lens / in - 1.0, base, base / in - 1.0);
+                EXPECT_NEAR(lens / in, 1.0, 1e-4);
+            }
         }
     }
 }
