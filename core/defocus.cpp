@@ -376,7 +376,11 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
         mean = Plane(out.w, out.h, out.nc);
         std::fill_n(mean.px.get(), mean.size(), 0.0f);
     }
+    // What each tile of a layer holds does not depend on the view (a view's kernel keeps
+    // the whole aperture's extent): found in the first view, read in the others.
+    std::vector<std::vector<TileContent>> contents(m.coc_px.size());
     for (const ApertureView& view : views) {
+        const bool first_view = &view == &views.front();
         if (views.size() > 1)
             std::copy_n(under.px.get(), under.size(), out.px.get());
         for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
@@ -391,6 +395,8 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             for (size_t i = 0; i < tiles[size_t(k)].size(); ++i)
                 if (tiles[size_t(k)][i])
                     todo.push_back(int(i));
+            if (first_view)
+                contents[size_t(k)].resize(tiles[size_t(k)].size());
             const double weight = tile_weight(size_t(k));
             // Lens character on a flat frame: the layer's sprites are divided by its visibility
             // as its colour is (a deep frame's layers are continued only under the same
@@ -422,7 +428,10 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
                 // Only where the layer's pixels reach: past its pixels' bounding box grown by
                 // the kernel the layer is exactly 0 (so compositing it changes nothing). One
                 // reduced pixel more keeps the bilinear reads at the edge exact.
-                const TileContent content = tile_content(f, m, k, grown(low, w.rx, w.ry), gx, gy, s);
+                TileContent& known = contents[size_t(k)][size_t(todo[size_t(n)])];
+                if (first_view)
+                    known = tile_content(f, m, k, grown(low, w.rx, w.ry), gx, gy, s);
+                const TileContent content = known;
                 if (content.held.xbegin >= content.held.xend)
                     return;
                 const OIIO::ROI need = OIIO::roi_intersection(grown(content.held, w.rx + 1, w.ry + 1), low);
@@ -494,7 +503,7 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             // Lens character: the layer's highlights, before any nearer layer hides them.
             if (f.sprites)
                 draw_layer_sprites(per_layer ? (*per_layer)[size_t(k)] : out, f, m, k, nthreads, &gain,
-                                   &view == &views.front());
+                                   first_view);
         }
         if (views.size() > 1) {
             const float share = float(view.share);
