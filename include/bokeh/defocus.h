@@ -72,7 +72,7 @@ struct DefocusOptions {
     /// the same side, as a lens does: one pass takes the product of two whole-aperture
     /// averages, which shows at a defocused silhouette over a defocused background. Cost:
     /// views^2 passes over the layers, each blurring with kernels about 1 / views as tall
-    /// (the deep reference on LowResLeftView: 4.4x the time in 4 x 4 views). Disk, polygon
+    /// (the deep reference on LowResLeftView: 3.4x the time in 4 x 4 views). Disk, polygon
     /// and box apertures (a pupil with an edge to cut within). 1: off.
     int aperture_views = 1;
     /// A deep input's result as a deep image: one sample a layer per pixel, each a volume

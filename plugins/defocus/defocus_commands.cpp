@@ -163,7 +163,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Int("views", 1, 1, 8,
                         "layers, reference: the aperture cut into views x views sub-apertures, the layers "
                         "composited for each (a blurred silhouette hides the background along its own rays; "
-                        "views^2 passes with kernels 1/views as tall: 4.4x the time at views=4)"),
+                        "views^2 passes with kernels 1/views as tall: 3.4x the time at views=4)"),
         OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
         OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
         OptionSpec::Choice("pixel", { "centre", "area" },
