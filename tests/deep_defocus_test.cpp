@@ -623,8 +623,9 @@ TEST(DefocusViews, OneDepthIsTheWholeAperturesBlur)
 
 TEST(DefocusViews, LightIsKept)
 {
-    // A lone point, flat and deep, behind and in front of focus: every view's kernel sums
-    // to 1 and the views' shares to 1.
+    // A lone point, flat and deep, behind and in front of focus, at the input's resolution
+    // and at twice it (supersample 2: the output sums to 4 times the input): every view's
+    // kernel sums to 1 and the views' shares to 1.
     for (float coc : { 15.0f, -9.5f }) {
         const OIIO::ImageBuf flat = rgbaz_image(41, 41, [coc](int x, int y) {
             const bool lit = x == 20 && y == 20;
@@ -632,16 +633,20 @@ TEST(DefocusViews, LightIsKept)
         });
         OIIO::ImageBuf deep;
         ASSERT_TRUE(deepen(deep, flat));
-        for (const OIIO::ImageBuf* in : { &flat, static_cast<const OIIO::ImageBuf*>(&deep) }) {
-            DefocusOptions o  = direct_options(DefocusMethod::Layers);
-            o.aperture_views = 3;
-            OIIO::ImageBuf out;
-            ASSERT_TRUE(defocus(out, *in, o)) << out.geterror();
-            const auto stats = OIIO::ImageBufAlgo::computePixelStats(out);
-            const double npx = double(out.spec().width) * out.spec().height;
-            EXPECT_NEAR(stats.avg[0] * npx, 1000.0, 0.1) << "CoC " << coc << (in->deep() ? ", deep" : ", flat");
-            EXPECT_NEAR(stats.avg[3] * npx, 1.0, 1e-4) << "CoC " << coc << (in->deep() ? ", deep" : ", flat");
-        }
+        for (int up : { 1, 2 })
+            for (const OIIO::ImageBuf* in : { &flat, static_cast<const OIIO::ImageBuf*>(&deep) }) {
+                DefocusOptions o  = direct_options(DefocusMethod::Layers);
+                o.aperture_views = 3;
+                o.supersample    = up;
+                OIIO::ImageBuf out;
+                ASSERT_TRUE(defocus(out, *in, o)) << out.geterror();
+                const auto stats = OIIO::ImageBufAlgo::computePixelStats(out);
+                const double npx = double(out.spec().width) * out.spec().height;
+                const std::string what = "CoC " + std::to_string(coc) + (in->deep() ? ", deep" : ", flat")
+                                         + (up > 1 ? ", supersample 2" : "");
+                EXPECT_NEAR(stats.avg[0] * npx, 1000.0 * up * up, 0.1 * up * up) << what;
+                EXPECT_NEAR(stats.avg[3] * npx, 1.0 * up * up, 1e-4 * up * up) << what;
+            }
     }
 }
 
