@@ -86,8 +86,8 @@ std::vector<ApertureView> aperture_views(const DefocusOptions& o, int nthreads)
         }
     // A cell in a central hole, or past a polygon's corner with a sliver of it, would cost
     // a whole compositing for under 1e-4 of the light: its share goes to the others.
-    views.erase(std::remove_if(views.begin(), views.end(), [&](const ApertureView& v) { return v.share < 1e-4 * total; }),
-                views.end());
+    const auto sliver = [&](const ApertureView& v) { return v.share < 1e-4 * total; };
+    views.erase(std::remove_if(views.begin(), views.end(), sliver), views.end());
     total = 0.0;
     for (const ApertureView& v : views)
         total += v.share;

@@ -66,11 +66,11 @@ constexpr int kAngleSteps = 4096;
 // [coc - reach, coc + reach], reach half the CoC gap to the nearest opaque point of each
 // 4-neighbour whose gap is at most kConnectedCocPx: a ray crossing between two such
 // pixels meets one of them. A ray moves at most half a pixel sideways per pixel of CoC, so
-// where the two are different surfaces, what lies behind them loses a sliver at most half a
-// pixel wide (times the aspect, vertically) at the aperture's rim. Partly transparent samples (coverage of an edge, a
-// small light, smoke) are not tiles of a solid surface and stay points: connected too, the
-// lights scene's fairy lights took rays from the wall around them, 1.6 dB further from
-// its geometric truth (4 x 4 blocks, 1024 rays a pixel).
+// where the two are different surfaces, what lies behind them loses a sliver at most half
+// a pixel wide (times the aspect, vertically) at the aperture's rim. Partly transparent
+// samples (coverage of an edge, a small light, smoke) are not tiles of a solid surface and
+// stay points: connected too, the lights scene's fairy lights took rays from the wall
+// around them, 1.6 dB further from its geometric truth (4 x 4 blocks, 1024 rays a pixel).
 constexpr float kConnectedCocPx = 1.0f;
 
 

@@ -12,8 +12,9 @@
 // line in (x, y, w) and crosses the deep image's pixel cells (each pixel's frustum slice,
 // [i, i+1) x [j, j+1)) in order of depth. Each ray walks those cells by a DDA over c,
 // taking a point sample of a cell when its CoC lies in the c-interval the ray spends in
-// the cell (an opaque point: when its reach does, below), and the part of a volume sample [Z, ZBack) whose depths map into that interval
-// (alpha' = 1 - (1 - alpha)^(dz / (ZBack - Z)), by expm1/log1p, the OpenEXR split rule),
+// the cell (an opaque point: when its reach does, below), and the part of a volume sample
+// [Z, ZBack) whose depths map into that interval, by the OpenEXR split rule (expm1/log1p)
+//     alpha' = 1 - (1 - alpha)^(dz / (ZBack - Z)),
 // composited front to back with "over" until the transmittance of every alpha is 2^-25 or
 // less (what float stores as an opacity of 1; the samples left out change the result by
 // at most that fraction of their light).
@@ -50,8 +51,8 @@
 // 1 px, so a ray cannot slip between the tiles of a surface seen at a grazing angle
 // (core/truth.cpp, kConnectedCocPx).
 //
-// Limits: exact for the scene the file encodes (its opaque points joined as above) — surfaces seen only from the side of the
-// aperture (silhouettes' flanks) are not in it; alpha is opacity spread over the cell, not
+// Limits: exact for the scene the file encodes (its opaque points joined as above) —
+// surfaces seen only from the side of the aperture (silhouettes' flanks) are not in it; alpha is opacity spread over the cell, not
 // sub-pixel coverage; samples a renderer culled behind opaque ones cannot be revealed.
 // The aperture is the continuous shape (KernelEdge is ignored); disk and polygon only.
 #pragma once
