@@ -234,6 +234,9 @@ void load_pixel(const RawDeep& raw, int64_t p, const std::vector<int>& to_out, c
     const char* base     = static_cast<const char*>(dd.data_ptr(p, 0, 0));
     const size_t stride  = dd.samplesize();
     const int src_nch    = dd.channels();
+    // A source without the layout's ZBack holds point samples: ZBack = Z.
+    const bool point_only = L.zback >= 0
+                            && std::find(to_out.begin(), to_out.end(), L.zback) == to_out.end();
     // Room for every sample at once; a sample dropped below gives its row back.
     out.v.resize(size_t(out.n + ns) * size_t(out.nch), 0.0);
     for (int s = 0; s < ns; ++s) {
@@ -242,6 +245,8 @@ void load_pixel(const RawDeep& raw, int64_t p, const std::vector<int>& to_out, c
         for (int c = 0; c < src_nch; ++c)
             if (to_out[size_t(c)] >= 0)
                 o[to_out[size_t(c)]] = load_value(sp + raw.offset[size_t(c)], raw.base[size_t(c)]);
+        if (point_only)
+            o[L.zback] = o[L.z];
         // The rules need a depth; NaN or -inf depth places the sample nowhere.
         const double z  = o[L.z];
         const double zb = L.zback >= 0 ? o[L.zback] : z;
@@ -762,24 +767,36 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
             dst.errorfmt("{} (image {})", srcs[i] ? err : std::string("deepmerge: no image"), i + 1);
             return false;
         }
-    const DeepLayout L = layout_of(*srcs[0]);
-    // Each image's channels mapped onto the first's by name.
+    // Point samples merge with volume samples: a sample without ZBack is a point at its Z,
+    // as one whose ZBack equals its Z is ("Interpreting OpenEXR Deep Pixels"), so the result
+    // has ZBack when any input has it, and the channels are laid out as the first such
+    // input's; an input without ZBack gets ZBack = Z (load_pixel).
+    size_t lead = 0;
+    for (size_t i = 0; i < srcs.size(); ++i)
+        if (layout_of(*srcs[i]).zback >= 0) {
+            lead = i;
+            break;
+        }
+    const DeepLayout L = layout_of(*srcs[lead]);
+    // Each image's channels mapped onto the lead's by name.
     std::vector<std::vector<int>> maps;
     std::vector<RawDeep> raws;
     OIIO::ROI roi = srcs[0]->roi();
     for (size_t i = 0; i < srcs.size(); ++i) {
         const OIIO::ImageSpec& s = srcs[i]->spec();
-        if (s.nchannels != L.nch) {
-            dst.errorfmt("deepmerge: image {} has channels {}, image 1 has {}", i + 1,
-                         OIIO::Strutil::join(s.channelnames, ","), OIIO::Strutil::join(L.names, ","));
+        const bool point_only    = L.zback >= 0 && layout_of(*srcs[i]).zback < 0;
+        if (s.nchannels != L.nch - (point_only ? 1 : 0)) {
+            dst.errorfmt("deepmerge: image {} has channels {}, image {} has {}", i + 1,
+                         OIIO::Strutil::join(s.channelnames, ","), lead + 1,
+                         OIIO::Strutil::join(L.names, ","));
             return false;
         }
         std::vector<int> m(size_t(s.nchannels), -1);
         for (int c = 0; c < s.nchannels; ++c) {
             auto it = std::find(L.names.begin(), L.names.end(), s.channel_name(c));
             if (it == L.names.end()) {
-                dst.errorfmt("deepmerge: image {} has channel '{}', image 1 has not ({})", i + 1,
-                             s.channel_name(c), OIIO::Strutil::join(L.names, ","));
+                dst.errorfmt("deepmerge: image {} has channel '{}', image {} has not ({})", i + 1,
+                             s.channel_name(c), lead + 1, OIIO::Strutil::join(L.names, ","));
                 return false;
             }
             m[size_t(c)] = int(it - L.names.begin());
@@ -814,8 +831,13 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
         dst.errorfmt("deepmerge: {}", err);
         return false;
     }
+    // The lead's channels; the first image's display window and metadata.
+    OIIO::ImageSpec like = srcs[lead]->spec();
+    like.extra_attribs   = srcs[0]->spec().extra_attribs;
+    like.full_x = srcs[0]->spec().full_x, like.full_y = srcs[0]->spec().full_y;
+    like.full_width = srcs[0]->spec().full_width, like.full_height = srcs[0]->spec().full_height;
     OIIO::ImageBuf result;
-    assemble(result, srcs[0]->spec(), L.types, res, nthreads);
+    assemble(result, like, L.types, res, nthreads);
     dst = std::move(result);
     return true;
 }

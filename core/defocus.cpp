@@ -761,8 +761,9 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
         err = format("layers {} is outside 0..1024 (0: automatic)", o.layers);
         return false;
     }
-    if (o.max_reduction < 1 || o.max_reduction > 16 || (o.max_reduction & (o.max_reduction - 1))) {
-        err = format("max reduction {} is not one of 1, 2, 4, 8, 16", o.max_reduction);
+    // Any bound 1..16: the buffers are powers of two, the largest up to it (reduction_for).
+    if (o.max_reduction < 1 || o.max_reduction > 16) {
+        err = format("max reduction {} is outside 1..16", o.max_reduction);
         return false;
     }
     if (!(o.min_reduced_coc_px >= 0.0f && o.min_reduced_coc_px <= 256.0f)) {
@@ -839,6 +840,7 @@ bool prepare(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, Defoc
     CocOptions coc = o.coc;
     if (!resolve_coc_options(coc, src, err) || !to_work_image(f.img, src, nthreads, err))
         return false;
+    f.lens = coc;
     // The bad-value policy (DESIGN.md): colour -> 0, depth -> far ("no depth"), counted.
     using Counts  = std::array<int64_t, 2>;
     const int64_t npx = int64_t(f.img.z.size());
@@ -1002,6 +1004,7 @@ void write_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f
                                                               : std::vector<std::string>{ "R", "G", "B" },
                                           region);
     scale_display_window(spec, src.spec(), f.up);
+    record_lens(spec, f.lens);
     reset_uninitialised(dst, spec);
     parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
         for (int y = int(y0); y < int(y1); ++y) {

@@ -186,6 +186,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
 
     // Each layer's pixels: the pixel's pieces in it, composited front to back.
     Frame f;
+    f.lens     = coc;
     f.data     = tidy.roi();
     f.img.roi  = f.data;
     f.border   = o.border;
@@ -430,6 +431,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             return fail(err);
         OIIO::ImageSpec fs = derived_spec(src.spec(), { "R", "G", "B", "A" }, region);
         scale_display_window(fs, src.spec(), f.up);
+        record_lens(fs, f.lens);
         fs.deep            = false;
         fs.channelformats.clear();
         reset_uninitialised(dst, fs);
@@ -452,6 +454,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             z1[k] = k + 1 < K ? std::max(float(rung_depth[k + 1]), std::nextafter(z0[k], HUGE_VALF)) : z0[k];
         }
         OIIO::ImageSpec ds = derived_spec(src.spec(), { "R", "G", "B", "A", "Z", "ZBack" }, f.out);
+        record_lens(ds, f.lens);
         ds.deep            = true;
         ds.z_channel       = 4;
         ds.channelformats  = std::vector<OIIO::TypeDesc>(6, OIIO::TypeFloat);

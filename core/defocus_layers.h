@@ -75,6 +75,7 @@ struct Frame {
     IrisSpace iris;
     std::vector<float> coc;  // signed CoC per pixel of the data window
     OIIO::ROI data, out;     // the data window; the output region
+    CocOptions lens;         // the CoC options as resolved (focus by pixel made a distance)
     Border border = Border::Clamp;
     // A deep frame: per layer, its premultiplied RGBA per data-window pixel (the pixel's
     // samples in that layer composited front to back); img, coc and the membership's

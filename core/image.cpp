@@ -11,6 +11,7 @@
 #include "plane.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -74,6 +75,40 @@ int channel_index_named(const OIIO::ImageSpec& spec, const std::string& name, st
         err = format("no channel '{}' (the image has {})", name,
                      OIIO::Strutil::join(spec.channelnames, ", "));
     return -1;
+}
+
+bool metadata_number(const OIIO::ImageSpec& spec, const std::string& name, double& value,
+                     std::string& err)
+{
+    const OIIO::ParamValue* p = spec.find_attribute(name);
+    if (!p)
+        return true;
+    const OIIO::TypeDesc t = p->type();
+    double v               = std::numeric_limits<double>::quiet_NaN();
+    if (t == OIIO::TypeString) {
+        const std::string text = OIIO::Strutil::strip(p->get_ustring().string());
+        double parsed          = 0.0;
+        const auto [end, ec]   = std::from_chars(text.data(), text.data() + text.size(), parsed);
+        if (!text.empty() && ec == std::errc() && end == text.data() + text.size())
+            v = parsed;
+    } else if (t.aggregate == OIIO::TypeDesc::SCALAR && t.arraylen <= 1 && p->nvalues() == 1
+               && t.basetype != OIIO::TypeDesc::UNKNOWN && t.basetype != OIIO::TypeDesc::PTR
+               && t.basetype != OIIO::TypeDesc::NONE) {
+        v = p->get_float_indexed(0);
+        if (t.basetype == OIIO::TypeDesc::DOUBLE)
+            v = *static_cast<const double*>(p->data());
+        else if (t.basetype == OIIO::TypeDesc::INT32)
+            v = *static_cast<const int32_t*>(p->data());
+        else if (t.basetype == OIIO::TypeDesc::UINT32)
+            v = *static_cast<const uint32_t*>(p->data());
+    }
+    if (!std::isfinite(v)) {
+        err = OIIO::Strutil::fmt::format("metadata {} is {} '{}', not a number", name,
+                                         t.c_str(), p->get_string());
+        return false;
+    }
+    value = v;
+    return true;
 }
 
 bool is_premultiplied(const OIIO::ImageSpec& spec)

@@ -24,7 +24,9 @@
 #include <cctype>
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <mutex>
 #include <new>
 
@@ -494,6 +496,40 @@ static bool write_part(OIIO::ImageOutput& out, const std::string& tmp, const OII
     return !subset.has_error() && write_pixels(out, subset);
 }
 
+namespace {
+
+// The time a file is written, as TIFF and EXIF spell DateTime ("YYYY:MM:DD HH:MM:SS"), in
+// UTC. SOURCE_DATE_EPOCH (the reproducible-builds convention: seconds since 1970) fixes
+// it, so that two runs can give the same bytes.
+std::string date_time_now()
+{
+    std::time_t t = std::time(nullptr);
+    if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) {
+        char* end       = nullptr;
+        const long long v = std::strtoll(epoch, &end, 10);
+        if (end != epoch && *end == '\0' && v >= 0)
+            t = std::time_t(v);
+    }
+    std::tm utc = {};
+    gmtime_r(&t, &utc);
+    char text[32];
+    std::strftime(text, sizeof(text), "%Y:%m:%d %H:%M:%S", &utc);
+    return text;
+}
+
+}  // namespace
+
+void describe_output(OIIO::ImageSpec& spec, const WriteOptions& opts)
+{
+    // Facts about the file an image was read from, not about the one being written.
+    for (const char* stale : { "openexr:chunkCount", "oiio:subimages" })
+        spec.erase_attribute(stale);
+    spec.attribute("Software", "OpenBokeh " BOKEH_VERSION);
+    spec.attribute("DateTime", date_time_now());
+    for (const OIIO::ParamValue& p : opts.metadata)
+        spec.attribute(p.name().string(), p.type(), p.data());
+}
+
 bool write_image(const OIIO::ImageBuf& img, const std::string& path, const WriteOptions& opts,
                  std::string& err)
 {
@@ -541,6 +577,7 @@ bool write_image(const OIIO::ImageBuf& img, const std::string& path, const Write
     }
 
     OIIO::ImageSpec spec = img.spec();
+    describe_output(spec, opts);
     std::vector<OIIO::TypeDesc> formats = opts.channel_formats;
     if (img.deep()) {
         const auto types = img.deepdata()->all_channeltypes();  // deep samples keep their own types

@@ -83,6 +83,22 @@ double distance_from_depth(double value, DepthMode mode, bool negate)
     return kInf;
 }
 
+void record_lens(OIIO::ImageSpec& spec, const CocOptions& resolved)
+{
+    static const char* names[] = { "bokeh:focal_mm", "bokeh:fstop", "bokeh:sensor_width_mm",
+                                   "bokeh:focus_m" };
+    if (resolved.mode == DepthMode::Direct) {
+        for (const char* n : names)
+            spec.erase_attribute(n);
+        return;
+    }
+    const Lens& l = resolved.lens;
+    spec.attribute(names[0], float(l.focal_mm));
+    spec.attribute(names[1], float(l.fstop));
+    spec.attribute(names[2], float(l.sensor_width_mm));
+    spec.attribute(names[3], float(l.focus_distance * l.depth_unit_mm / 1000.0));
+}
+
 bool resolve_coc_options(CocOptions& o, const OIIO::ImageBuf& src, std::string& err)
 {
     using OIIO::Strutil::fmt::format;

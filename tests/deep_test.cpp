@@ -313,6 +313,51 @@ TEST(Deep, MergeOverDifferentWindowsAndChannelOrders)
     EXPECT_NE(bad.geterror().find("'X'"), std::string::npos) << bad.geterror();
 }
 
+// A pass of point samples (R, G, B, A, Z: what renderers and --defocus:output=deep's
+// inputs hold) merges with a pass of volume samples (with ZBack): OpenEXR reads a sample
+// without ZBack as a point at Z, so the merge adds ZBack = Z to it. Every combination
+// flattens to the density integral of the pooled samples.
+TEST(Deep, PointPassesMergeWithVolumePasses)
+{
+    const int w = 12, h = 9;
+    std::vector<Pixel> pp = random_pixels(w * h, 41, 3);
+    for (Pixel& px : pp)
+        for (Smp& s : px)
+            s.zb = s.z;  // points: the pass below has no ZBack to hold anything else
+    const auto pv = random_pixels(w * h, 42, 3);
+    OIIO::ImageBuf points;
+    ASSERT_TRUE(OIIO::ImageBufAlgo::channels(points, make_deep(w, h, pp), 5, { 0, 1, 2, 3, 4 }));
+    ASSERT_EQ(points.spec().channelindex("ZBack"), -1);
+    const OIIO::ImageBuf volumes = make_deep(w, h, pv);
+    struct Combo {
+        const OIIO::ImageBuf *first, *second;
+        const std::vector<Pixel> *a, *b;
+        bool zback;
+    };
+    const Combo combos[] = { { &points, &points, &pp, &pp, false },
+                             { &points, &volumes, &pp, &pv, true },
+                             { &volumes, &points, &pv, &pp, true },
+                             { &volumes, &volumes, &pv, &pv, true } };
+    for (const Combo& k : combos) {
+        OIIO::ImageBuf merged, flat;
+        bokeh::DeepRepairs repairs;
+        bokeh::DeepOptions opt;
+        opt.repairs = &repairs;
+        ASSERT_TRUE(bokeh::deep_merge(merged, { k.first, k.second }, false, opt)) << merged.geterror();
+        EXPECT_EQ(repairs.total(), 0) << "a point without ZBack is no fault to repair";
+        EXPECT_EQ(merged.spec().channelindex("ZBack") >= 0, k.zback);
+        EXPECT_EQ(merged.spec().channelindex("R"), 0) << "colour stays first";
+        ASSERT_TRUE(bokeh::flatten(flat, merged)) << flat.geterror();
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                Pixel all = (*k.a)[size_t(y * w + x)];
+                for (const Smp& s : (*k.b)[size_t(y * w + x)])
+                    all.push_back(s);
+                expect_flat_matches(flat, x, y, density_composite(all), 3e-6, "point + volume merge");
+            }
+    }
+}
+
 TEST(Deep, CullDropsOnlyWhatAccumulatedOpacityHides)
 {
     // 30 samples of alpha 0.5, then one more: after 25 of them the transmittance is 2^-25,

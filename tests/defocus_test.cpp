@@ -1035,6 +1035,36 @@ TEST(DefocusIris, RangeTooWideIsRefused)
     EXPECT_NE(dst.geterror().find("iris"), std::string::npos) << dst.geterror();
 }
 
+// The reduction bound takes any value of its range: the buffers are powers of two, the
+// largest up to it, so a bound of 3 plans exactly what a bound of 2 does.
+TEST(DefocusOptionsRange, ReductionBoundBetweenPowersOfTwo)
+{
+    const OIIO::ImageBuf src = make_image(96, 64, [](int x, int y) {
+        Px p;
+        p.r = float((x * 7 + y * 3) % 11) / 10.0f;
+        p.z = 2.0f + float(x);  // CoC grows to 97 px across the frame: layers get reduced
+        return p;
+    });
+    DefocusOptions two = direct(DefocusMethod::Layers), three = two;
+    two.max_reduction   = 2;
+    three.max_reduction = 3;
+    DefocusReport r2, r3;
+    OIIO::ImageBuf a, b;
+    ASSERT_TRUE(defocus(a, src, two, &r2)) << a.geterror();
+    ASSERT_TRUE(defocus(b, src, three, &r3)) << b.geterror();
+    EXPECT_EQ(r2.layer_reduction, r3.layer_reduction);
+    EXPECT_NE(std::find(r2.layer_reduction.begin(), r2.layer_reduction.end(), 2), r2.layer_reduction.end())
+        << "the scene must reduce some layer for the case to test anything";
+    DefocusReport r16;
+    OIIO::ImageBuf c;
+    DefocusOptions sixteen = two;
+    sixteen.max_reduction  = 16;
+    ASSERT_TRUE(defocus(c, src, sixteen, &r16)) << c.geterror();
+    EXPECT_NE(r16.layer_reduction, r2.layer_reduction) << "the bound decides the plan here";
+    const auto cmp = OIIO::ImageBufAlgo::compare(a, b, 0.0f, 0.0f);
+    EXPECT_EQ(cmp.maxerror, 0.0);
+}
+
 TEST(DefocusBadOptions, RefusedByName)
 {
     const OIIO::ImageBuf src = make_image(16, 12, [](int, int) { Px p; p.z = 3.0f; return p; });
@@ -1044,7 +1074,8 @@ TEST(DefocusBadOptions, RefusedByName)
     };
     const Case cases[] = {
         { "aspect", [](DefocusOptions& o) { o.aspect = 0.0f; } },
-        { "reduction", [](DefocusOptions& o) { o.max_reduction = 3; } },
+        { "reduction", [](DefocusOptions& o) { o.max_reduction = 17; } },
+        { "reduction", [](DefocusOptions& o) { o.max_reduction = 0; } },
         { "layers", [](DefocusOptions& o) { o.layers = -1; } },
         { "budget", [](DefocusOptions& o) { o.budget_db = 0.0f; } },
         { "reference step", [](DefocusOptions& o) { o.reference_step_px = 0.0f; } },

@@ -126,3 +126,40 @@ TEST(NonFinite, ErrorPolicyFailsAndLeavesPixels)
     EXPECT_TRUE(scrub_nonfinite(clean, NonFinitePolicy::Error, n));
     EXPECT_EQ(n.total(), 0);
 }
+
+// A metadata number is read whatever type it was stored with; a non-number is refused by
+// name, and an absent attribute leaves the default.
+TEST(Metadata, NumbersOfAnyStoredType)
+{
+    OIIO::ImageSpec spec(1, 1, 3, OIIO::TypeFloat);
+    spec.attribute("as_int", 85);
+    spec.attribute("as_float", 85.0f);
+    const double d = 85.0;
+    spec.attribute("as_double", OIIO::TypeDesc::DOUBLE, &d);
+    const unsigned u = 85;
+    spec.attribute("as_uint", OIIO::TypeDesc::UINT, &u);
+    const uint16_t half_85 = 0x5550;  // 85.0 in IEEE half: sign 0, exponent 21 (6 + 15), mantissa 0x150
+    spec.attribute("as_half", OIIO::TypeDesc::HALF, &half_85);
+    spec.attribute("as_string", " 85 ");
+    spec.attribute("as_word", "eighty-five");
+    spec.attribute("as_nan", std::numeric_limits<float>::quiet_NaN());
+    const float vec[3] = { 85.0f, 1.0f, 2.0f };
+    spec.attribute("as_vector", OIIO::TypeVector, vec);
+    for (const char* name : { "as_int", "as_float", "as_double", "as_uint", "as_half", "as_string" }) {
+        double v = 50.0;
+        std::string err;
+        EXPECT_TRUE(metadata_number(spec, name, v, err)) << name << ": " << err;
+        EXPECT_EQ(v, 85.0) << name;
+    }
+    for (const char* name : { "as_word", "as_nan", "as_vector" }) {
+        double v = 50.0;
+        std::string err;
+        EXPECT_FALSE(metadata_number(spec, name, v, err)) << name;
+        EXPECT_NE(err.find(std::string("metadata ") + name), std::string::npos) << err;
+        EXPECT_EQ(v, 50.0) << name << " leaves the value";
+    }
+    double v = 50.0;
+    std::string err;
+    EXPECT_TRUE(metadata_number(spec, "absent", v, err));
+    EXPECT_EQ(v, 50.0);
+}

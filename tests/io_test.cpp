@@ -395,6 +395,7 @@ TEST(Write, ZipChunksReadBackThroughOpenExr)
 
         // OpenEXR's own writer, through OIIO, for the header and the size.
         OIIO::ImageSpec direct_spec = spec;
+        describe_output(direct_spec, opts);  // the attributes every write adds
         direct_spec.attribute("compression", compression);
         const std::string theirs = dir + "/oiio_" + compression + ".exr";
         {

@@ -50,7 +50,9 @@ bool deep_tidy(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions
 
 /// Merge any number of deep images (their samples pooled per pixel, then tidied). They
 /// must have the same channel names (in any order; the first image's order and types are
-/// kept); the data window is the union of theirs. With `cull`, samples behind the depth
+/// kept), except that point passes without ZBack merge with volume passes: their samples
+/// get ZBack = Z and the result is laid out as the first image with ZBack. The data
+/// window is the union of theirs. With `cull`, samples behind the depth
 /// where the accumulated opacity rounds to 1 in float (transmittance <= 2^-25) are dropped.
 bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& srcs,
                 bool cull = false, const DeepOptions& opt = {}, int nthreads = 0);

@@ -69,6 +69,14 @@ bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads,
 OIIO::ImageSpec derived_spec(const OIIO::ImageSpec& like, const std::vector<std::string>& names,
                              OIIO::ROI data = {});
 
+/// The number held in metadata attribute `name` of `spec`, whatever type it was stored
+/// with: any integer, half, float or double scalar, or a string holding a number
+/// (`--attrib bokeh:focal_mm 85` stores an int, OpenEXR headers a float, other tools a
+/// string). Returns true with `value` unchanged when the attribute is absent; false with
+/// `err` naming it when it is there but holds no single finite number.
+bool metadata_number(const OIIO::ImageSpec& spec, const std::string& name, double& value,
+                     std::string& err);
+
 /// What to do with NaN and Inf pixel values (DESIGN.md, "bad values").
 enum class NonFinitePolicy {
     Zero,   ///< colour -> 0, depth -> +inf ("no depth": infinitely far); counted

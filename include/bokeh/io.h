@@ -104,7 +104,16 @@ struct WriteOptions {
     std::string compression;
     /// Tile size in pixels; 0 = as the image was read (scanlines unless it was tiled).
     int tile_width = 0, tile_height = 0;
+    /// Attributes to set on the file besides the image's own (bokehtool records the
+    /// command line that made it as "bokeh:command").
+    OIIO::ParamValueList metadata;
 };
+
+/// The metadata a written file carries: the image's own, less what described the file it
+/// was read from (its chunk and part counts), with "Software" (OpenBokeh and its
+/// version), "DateTime" (the time of writing, UTC; SOURCE_DATE_EPOCH fixes it) and
+/// `opts.metadata`. write_image applies it.
+void describe_output(OIIO::ImageSpec& spec, const WriteOptions& opts);
 
 /// Write `img` to `path` through a temporary file in the same directory, renamed into
 /// place on success; on failure nothing is left at `path` (an existing file there is

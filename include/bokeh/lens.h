@@ -73,6 +73,12 @@ double distance_from_depth(double value, DepthMode mode, bool negate);
 /// False + `err` naming the option.
 bool resolve_coc_options(CocOptions& opts, const OIIO::ImageBuf& src, std::string& err);
 
+/// Write into `spec` the lens a defocus used (resolved options): "bokeh:focal_mm",
+/// "bokeh:fstop", "bokeh:sensor_width_mm" and "bokeh:focus_m" (metres), so that an output
+/// says what it is rather than what its input was meant for. With DepthMode::Direct no
+/// lens made the CoC, and those attributes are removed.
+void record_lens(OIIO::ImageSpec& spec, const CocOptions& resolved);
+
 /// The signed CoC of a depth-channel value, for resolved options and an image
 /// `image_width_px` wide (the display window's width): the lens's CoC with the in-focus
 /// range, the gains and the limit applied. Non-finite or "no depth" values are far.
