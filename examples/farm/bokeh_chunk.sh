@@ -12,8 +12,9 @@
 #     resubmitted shot redoes only the frames missing or stale;
 #   * --skip-bad-frames: a bad frame is reported by number on stderr and the chunk's other
 #     frames are still rendered; the exit status is then 1, which fails the farm task.
-# Exit status: 0 every frame of the chunk written or up to date; 1 a frame failed (its
-# number in the log); 2 bad arguments to this script. BOKEHTOOL overrides the program.
+# Exit status: bokehtool's (0 every frame of the chunk written or up to date; 1 a frame
+# failed, its number in the log; 124 --timeout stopped it); 2 bad arguments to this
+# script. BOKEHTOOL overrides the program, BOKEH_THREADS the thread count.
 set -u
 if [[ $# -lt 5 ]]; then
   echo "usage: $0 FIRST LAST CHUNK INDEX bokehtool-arguments..." >&2
@@ -34,8 +35,11 @@ if (( index < 0 || a > last )); then
   exit 2
 fi
 bokehtool=${BOKEHTOOL:-bokehtool}
-echo "chunk $index: frames $a-$b on $(hostname) at $(date -u +%FT%TZ)"
-"$bokehtool" -u --skip-bad-frames --progress --runstats --frames "$a-$b" "$@"
+# As many threads as the task was given CPUs (Slurm says so in SLURM_CPUS_PER_TASK; other
+# managers can set BOKEH_THREADS); 0, every core, when nothing says.
+threads=${BOKEH_THREADS:-${SLURM_CPUS_PER_TASK:-0}}
+echo "chunk $index: frames $a-$b on $(hostname) at $(date -u +%FT%TZ), $threads thread(s) (0: all cores)"
+"$bokehtool" -u --skip-bad-frames --progress --runstats --threads "$threads" --frames "$a-$b" "$@"
 status=$?
 echo "chunk $index: frames $a-$b exit status $status"
 exit $status

@@ -97,6 +97,10 @@ done
 echo "slurm: node $host idle (slurmctld, slurmd, munged pids ${pids[*]})"
 
 # --- the shot: 12 frames of a built-in scene, defocused ---------------------------------------
+# Files record the time they were written (DateTime); a fixed SOURCE_DATE_EPOCH (exported to
+# the tasks with the rest of the environment) makes a farm frame and a local one comparable
+# byte for byte.
+export SOURCE_DATE_EPOCH=1700000000
 "$bokehtool" --frames 1-12 --scene "lights:width=160:height=90:seed=#" -o "$scratch/in/shot.#.exr" \
   || fail "making the input frames"
 dof=(--defocus:focus=4:fstop=1.4 -o)

@@ -102,8 +102,18 @@ int main(int argc, char* argv[])
     std::string csv, task = "blur";
     bokeh_bench::BenchArgs args;
     std::vector<std::string> image_files;  // the blur task's frames from files
+    const char* usage = "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens|truth-chain] "
+                        "[--threads N] [--reps N] [--csv FILE] [--quick] [--size WxH] [--data DIR] "
+                        "[--images DIR] [--scenes a,b] [--image FILE]...\n";
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
+        if (a == "--help" || a == "-h") {
+            std::fputs(usage, stdout);
+            std::fputs("Times the methods and their peers on this machine and writes a CSV row a case "
+                       "(make bench charts them into docs/bench and docs/benchmarks.md).\n",
+                       stdout);
+            return 0;
+        }
         if (a == "--threads" && i + 1 < argc)
             threads = std::atoi(argv[++i]);
         else if (a == "--task" && i + 1 < argc && (std::string(argv[i + 1]) == "blur"
@@ -135,11 +145,7 @@ int main(int argc, char* argv[])
         else if (a == "--quick")
             quick = true;
         else {
-            std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n"
-                                 "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens|truth-chain] [--threads N] [--reps N] "
-                                 "[--csv FILE] [--quick] [--size WxH] [--data DIR] [--images DIR] "
-                                 "[--scenes a,b] [--image FILE]...\n",
-                         a.c_str());
+            std::fprintf(stderr, "bokeh-bench: unknown argument '%s'\n%s", a.c_str(), usage);
             return 1;
         }
     }
