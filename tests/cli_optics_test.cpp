@@ -16,7 +16,7 @@ TEST(CliBokeh, PsfCentredWithUnitEnergy)
 {
     const std::string dir = fresh_dir("cli_bokeh_psf");
     const RunResult r = bokehtool(format(
-        "--bokeh:lens=achromat:fstop=1.4:diffraction=exact:kernel=polygon:blades=7:field=0.5,0.2 -41 -o {}/psf.exr",
+        "-v --bokeh:lens=achromat:fstop=1.4:diffraction=exact:kernel=polygon:blades=7:field=0.5,0.2 -41 -o {}/psf.exr",
         dir));
     ASSERT_EQ(r.status, 0) << r.err;
     EXPECT_NE(r.out.find("achromat lens, 7 blades"), std::string::npos) << r.out;
@@ -57,7 +57,7 @@ TEST(CliBokeh, SheetStarPictureAndBeamMap)
     r = bokehtool(format("--bokeh:kernel=star:blades=5:inner=0.4:rotation=10 40 -o {}/star.exr", dir));
     EXPECT_EQ(r.status, 0) << r.err;
     // A picture aperture from the stack: the star PSF itself, read back as an aperture.
-    r = bokehtool(format("{}/star.exr --bokeh:kernel=image 60 -o {}/from_picture.exr", dir, dir));
+    r = bokehtool(format("-v {}/star.exr --bokeh:kernel=image 60 -o {}/from_picture.exr", dir, dir));
     EXPECT_EQ(r.status, 0) << r.err;
     EXPECT_NE(r.out.find("picture aperture"), std::string::npos) << r.out;
 

@@ -121,8 +121,19 @@ TEST(Robust, TimeoutStopsTheRunCleanly)
                                    "--defocus -o {}",
                                    out));
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    expect_clean_failure(r, "--timeout: still running after 0.3 s (in --", out);
+    // Its own exit status (GNU timeout's 124), one line, nothing written.
+    EXPECT_EQ(r.status, 124) << r.err;
+    EXPECT_TRUE(OIIO::Strutil::starts_with(r.err, "bokehtool ERROR: --timeout: still running after 0.3 s (in --"))
+        << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
     EXPECT_LT(seconds, 1.5) << "stopped near its limit";
+    EXPECT_TRUE(files_in(dir).empty());
+    // In a sequence the line names the frame it stopped in.
+    r = bokehtool(format("--threads 1 --timeout 0.3 --frames 1-3 --scene lights:width=2000:height=1000:aa=1 "
+                         "--defocus -o {}/seq.#.exr",
+                         dir));
+    EXPECT_EQ(r.status, 124) << r.err;
+    EXPECT_NE(r.err.find(", frame 1, 1 of 3); stopped"), std::string::npos) << r.err;
     EXPECT_TRUE(files_in(dir).empty());
     for (const char* bad : { "0", "-2", "abc", "nan" }) {
         r = bokehtool(format("--timeout {} --scene lights:width=8:height=8 -o {}", bad, out));

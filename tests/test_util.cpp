@@ -47,12 +47,16 @@ bool exists(const std::string& path) { return OIIO::Filesystem::exists(path); }
 
 RunResult bokehtool(const std::string& args, const std::string& env)
 {
+    return run_shell(env + " " + BOKEHTOOL + " " + args);
+}
+
+RunResult run_shell(const std::string& command)
+{
     static int counter = 0;
     const std::string base = std::string(BOKEH_TEST_TMP) + "/run" + std::to_string(getpid()) + "_"
                              + std::to_string(++counter);
     OIIO::Filesystem::create_directory(BOKEH_TEST_TMP);
-    const std::string cmd = env + " " + BOKEHTOOL + " " + args + " </dev/null >" + base
-                            + ".out 2>" + base + ".err";
+    const std::string cmd = "( " + command + " ) </dev/null >" + base + ".out 2>" + base + ".err";
     RunResult r;
     const int raw = std::system(cmd.c_str());
     r.status      = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;

@@ -30,6 +30,9 @@ struct RunResult {
 /// RunResult bokehtool with `args` (shell words), with `env` ("NAME=value ...") before it.
 RunResult bokehtool(const std::string& args, const std::string& env = "");
 
+/// Run a shell command line (no standard input), its exit status and output captured.
+RunResult run_shell(const std::string& command);
+
 /// Expect a clean failure: exit 1, one line "bokehtool ERROR: ..." holding `what`, and
 /// nothing written at `output` (unless it is "").
 void expect_clean_failure(const RunResult& r, const std::string& what, const std::string& output);

@@ -179,7 +179,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
     c.needs_scene_linear = true;
     // The options blur_options() reads, for both commands.
     const std::vector<OptionSpec> shared = {
-        OptionSpec::Choice("border", { "black", "clamp", "mirror" }, "pixels outside the image"),
+        OptionSpec::Choice("border", { "clamp", "black", "mirror" },
+                           "pixels outside the image: clamp (the edge repeats, as oiiotool's --blur "
+                           "and --convolve take them), black, mirror"),
         OptionSpec::Bool("grow", false, "grow the data window by the kernel radius"),
         OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
                           "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),

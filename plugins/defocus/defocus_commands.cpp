@@ -146,7 +146,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("back", 1.0, 0.0, 1e3, "multiplies the CoC behind focus"),
         OptionSpec::Float("maxcoc", 512.0, 0.0, 8192.0, "largest CoC diameter in px"),
         OptionSpec::Int("layers", 0, 0, 1024, "layers: count (0: from the CoC range and budget)"),
-        OptionSpec::Int("reduction", 16, 1, 16, "layers: coarsest buffer reduction (1, 2, 4, 8, 16)"),
+        OptionSpec::Int("reduction", 16, 1, 16, "layers: coarsest buffer reduction (buffers are 1/1, 1/2, 1/4, 1/8, 1/16: the largest power of two up to it)"),
         OptionSpec::String("budget", "40dB", "accuracy budget, PSNR against the reference"),
         OptionSpec::Float("bloom", 1.0, -1e30, 1e30, "bloom threshold (unpremultiplied colour)"),
         OptionSpec::Float("bloomgain", 1.0, 0.0, 1e4, "gain above the bloom threshold (1: off)"),

@@ -229,18 +229,17 @@ bool scene(CommandContext& c)
             bokeh::make_scene(*out.buf, name, o);  // fails, naming the known scenes
             return c.fail(out.buf->geterror());
         }
+        // The scene's camera as its sharp image records it, read by --defocus's rule.
         OIIO::ImageSpec camera_spec;
-        camera_spec.attribute("bokeh:focal_mm", float(camera.focal_mm));
-        camera_spec.attribute("bokeh:sensor_width_mm", float(camera.sensor_width_mm));
+        camera_spec.attribute("bokeh:focal_mm", OIIO::TypeDesc::DOUBLE, &camera.focal_mm);
+        camera_spec.attribute("bokeh:sensor_width_mm", OIIO::TypeDesc::DOUBLE, &camera.sensor_width_mm);
+        camera_spec.attribute("bokeh:focus_m", OIIO::TypeDesc::DOUBLE, &camera.focus_m);
+        camera_spec.attribute("bokeh:fstop", OIIO::TypeDesc::DOUBLE, &camera.fstop);
         bokeh::CocOptions coc;
+        coc.lens.depth_unit_mm = 1000.0;
         std::string err;
         if (!bokeh::thin_lens_from(c.options, camera_spec, coc, err))
             return c.fail(err);
-        if (!c.options.given("fstop"))
-            coc.lens.fstop = camera.fstop;
-        if (!c.options.given("focus"))
-            coc.lens.focus_distance = camera.focus_m;
-        coc.lens.depth_unit_mm = 1000.0;
         if (coc.focus_at_pixel) {  // the depth the sharp scene has there, as --defocus reads it
             OIIO::ImageBuf sharp;
             if (!bokeh::make_scene(sharp, name, o, c.nthreads))

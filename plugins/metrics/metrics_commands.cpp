@@ -18,7 +18,10 @@ bool diff_command(bokeh::CommandContext& c)
     std::string err;
     if (!bokeh::compare(e, *c.inputs[1].buf, *c.inputs[0].buf, err, {}, c.nthreads))
         return c.fail(err);
-    c.message(format("diff {} vs {}: RMSE {:.6g}, PSNR {:.2f} dB (x/(1+x) tone map), max {:.6g}{}",
+    // inputs[1] is the top image, inputs[0] the reference below it; each is named by what
+    // made it (a file, or the file and the commands applied).
+    c.message(format("diff {} against the reference {}: RMSE {:.6g}, PSNR {:.2f} dB (x/(1+x) tone "
+                     "map), max {:.6g}{}",
                      c.inputs[1].origin, c.inputs[0].origin, e.rmse_linear, e.psnr_db, e.max_abs,
                      e.nonfinite > 0 ? format(" ({} values NaN or infinite on one side only)", e.nonfinite)
                                      : std::string()));

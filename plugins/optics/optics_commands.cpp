@@ -7,6 +7,7 @@
 #include <aperture_options.h>
 #include <lens_options.h>
 
+#include <bokeh/color.h>
 #include <bokeh/lens.h>
 #include <bokeh/optics.h>
 #include <bokeh/plugin.h>
@@ -59,7 +60,12 @@ bool bokeh_command(CommandContext& c)
     if (!bokeh::lens_character_from(v, lens, err))
         return c.fail(err);
 
+    // A PSF is linear light whatever the picture its aperture came from was encoded in:
+    // the host decodes the picture first (needs_scene_linear), and the result is labelled
+    // scene-linear, so that writing it applies no transfer function after the
+    // normalisation (a PNG aperture's PSF would otherwise sum to 1/12.92).
     bokeh::StackImage out;
+    out.colorspace = c.colors->scene_linear();
     out.origin = format("--bokeh {}", c.args[0]);
     out.buf    = std::make_shared<OIIO::ImageBuf>();
     if (v.get_bool("map")) {
@@ -86,8 +92,9 @@ bool bokeh_command(CommandContext& c)
         if (!bokeh::lens_psf_image(*out.buf, lens, req, c.nthreads))
             return c.fail(out.buf->geterror());
     }
-    c.message(format("bokeh: {} lens, {} aperture, CoC {:g} px: {} x {} px", bokeh::lens_preset_name(lens.preset),
-                     lens.aperture.describe(), coc_px, out.buf->spec().width, out.buf->spec().height));
+    if (c.verbosity > 1)  // a description of what was asked for: -v, as other commands' details
+        c.message(format("bokeh: {} lens, {} aperture, CoC {:g} px: {} x {} px", bokeh::lens_preset_name(lens.preset),
+                         lens.aperture.describe(), coc_px, out.buf->spec().width, out.buf->spec().height));
     c.outputs.push_back(std::move(out));
     return true;
 }
@@ -126,5 +133,6 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         "aberrations, spectrum, diffraction, onion rings and field effects, or a sheet of them",
         bokeh_command, std::move(options));
     c.inputs_for = [](const bokeh::OptionValues& v) { return v.get_string("kernel") == "image" ? 1 : 0; };
+    c.needs_scene_linear = true;  // a picture aperture's transmission, decoded to linear
     r.add(c);
 }

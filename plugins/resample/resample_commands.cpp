@@ -154,7 +154,9 @@ std::vector<OptionSpec> filter_options(const std::string& first)
                            "bilinear (= triangle), catmull-rom, bspline, lanczos2, lanczos3, "
                            "gaussian, box (area-exact), nearest; enlarging only: reduced-blur, "
                            "upscale-blur, upscale-blur-fused, upscale-blur-2stage"),
-        OptionSpec::Choice("border", { "clamp", "black", "mirror" }, "pixels outside the image"),
+        OptionSpec::Choice("border", { "clamp", "black", "mirror" },
+                           "pixels outside the image: clamp (the edge repeats, as oiiotool's --resize "
+                           "takes them), black, mirror"),
         OptionSpec::Float("sigma", 0.0, 0.0, 64.0,
                           "gaussian: sigma in source pixels (0: 0.65, the sharpest without Mach bands)"),
         OptionSpec::Float("blur", 0.0, 0.0, 64.0, "reduced-blur: sigma at low resolution (0: 0.5)"),

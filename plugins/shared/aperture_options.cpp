@@ -9,6 +9,9 @@ namespace bokeh {
 bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why)
 {
     const bool polygon = kernel == "polygon" || kernel == "hex";
+    // Only --bokeh draws a star (its option inner= says so): elsewhere the messages do not
+    // name a kernel the command lacks.
+    const bool has_star = v.values.count("inner") > 0;
     struct Rule {
         const char* option;
         bool applies;
@@ -16,8 +19,11 @@ bool aperture_options_apply(const OptionValues& v, const std::string& kernel, st
     };
     const Rule rules[] = {
         { "sigma", kernel == "gaussian", "kernel=gaussian" },
-        { "blades", kernel == "polygon" || kernel == "star", "kernel=polygon (and star, its points); kernel=hex has 6" },
-        { "rotation", polygon || kernel == "star", "kernel=polygon, hex and star; a disk's squeeze stays on the frame's axes" },
+        { "blades", kernel == "polygon" || kernel == "star",
+          has_star ? "kernel=polygon (and star, its points); kernel=hex has 6" : "kernel=polygon; kernel=hex has 6" },
+        { "rotation", polygon || kernel == "star",
+          has_star ? "kernel=polygon, hex and star; a disk's squeeze stays on the frame's axes"
+                   : "kernel=polygon and hex; a disk's squeeze stays on the frame's axes" },
         { "inner", kernel == "star", "kernel=star" },
         { "curvature", polygon, "kernel=polygon and hex" },
         { "hole", polygon || kernel == "disk", "kernel=disk, polygon and hex" },

@@ -9,6 +9,7 @@
 #include "lens_options.h"
 
 #include <cmath>
+#include <limits>
 
 #include <OpenImageIO/strutil.h>
 
@@ -71,8 +72,9 @@ bool with_named_depth(const OptionValues& v, const std::shared_ptr<OIIO::ImageBu
 std::vector<OptionSpec> thin_lens_option_specs()
 {
     return {
-        OptionSpec::String("focus", "5", "focus distance in depth units, or a pixel x,y to sample"),
-        OptionSpec::Float("fstop", 2.8, 0.5, 1e4, "f-number"),
+        OptionSpec::String("focus", "5", "focus distance in depth units, or a pixel x,y to sample "
+                           "(default: image's bokeh:focus_m, else 5)"),
+        OptionSpec::Float("fstop", 2.8, 0.5, 1e4, "f-number (default: image's bokeh:fstop, else 2.8)"),
         OptionSpec::Float("focal", 50.0, 0.1, 1e5, "focal length mm (default: image's bokeh:focal_mm, else 50)"),
         OptionSpec::String("sensor", "36",
                            "film back width in mm or a preset (ff, super35, alexa-lf, ...); "
@@ -94,21 +96,51 @@ std::vector<OptionSpec> defocus_aperture_option_specs()
 
 bool thin_lens_from(const OptionValues& v, const OIIO::ImageSpec& spec, CocOptions& coc, std::string& err)
 {
-    // Camera facts recorded in the image (our scenes write these) unless given.
-    coc.lens.focal_mm = v.given("focal") ? v.get_float("focal")
-                                         : spec.get_float_attribute("bokeh:focal_mm", 50.0f);
-    coc.lens.fstop    = v.get_float("fstop");
+    // Camera facts recorded in the image (the built-in scenes write these; a pipeline may
+    // with --attrib) unless given: one rule for --defocus and --scene's truth.
+    coc.lens.focal_mm        = 50.0;
+    coc.lens.sensor_width_mm = 36.0;
+    coc.lens.fstop           = 2.8;
+    double focus_m           = std::numeric_limits<double>::quiet_NaN();
+    if (!metadata_number(spec, "bokeh:focal_mm", coc.lens.focal_mm, err)
+        || !metadata_number(spec, "bokeh:sensor_width_mm", coc.lens.sensor_width_mm, err)
+        || !metadata_number(spec, "bokeh:fstop", coc.lens.fstop, err)
+        || !metadata_number(spec, "bokeh:focus_m", focus_m, err))
+        return false;
+    // A recorded lens is held to the options' own ranges, so a bad header is refused as a
+    // bad option would be (naming the attribute) instead of dividing by it.
+    const auto in_range = [&](const char* option, const char* attribute, double value) {
+        for (const OptionSpec& o : thin_lens_option_specs())
+            if (o.name == option && (value < o.min || value > o.max))
+                return fail(err, format("metadata {} is {:g}, outside {}='s range {:g}..{:g}",
+                                        attribute, value, option, o.min, o.max));
+        return true;
+    };
+    if (!in_range("focal", "bokeh:focal_mm", coc.lens.focal_mm)
+        || !in_range("fstop", "bokeh:fstop", coc.lens.fstop))
+        return false;
+    if (!(coc.lens.sensor_width_mm > 0.0))
+        return fail(err, format("metadata bokeh:sensor_width_mm is {:g}, not a width in mm",
+                                coc.lens.sensor_width_mm));
+    if (!std::isnan(focus_m) && !(focus_m > 0.0))
+        return fail(err, format("metadata bokeh:focus_m is {:g}, not a distance", focus_m));
+    if (v.given("focal"))
+        coc.lens.focal_mm = v.get_float("focal");
+    if (v.given("fstop"))
+        coc.lens.fstop = v.get_float("fstop");
     const std::string& sensor = v.get_string("sensor");
-    if (!v.given("sensor"))
-        coc.lens.sensor_width_mm = spec.get_float_attribute("bokeh:sensor_width_mm", 36.0f);
-    else if (!film_back_width(sensor, coc.lens.sensor_width_mm)
-             && !parse_number(sensor, coc.lens.sensor_width_mm)) {
+    if (v.given("sensor") && !film_back_width(sensor, coc.lens.sensor_width_mm)
+        && !parse_number(sensor, coc.lens.sensor_width_mm)) {
         std::string names;
         for (const FilmBack& b : film_backs())
             names += std::string(names.empty() ? "" : ", ") + b.name;
         return fail(err, format("sensor '{}' is neither a width in mm nor a film back ({})", sensor, names));
     }
 
+    if (!v.given("focus") && !std::isnan(focus_m)) {
+        coc.lens.focus_distance = focus_m * 1000.0 / coc.lens.depth_unit_mm;
+        return true;
+    }
     const std::string& focus = v.get_string("focus");
     if (focus.find(',') != std::string::npos) {
         std::vector<std::string> xy;
@@ -130,10 +162,11 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
                           std::string& err)
 {
     CocOptions& coc = o.coc;
-    if (!thin_lens_from(v, spec, coc, err))
-        return false;
+    // The unit first: a focus distance recorded in the metadata (metres) is converted to it.
     if (!unit_mm(v.get_string("unit"), coc.lens.depth_unit_mm))
         return fail(err, format("unit '{}' is not one of m, cm, mm, in, ft", v.get_string("unit")));
+    if (!thin_lens_from(v, spec, coc, err))
+        return false;
     const std::string& math = v.get_string("math");
     coc.mode = math == "direct" ? DepthMode::Direct
                : math == "far0" ? DepthMode::InverseDepth

@@ -23,15 +23,17 @@ std::vector<OptionSpec> thin_lens_option_specs();
 /// curvature, hole, aspect. Shared with --scene's geometric truth.
 std::vector<OptionSpec> defocus_aperture_option_specs();
 
-/// The lens of thin_lens_option_specs() from `v`: focal length and film back from the
-/// options, else the image's metadata ("bokeh:focal_mm", "bokeh:sensor_width_mm"), else
-/// 50 and 36 mm; f-number; the focus distance or pixel. The depth unit is left as it is.
-/// False + `err` naming the option.
+/// The lens of thin_lens_option_specs() from `v`: each of focal length, film back,
+/// f-number and focus distance from the option when given, else from the image's metadata
+/// ("bokeh:focal_mm", "bokeh:sensor_width_mm", "bokeh:fstop", "bokeh:focus_m" in metres,
+/// stored with any numeric type), else 50 mm, 36 mm, f/2.8 and 5. A recorded focus is
+/// converted to the depth unit `coc.lens.depth_unit_mm` already holds. False + `err`
+/// naming the option or the attribute.
 bool thin_lens_from(const OptionValues& v, const OIIO::ImageSpec& spec, CocOptions& coc, std::string& err);
 
 /// Fill `o` from `--defocus`'s option values `v` for an image with spec `spec`: its camera
-/// metadata ("bokeh:focal_mm", "bokeh:sensor_width_mm", as the built-in scenes write)
-/// gives the focal length and film back unless the options do. False + `err` naming the
+/// metadata (thin_lens_from, as the built-in scenes write it) gives the lens unless the
+/// options do. False + `err` naming the
 /// option and why.
 bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, DefocusOptions& o,
                           std::string& err);

@@ -179,8 +179,9 @@ def test_defocus_and_its_report_match_bokehtool(tmp, scene_file, options):
 @pytest.mark.parametrize("output", ["coc", "focalplane", "layers"])
 def test_defocus_diagnostics_match_bokehtool(tmp, scene_file, scene_array, output):
     out = fresh(tmp, f"defocus_{output}.exr")
-    tool(scene_file, f"--defocus:focus=6:output={output}", "-o", out)
-    result, report = ob.defocus(scene_array, focus=6, output=output)
+    # The lens given whole: the file records one (bokehtool reads it), the array none.
+    tool(scene_file, f"--defocus:focus=6:fstop=2:output={output}", "-o", out)
+    result, report = ob.defocus(scene_array, focus=6, fstop=2, output=output)
     assert report is None
     assert np.array_equal(result, pixels(out))
 

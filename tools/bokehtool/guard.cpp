@@ -24,6 +24,7 @@ namespace bokehtool {
 namespace {
 
 char g_command[128] = "bokehtool";
+char g_frame[64]    = "";  // "frame 3, 3 of 5" in a sequence
 int g_stderr = 2;  // the terminal's stderr, also while a StderrCapture holds fd 2
 
 void write_text(const char* s) { (void)!write(g_stderr, s, std::strlen(s)); }
@@ -93,6 +94,13 @@ void set_guard_command(const std::string& name)
     g_command[n] = 0;
 }
 
+void set_guard_frame(const std::string& frame)
+{
+    const size_t n = std::min(frame.size(), sizeof g_frame - 1);
+    std::memcpy(g_frame, frame.data(), n);
+    g_frame[n] = 0;
+}
+
 void install_guards()
 {
     const int fd = dup(2);
@@ -152,11 +160,11 @@ Watchdog::Watchdog(double seconds)
             return;
         bokeh::remove_partial_writes();
         write_text(OIIO::Strutil::fmt::format("bokehtool ERROR: --timeout: still running after "
-                                              "{:g} s (in {}); stopped, temporary output files "
+                                              "{:g} s (in {}{}{}); stopped, temporary output files "
                                               "removed\n",
-                                              seconds, g_command)
+                                              seconds, g_command, g_frame[0] ? ", " : "", g_frame)
                        .c_str());
-        std::_Exit(1);
+        std::_Exit(kTimeoutStatus);
     });
 }
 

@@ -19,6 +19,12 @@ void install_guards();
 
 /// The command named by the guards' messages (the one running now).
 void set_guard_command(const std::string& name);
+/// The frame of a sequence the --timeout message names ("frame 3, 3 of 5"; "" for none).
+void set_guard_frame(const std::string& frame);
+
+/// The exit status of a run stopped by --timeout: 124, as GNU timeout(1) gives, so that a
+/// farm tells "too slow, retry elsewhere" from 1, "the command or an input is wrong".
+constexpr int kTimeoutStatus = 124;
 
 /// Messages that libraries print straight to stderr (libpng's "libpng error: ...") while
 /// it lives are caught instead of shown, so that a failed read still ends in one line;
@@ -38,7 +44,7 @@ private:
 };
 
 /// After `seconds` (> 0), print "bokehtool ERROR: --timeout: ..." naming the command
-/// running, remove the temporary output files and exit with status 1. Stopped when
+/// running and the frame, remove the temporary output files and exit with kTimeoutStatus. Stopped when
 /// destroyed; 0 seconds = no watchdog.
 class Watchdog {
 public:

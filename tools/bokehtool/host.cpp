@@ -328,6 +328,8 @@ void Host::register_host_commands()
         "Write the top image (after the whole command line has succeeded)",
         [this](CommandContext& c) {
             PendingWrite w{ c.inputs[0], c.args[0], m_datatypes, {} };
+            // What made the file, so that -u can tell a frame made with other options.
+            w.options.metadata.attribute("bokeh:command", m_frame_recipe);
             w.options.parts       = c.options.get_string("parts") == "layers"
                                         ? bokeh::PartLayout::Layers
                                         : bokeh::PartLayout::Single;
@@ -362,8 +364,8 @@ void Host::register_host_commands()
                              return c.fail(format("'{}' is not a pixel type (uint8, uint16, "
                                                   "half, float, ...)",
                                                   a));
-                         if (channel.empty())
-                             m_datatypes.clear();
+                         // As in oiiotool, the global type and the per-channel types are
+                         // separate settings: their order on the command line does not matter.
                          m_datatypes[channel] = t;
                          return true;
                      }),
@@ -553,6 +555,8 @@ void Host::message(const std::string& what) const
 
 bool Host::parse(const std::vector<std::string>& args, bool checking)
 {
+    if (checking)
+        m_line_recipe.clear();
     OIIO::ArgParse ap;
     ap.prog(kProgram).add_help(false).exit_on_error(false);
     std::vector<const char*> argv = { kProgram };
@@ -580,10 +584,29 @@ bool Host::parse(const std::vector<std::string>& args, bool checking)
     return !m_failed;
 }
 
+// Global options that change how a run goes but not a pixel or a byte of what it writes;
+// -u leaves them out of the command line it compares (a frame rendered with -v or on
+// more threads is still up to date).
+static bool changes_no_output(const std::string& name)
+{
+    static const char* names[] = { "--help",   "--help-markdown", "--version",         "--plugins",
+                                   "--frames", "--threads",       "--maxmemory",       "--timeout",
+                                   "-n",       "-u",              "--skip-bad-frames", "--framepadding",
+                                   "-v",       "-q",              "--parallel-frames", "--runstats",
+                                   "--info",   "--no-clobber",    "--progress" };
+    return std::find(std::begin(names), std::end(names), name) != std::end(names);
+}
+
 void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool checking)
 {
     const std::string& head = words[0];
     const bool is_file      = head.empty() || head[0] != '-' || head == "-";
+    // The recipe: what decides the bytes written, so not where they go (-o's file name;
+    // its modifiers stay) nor the options that change no output.
+    const std::string head_name = head.substr(0, head.find(':'));
+    if (checking && !changes_no_output(head_name))
+        m_line_recipe += (m_line_recipe.empty() ? "" : " ")
+                         + (head_name == "-o" ? head : OIIO::Strutil::join(words, " "));
     if (is_file) {
         if (checking) {
             ++m_depth;
@@ -625,7 +648,7 @@ void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool
     set_current(name);
     std::string err;
     bokeh::parse_options(cmd->options, modifiers, opts, err);  // checked in pass 1
-    run_command(*cmd, opts, args);
+    run_command(*cmd, opts, args, OIIO::Strutil::join(words, " "));
 }
 
 bool Host::check_command(const Command& cmd, const std::string& modifiers,
@@ -646,7 +669,7 @@ bool Host::check_command(const Command& cmd, const std::string& modifiers,
 }
 
 bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
-                       const std::vector<std::string>& args)
+                       const std::vector<std::string>& args, const std::string& spelled)
 {
     const int inputs = cmd.input_count(opts);
     if (int(m_stack.size()) < inputs)
@@ -667,6 +690,15 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     ctx.inputs.assign(m_stack.end() - inputs, m_stack.end());
     m_stack.resize(m_stack.size() - size_t(inputs));
 
+    // A filter works in the scene-linear working space. An input in another linear space
+    // (ACEScg) is converted for it and its result converted back, so that an ACEScg plate
+    // stays ACEScg down the line and in the file (an encoded input, sRGB from a PNG, stays
+    // in the working space: a float file holds linear light).
+    std::string linear_space_in;
+    if (cmd.needs_scene_linear && !ctx.inputs.empty() && !ctx.inputs[0].buf->deep()
+        && ctx.inputs[0].colorspace != m_colors.scene_linear()
+        && m_colors.is_scene_linear(ctx.inputs[0].colorspace))
+        linear_space_in = ctx.inputs[0].colorspace;
     if (cmd.needs_scene_linear) {
         for (StackImage& in : ctx.inputs) {
             if (in.buf->deep() || in.colorspace == m_colors.scene_linear())
@@ -700,6 +732,17 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     if (int(ctx.outputs.size()) != cmd.outputs)
         return fail(cmd.name, format("pushed {} image(s) but declares {} (a plugin bug; {})",
                                      ctx.outputs.size(), cmd.outputs, cmd.plugin));
+    for (StackImage& out : ctx.outputs)
+        if (!linear_space_in.empty() && out.buf && !out.buf->deep()
+            && (out.colorspace.empty() || out.colorspace == m_colors.scene_linear())) {
+            auto back = std::make_shared<OIIO::ImageBuf>(*out.buf);
+            std::string err;
+            std::lock_guard<std::mutex> lock(m_colors_mutex);
+            if (!m_colors.convert(*back, m_colors.scene_linear(), linear_space_in, m_threads, err))
+                return fail(cmd.name, err);
+            out.buf        = back;
+            out.colorspace = linear_space_in;
+        }
     for (StackImage& out : ctx.outputs) {
         if (!out.buf || !out.buf->initialized())
             return fail(cmd.name, format("produced no image (a plugin bug; {})", cmd.plugin));
@@ -708,13 +751,18 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
                 out.file_types = ctx.inputs[0].file_types;
             if (out.colorspace.empty())
                 out.colorspace = ctx.inputs[0].colorspace;
-            if (out.origin.empty())
-                out.origin = ctx.inputs[0].origin;
+            // A new image is named by what made it, as a command line reads: "shot.exr
+            // --defocus:focus=6" (--diff labels its two images so). Plugins start a result
+            // from a copy of their input, its name included; an image passed through (-o)
+            // keeps its name.
+            const bool made_here = out.buf != ctx.inputs[0].buf;
+            if (out.origin.empty() || (made_here && out.origin == ctx.inputs[0].origin))
+                out.origin = ctx.inputs[0].origin + " " + spelled;
         }
         if (out.colorspace.empty())
             out.colorspace = m_colors.scene_linear();
         if (out.origin.empty())
-            out.origin = cmd.name;
+            out.origin = spelled;
         m_stack.push_back(std::move(out));
     }
     if (m_verbosity > 1 && cmd.name != "-o")
@@ -747,10 +795,12 @@ bool Host::substitute_missing(const std::string& path)
             dark[size_t(work.z_channel)] = light[size_t(work.z_channel)] = 0.0f;  // no depth
         OIIO::ImageBufAlgo::checker(*buf, 64, 64, 1, dark, light, 0, 0, 0);
     }
+    // A warning: the run goes on with the substitute (m_where's "the run stopped here" is
+    // for errors).
     warn(format("{}: no such file; {} image of {} x {}, {} channels in its place "
-                "(--missingfile {}){}",
+                "(--missingfile {}{}); the run goes on",
                 path, checker ? "a checker" : "a black", work.width, work.height, work.nchannels,
-                checker ? "checker" : "black", m_where));
+                checker ? "checker" : "black", m_frame_label.empty() ? "" : "; " + m_frame_label));
     StackImage img;
     img.colorspace = m_colors.scene_linear();
     img.file_types = bokeh::channel_types_of(spec);
@@ -861,7 +911,12 @@ bool Host::write_checked(const PendingWrite& w, std::string& err)
             t = OIIO::TypeHalf;
         integer = integer && !t.is_floating_point();
     }
-    const std::string target = integer ? m_colors.display_default() : m_colors.scene_linear();
+    // Integer files hold display-referred colour (sRGB); float files hold linear light: in
+    // the image's own space when it is linear (ACEScg stays ACEScg, as --colorconvert or
+    // --iscolorspace left it), else converted to the working space.
+    const std::string target = integer                                  ? m_colors.display_default()
+                               : m_colors.is_scene_linear(img.colorspace) ? img.colorspace
+                                                                          : m_colors.scene_linear();
 
     const OIIO::ImageBuf* pixels = img.buf.get();
     OIIO::ImageBuf converted;
@@ -873,10 +928,10 @@ bool Host::write_checked(const PendingWrite& w, std::string& err)
             err = format("{}: {}", w.path, why);
             return false;
         }
-        converted.specmod().attribute("oiio:ColorSpace", target);
         pixels = &converted;
     }
     bokeh::WriteOptions opts = w.options;
+    opts.metadata.attribute("oiio:ColorSpace", target);  // what the pixels are, converted or not
     opts.channel_formats     = formats;
     opts.no_clobber          = m_no_clobber;
     if (m_dry_run) {
@@ -948,7 +1003,8 @@ int Host::main(const std::vector<std::string>& args)
     return 1;
 }
 
-bool Host::frame_up_to_date(const std::vector<std::string>& line, std::string& why)
+bool Host::frame_up_to_date(const std::vector<std::string>& line, std::string& why,
+                             std::string& stale)
 {
     m_line_inputs.clear();
     m_line_outputs.clear();
@@ -968,6 +1024,18 @@ bool Host::frame_up_to_date(const std::vector<std::string>& line, std::string& w
         const auto t = fs::last_write_time(out, ec);
         if (ec || !(t > newest_input))
             return false;
+    }
+    // A farm resubmitted with other options must not keep frames made with the old ones:
+    // each output's recorded command line is compared with this frame's.
+    for (const std::string& out : m_line_outputs) {
+        auto in = OIIO::ImageInput::open(out);
+        const std::string made_by = in ? in->spec().get_string_attribute("bokeh:command") : "";
+        if (made_by != m_line_recipe) {
+            stale = made_by.empty()
+                        ? format("{} records no command line", out)
+                        : format("{} was made by another command line ({})", out, made_by);
+            return false;
+        }
     }
     why = m_line_inputs.empty()
               ? format("{} exist(s)", OIIO::Strutil::join(m_line_outputs, ", "))
@@ -1100,15 +1168,38 @@ int Host::run_frames(const std::vector<std::string>& args)
         m_failed = false;
         const std::vector<std::string> line = sequence ? args_for_frame(plan, frames[i]) : plan.args;
         const std::string frame_name = sequence ? format("frame {}", frames[i]) : std::string("the image");
-        if (sequence)
-            m_where = format(" (frame {}, {} of {}; {})", frames[i], i + 1, frames.size(),
-                             m_skip_bad_frames ? "skipped, the run goes on" : "the run stopped here");
-        std::string why;
-        if (m_update && frame_up_to_date(line, why)) {
+        if (sequence) {
+            m_frame_label = format("frame {}, {} of {}", frames[i], i + 1, frames.size());
+            set_guard_frame(m_frame_label);
+            m_where       = format(" ({}; {})", m_frame_label,
+                                   m_skip_bad_frames ? "skipped, the run goes on" : "the run stopped here");
+        }
+        std::string why, stale;
+        if (m_update && frame_up_to_date(line, why, stale)) {
             ++m_frames_skipped;
             if (m_verbosity > 0)
                 std::cout << format("-u: {} skipped, up to date ({})\n", frame_name, why);
             continue;
+        }
+        if (!stale.empty() && m_verbosity > 0)
+            std::cout << format("-u: {} made again: {}\n", frame_name, stale);
+        // Pass 1 again for this frame (cheap): its command line, recorded in what it
+        // writes, and its outputs' folders, checked before anything is computed.
+        m_line_inputs.clear();
+        m_line_outputs.clear();
+        m_depth          = 0;
+        bool ready       = parse(line, true);
+        m_frame_recipe   = m_line_recipe;
+        for (const std::string& out : m_line_outputs) {
+            const std::string dir = OIIO::Filesystem::parent_path(out);
+            if (ready && !dir.empty() && !OIIO::Filesystem::is_directory(dir))
+                ready = fail("-o", format("{}: directory '{}' does not exist", out, dir));
+        }
+        if (!ready) {
+            m_frames_failed.push_back(frames[i]);
+            if (m_skip_bad_frames && sequence)
+                continue;
+            return stop();
         }
         if (overlap && i + 1 < frames.size()) {
             read_ahead(args_for_frame(plan, frames[i + 1]));

@@ -67,17 +67,20 @@ private:
     void dispatch(OIIO::ArgParse& ap, const std::vector<std::string>& argv, bool checking);
     bool check_command(const bokeh::Command& cmd, const std::string& modifiers,
                        const std::vector<std::string>& args, bokeh::OptionValues& opts);
+    /// `spelled`: the command as typed, options and arguments included (names its result).
     bool run_command(const bokeh::Command& cmd, bokeh::OptionValues opts,
-                     const std::vector<std::string>& args);
+                     const std::vector<std::string>& args, const std::string& spelled);
     bool read_input(const std::string& path);
     bool write_pending();
     bool write_one(const PendingWrite& w);
     /// write_one without reporting: false + `err` (safe off the main thread).
     bool write_checked(const PendingWrite& w, std::string& err);
     int run_frames(const std::vector<std::string>& args);
-    /// -u: true when every output of the frame line `line` exists and is newer than each
-    /// of its inputs (`why` says which output decided).
-    bool frame_up_to_date(const std::vector<std::string>& line, std::string& why);
+    /// -u: true when every output of the frame line `line` exists, is newer than each of
+    /// its inputs and records the same command line (`why` says which output decided);
+    /// `stale` says why an existing output is made again.
+    bool frame_up_to_date(const std::vector<std::string>& line, std::string& why,
+                          std::string& stale);
     bool substitute_missing(const std::string& path);
     void print_runstats(double seconds) const;
     void set_current(const std::string& command);
@@ -112,6 +115,9 @@ private:
     int m_depth = 0;
     bool m_failed = false;
     std::vector<std::string> m_line_inputs, m_line_outputs;  // files of the line checked last
+    // The line checked last without the options that change no output (its "recipe"), and
+    // the running frame's: recorded as "bokeh:command" in each file written, compared by -u.
+    std::string m_line_recipe, m_frame_recipe;
 
     // --parallel-frames: the next frame's inputs read ahead, by file name.
     struct Prefetched {
@@ -122,7 +128,8 @@ private:
     std::map<std::string, std::shared_future<Prefetched>> m_read_ahead;
     std::mutex m_colors_mutex;  // colour conversions of the main thread and of a write behind
     void read_ahead(const std::vector<std::string>& line);
-    std::string m_where;    // appended to errors: which frame of a sequence
+    std::string m_where;    // appended to errors: which frame of a sequence, and what follows
+    std::string m_frame_label;  // "frame 3, 3 of 5" in a sequence, else empty
     std::string m_current;  // the command running, named by errors that are not its own
 };
 

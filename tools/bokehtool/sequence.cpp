@@ -177,8 +177,19 @@ bool plan_frames(const std::vector<std::string>& args, FramePlan& plan, std::str
     }
     // No range given: the frames are the files on disk matching the first pattern.
     if (!scan_frames(plan.normalized.front(), plan.frames)) {
-        err = format("{}: no files match this frame pattern (give --frames for outputs)",
-                     plan.args[size_t(plan.pattern_args.front())]);
+        // Name the file looked for: "shot.####.exr" names 16 digits, not 4 (a '#' is
+        // --framepadding digits, 4 by default, as in oiiotool; '@' is one digit).
+        const std::string& typed = plan.args[size_t(plan.pattern_args.front())];
+        char example[4096];
+        std::snprintf(example, sizeof(example), plan.normalized.front().c_str(), 1);
+        const size_t hashes = size_t(std::count(typed.begin(), typed.end(), '#'));
+        err = format("{}: no files match this frame pattern (frame 1 would be {}{}; give --frames "
+                     "for outputs)",
+                     typed, example,
+                     hashes > 1 ? format("; each '#' is {} digits, so shot.#.exr or shot.%04d.exr "
+                                         "name 4",
+                                         padding > 0 ? padding : 4)
+                                : std::string());
         return false;
     }
     return true;
