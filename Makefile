@@ -1,30 +1,42 @@
 # The commands a newcomer types. Each one installs what is missing, configures, builds.
-#   make demo   render the built-in scene, defocus it: out/demo.exr + out/demo.png
-#   make test   build and run every test (ctest)
+#   make demo   install what bokehtool needs, build it, render the built-in scene:
+#               out/demo.exr + out/demo.png (no tests, benches or bindings are built)
+#   make test   install everything, build everything, run every test (ctest)
 #   make bench  run the speed/accuracy benchmarks
 #   make docs   regenerate the command reference docs/commands/ from the plugins
 #   make test-asan  the tests built with AddressSanitizer + UndefinedBehaviorSanitizer
-#   make fuzz   run the libFuzzer targets (clang-14) for FUZZ_SECONDS each
+#   make fuzz   build the libFuzzer targets (clang-14) and run each for FUZZ_SECONDS
 BUILD ?= build
 JOBS  ?= 2
 BOKEHTOOL = $(BUILD)/bin/bokehtool
 
-.PHONY: all deps configure build demo test test-asan fuzz bench docs micro install clean
+.PHONY: all deps deps-tool configure build tool demo test test-asan fuzz bench docs micro install clean
 
 all: build
 
 deps:
 	@tools/install-deps.sh
 
-$(BUILD)/CMakeCache.txt: | deps
+deps-tool:
+	@tools/install-deps.sh tool
+
+# Configured once; options already in the cache are kept (the test build turns the tests on).
+$(BUILD)/CMakeCache.txt:
 	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release
 
 configure: $(BUILD)/CMakeCache.txt
 
-build: deps configure
-	cmake --build $(BUILD) -j $(JOBS)
+# Everything: library, tool, plugins, tests, bench harness, Python module.
+build: deps
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DBOKEH_BUILD_TESTS=ON -DBOKEH_BUILD_PYTHON=ON
+	cmake --build $(BUILD) -j $(JOBS) --target all bokeh-bench
 
-demo: build
+# bokehtool and its plugins alone.
+tool: deps-tool
+	@$(MAKE) --no-print-directory configure
+	cmake --build $(BUILD) -j $(JOBS) --target tool
+
+demo: tool
 	@mkdir -p out
 	$(BOKEHTOOL) -v --scene lights -o out/sharp.exr --defocus:focus=6:fstop=2 -o out/demo.exr --ch R,G,B -o out/demo.png
 	$(BOKEHTOOL) out/sharp.exr --defocus:focus=6:fstop=2:output=focalplane -o out/focalplane.png
@@ -61,8 +73,10 @@ test-asan: deps
 FUZZ_TARGETS ?= read_image command_line kernel_image deep
 FUZZ_SECONDS ?= 60
 FUZZ_WORK    ?= build-fuzz
-fuzz: build
-	@test -x $(BUILD)/bin/fuzz_deep || { echo "make fuzz: no fuzz targets in $(BUILD)/bin: BOKEH_FUZZ is off (needs clang++-14 and libclang-rt-14-dev)"; exit 1; }
+fuzz: deps
+	@command -v clang++-14 >/dev/null || { echo "make fuzz: needs clang++-14 and libclang-rt-14-dev (apt-get install clang-14 libclang-rt-14-dev)"; exit 1; }
+	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DBOKEH_FUZZ=ON
+	cmake --build $(BUILD) -j $(JOBS)
 	/usr/bin/python3 tests/fuzz/make_seeds.py $(FUZZ_WORK)/seeds_read_image
 	tests/fuzz/run_fuzz.sh $(BUILD)/bin $(FUZZ_WORK) $(FUZZ_SECONDS) $(FUZZ_TARGETS)
 
@@ -89,6 +103,7 @@ docs: build
 # The microbenchmarks behind the exact methods' cost models (Google Benchmark), the
 # methods' repetitions interleaved so the machine's drift falls on all of them alike.
 micro: build
+	cmake --build $(BUILD) -j $(JOBS) --target bokeh-micro
 	$(BUILD)/bin/bokeh-micro --benchmark_repetitions=3 --benchmark_enable_random_interleaving=true \
 	  --benchmark_report_aggregates_only=true
 
@@ -96,4 +111,4 @@ install: build
 	cmake --install $(BUILD) --prefix $(or $(PREFIX),/usr/local)
 
 clean:
-	rm -rf $(BUILD) $(ASAN_BUILD) $(FUZZ_BUILD) out
+	rm -rf $(BUILD) $(ASAN_BUILD) $(FUZZ_WORK) out

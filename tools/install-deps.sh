@@ -1,18 +1,30 @@
 #!/usr/bin/env bash
 # Install the Debian packages OpenBokeh needs, only those missing; quiet when none is.
 # Run as root (CI, a fresh machine) or with sudo available.
+#
+#   install-deps.sh        everything: the tool, the tests, the benches, Python, the farm test
+#   install-deps.sh tool   the library, bokehtool and its plugins only (what make demo needs)
 set -euo pipefail
 
+# Building and running the library and bokehtool.
 packages=(
   build-essential cmake pkg-config ccache
-  libopenimageio-dev openimageio-tools libopenexr-dev openexr
-  libopencolorio-dev opencolorio-tools libtbb-dev libglm-dev libfftw3-dev libdeflate-dev
-  libgtest-dev libbenchmark-dev
-  python3-matplotlib
-  pybind11-dev python3-dev python3-numpy python3-openimageio python3-pytest
-  libgegl-dev
-  slurm-wlm munge
+  libopenimageio-dev libopenexr-dev libopencolorio-dev libtbb-dev libglm-dev libfftw3-dev libdeflate-dev
 )
+case "${1:-all}" in
+  tool) ;;
+  all)
+    packages+=(
+      openimageio-tools openexr opencolorio-tools   # oiiotool and friends: peers in tests
+      libgtest-dev libbenchmark-dev                 # unit tests, microbenchmarks
+      python3-matplotlib                            # the bench charts
+      pybind11-dev python3-dev python3-numpy python3-openimageio python3-pytest  # Python
+      libgegl-dev                                   # a bench peer
+      slurm-wlm munge                               # the farm test
+    )
+    ;;
+  *) echo "usage: $0 [tool|all]" >&2; exit 2 ;;
+esac
 
 missing=()
 for p in "${packages[@]}"; do
