@@ -2,6 +2,7 @@
 // usable as --convolve's kernel; the sheet and the beam map; bad lens values refused.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include <OpenImageIO/imagebuf.h>
@@ -38,10 +39,33 @@ TEST(CliBokeh, PsfCentredWithUnitEnergy)
     for (int c = 0; c < 3; ++c)
         EXPECT_NEAR(sum[c], 1.0, 1e-5) << "channel " << c;
 
-    // As a convolution kernel: a lone light becomes the PSF (energy kept).
-    const RunResult conv = bokehtool(format("--scene lights:width=96:height=54 --ch R,G,B {}/psf.exr --convolve -o {}/conv.exr",
-                                            dir, dir));
-    EXPECT_EQ(conv.status, 0) << conv.err;
+    // As a convolution kernel: a lone light becomes the PSF, scaled by the light and
+    // centred on it (out(x + d) = 100 psf(d)), its energy kept.
+    OIIO::ImageBuf light(OIIO::ImageSpec(160, 120, 3, OIIO::TypeFloat));
+    const float hundred[3] = { 100.0f, 100.0f, 100.0f };
+    light.setpixel(80, 60, hundred);
+    ASSERT_TRUE(light.write(dir + "/light.exr"));
+    const RunResult conv = bokehtool(format("{0}/light.exr {0}/psf.exr --convolve:border=black -o {0}/conv.exr", dir));
+    ASSERT_EQ(conv.status, 0) << conv.err;
+    OIIO::ImageBuf out(dir + "/conv.exr");
+    ASSERT_TRUE(out.read(0, 0, true, OIIO::TypeFloat)) << out.geterror();
+    double energy[3] = { 0, 0, 0 }, worst = 0.0;
+    for (int y = 0; y < 120; ++y)
+        for (int x = 0; x < 160; ++x) {
+            float got[3], want[3] = { 0, 0, 0 };
+            out.getpixel(x, y, got);
+            const int dx = x - 80, dy = y - 60;
+            if (dx >= s.x && dx < s.x + s.width && dy >= s.y && dy < s.y + s.height)
+                psf.getpixel(dx, dy, want);
+            for (int c = 0; c < 3; ++c) {
+                energy[c] += got[c];
+                worst = std::max(worst, double(std::abs(got[c] - 100.0f * want[c])));
+            }
+        }
+    ASSERT_LT(s.width, 160) << "the PSF fits inside the frame, so all its energy is there";
+    for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(energy[c], 100.0, 1e-3) << "channel " << c;
+    EXPECT_LT(worst, 1e-4) << "the output is the PSF, scaled and moved to the light";
 }
 
 TEST(CliBokeh, SheetStarPictureAndBeamMap)
