@@ -115,18 +115,24 @@ TEST(Robust, OutOfMemoryIsTheOneLineError)
 TEST(Robust, TimeoutStopsTheRunCleanly)
 {
     const std::string dir = fresh_dir("robust_timeout"), out = dir + "/out.exr";
-    // About 1.7 s on one core of the project's machine.
+    // The run whole (about 1.7 s on one core of the project's machine), then stopped at
+    // 0.3 s: "stopped near its limit" is judged against the whole run measured here, so a
+    // loaded machine slows both alike.
+    const std::string line = "--threads 1 --scene lights:width=2000:height=1000:aa=1 --defocus -o ";
+    const auto tw       = std::chrono::steady_clock::now();
+    RunResult whole     = bokehtool(line + dir + "/whole.exr");
+    const double full_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - tw).count();
+    ASSERT_EQ(whole.status, 0) << whole.err;
+    OIIO::Filesystem::remove(dir + "/whole.exr");
     const auto t0 = std::chrono::steady_clock::now();
-    RunResult r = bokehtool(format("--threads 1 --timeout 0.3 --scene lights:width=2000:height=1000:aa=1 "
-                                   "--defocus -o {}",
-                                   out));
+    RunResult r   = bokehtool("--timeout 0.3 " + line + out);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     // Its own exit status (GNU timeout's 124), one line, nothing written.
     EXPECT_EQ(r.status, 124) << r.err;
     EXPECT_TRUE(OIIO::Strutil::starts_with(r.err, "bokehtool ERROR: --timeout: still running after 0.3 s (in --"))
         << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
-    EXPECT_LT(seconds, 1.5) << "stopped near its limit";
+    EXPECT_LT(seconds, 0.6 * full_s) << "stopped near its limit (the whole run took " << full_s << " s)";
     EXPECT_TRUE(files_in(dir).empty());
     // In a sequence the line names the frame it stopped in.
     r = bokehtool(format("--threads 1 --timeout 0.3 --frames 1-3 --scene lights:width=2000:height=1000:aa=1 "

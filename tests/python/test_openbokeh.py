@@ -442,8 +442,10 @@ def test_the_gil_is_released_while_the_library_works():
     print(f"\nGIL: a Python thread ran at {ratio:.0%} of its idle rate during {blurs[0]} blurs "
           f"({seconds:.2f} s; 1024x1024 RGBA, 61 px disk, threads=1), at {held_ratio:.1%} during "
           f"a C call holding the GIL; {alone:.3g} iterations/s idle")
+    # Against the control measured in the same run, not against the wall clock: another
+    # process on the machine slows both alike.
     assert held_ratio < 0.08
-    assert ratio > 0.15
+    assert ratio > max(0.1, 3 * held_ratio)
 
 
 def test_calls_from_several_threads_at_once_give_each_its_own_result(scene_array):
