@@ -6,16 +6,19 @@
 #   install-deps.sh tool   the library, bokehtool and its plugins only (what make demo needs)
 set -euo pipefail
 
-# Building and running the library and bokehtool.
+# Building and running the library and bokehtool. openimageio-tools too: Debian's
+# OpenImageIO CMake package names its programs (/usr/bin/iconvert, ...) as imported
+# targets and refuses to configure without them (seen on a fresh debootstrap'd bookworm).
 packages=(
   build-essential cmake pkg-config ccache
-  libopenimageio-dev libopenexr-dev libopencolorio-dev libtbb-dev libglm-dev libfftw3-dev libdeflate-dev
+  libopenimageio-dev openimageio-tools libopenexr-dev libopencolorio-dev libtbb-dev libglm-dev
+  libfftw3-dev libdeflate-dev
 )
 case "${1:-all}" in
   tool) ;;
   all)
     packages+=(
-      openimageio-tools openexr opencolorio-tools   # oiiotool and friends: peers in tests
+      openexr opencolorio-tools                     # exrheader, ociocheck: peers in tests
       libgtest-dev libbenchmark-dev                 # unit tests, microbenchmarks
       python3-matplotlib                            # the bench charts
       pybind11-dev python3-dev python3-numpy python3-openimageio python3-pytest  # Python
