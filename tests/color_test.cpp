@@ -8,6 +8,8 @@
 
 #include <OpenColorIO/OpenColorIO.h>
 
+#include "test_util.h"
+
 using namespace bokeh;
 namespace OCIO = OCIO_NAMESPACE;
 

@@ -668,9 +668,12 @@ TEST(DefocusLarge, HalfFrameCoc)
         // resolution (the reduced case is the next test).
         EXPECT_LE(e, 1e-6) << method_name(m) << ": energy error " << e;
     }
+    // One CoC, one layer: the layered method is the reference here, to float rounding
+    // (measured identical; a PSNR floor of 30 dB would pass a method 30 dB off).
     const ImageError e = error_of(outs[1], outs[0]);
-    std::printf("[ figures  ] CoC 24 uniform: layers vs reference PSNR %.2f dB\n", e.psnr_db);
-    EXPECT_GE(e.psnr_db, 30.0);
+    std::printf("[ figures  ] CoC 24 uniform: layers vs reference PSNR %.2f dB, max %.3g\n", e.psnr_db,
+                e.max_abs);
+    EXPECT_LE(e.max_abs, 1e-6);
 
     // CoC from -24 to +24 px, continuous in x and y (more than 64 distinct values, so the
     // layers use their ladder of shared rungs), default (clamp) border.
@@ -684,9 +687,10 @@ TEST(DefocusLarge, HalfFrameCoc)
     std::printf("[ figures  ] CoC -24..24 ramp: layers (%zu rungs) vs reference PSNR %.2f dB\n",
                 rl.layer_coc_px.size(), er.psnr_db);
     EXPECT_LT(rl.layer_coc_px.size(), 64u) << "expected the ladder, not one rung per CoC";
-    // Measured 38.9 dB. (The 28.9 dB seen before was the ramp in x alone with the exact
-    // rungs -0.38 / +0.38 and no rung at 0, which dropped a whole column: now a rung at 0
-    // always, see DefocusAccuracy.CocsSymmetricAroundFocusKeepEveryPixel.)
+    // Measured 34.4 dB (19 rungs shared across 48 px of CoC). The floor of 30 dB is what a
+    // dropped rung costs (the ramp in x alone, with the exact rungs -0.38 / +0.38 and no
+    // rung at 0, dropped a whole column: 28.9 dB; a rung at 0 always, see
+    // DefocusAccuracy.CocsSymmetricAroundFocusKeepEveryPixel).
     EXPECT_GE(er.psnr_db, 30.0);
 }
 

@@ -19,6 +19,16 @@
 
 namespace bokeh_test {
 
+namespace paths {
+const char* const bokehtool      = BOKEH_TEST_PATH_BOKEHTOOL;
+const char* const source_dir     = BOKEH_TEST_PATH_SOURCE_DIR;
+const char* const shared_data    = BOKEH_TEST_PATH_SHARED_DATA;
+const char* const test_tmp       = BOKEH_TEST_PATH_TMP;
+const char* const bad_plugin_dir = BOKEH_TEST_PATH_BAD_PLUGIN_DIR;
+const char* const ocio_config    = BOKEH_TEST_PATH_OCIO_CONFIG;
+}  // namespace paths
+
+
 std::string fresh_dir(const std::string& name)
 {
     const std::string dir = std::string(BOKEH_TEST_TMP) + "/" + name;

@@ -10,6 +10,18 @@
 
 namespace bokeh_test {
 
+/// Where the tests find things, set when the build is configured. They are compiled into
+/// test_util.cpp alone (a clone in another folder then changes one file, and the compiler
+/// cache serves the rest); the macros below are what the tests use.
+namespace paths {
+extern const char* const bokehtool;       ///< the built bokehtool
+extern const char* const source_dir;      ///< the checkout
+extern const char* const shared_data;     ///< ../shared/data beside it
+extern const char* const test_tmp;        ///< scratch space under the build tree
+extern const char* const bad_plugin_dir;  ///< the plugins that fail on purpose
+extern const char* const ocio_config;     ///< ocio/config.ocio
+}  // namespace paths
+
 /// A new empty directory for one test, under the build tree.
 std::string fresh_dir(const std::string& name);
 
@@ -57,6 +69,13 @@ OIIO::ImageBuf make_deep(int w, int h, const std::vector<DeepPixel>& px, bool ha
 double max_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b);
 
 }  // namespace bokeh_test
+
+#define BOKEHTOOL (::bokeh_test::paths::bokehtool)
+#define BOKEH_SOURCE_DIR (::bokeh_test::paths::source_dir)
+#define BOKEH_SHARED_DATA (::bokeh_test::paths::shared_data)
+#define BOKEH_TEST_TMP (::bokeh_test::paths::test_tmp)
+#define BOKEH_BAD_PLUGIN_DIR (::bokeh_test::paths::bad_plugin_dir)
+#define BOKEH_OCIO_CONFIG (::bokeh_test::paths::ocio_config)
 
 // Tests on the real files in ../shared/data are skipped, with a message, when it is absent.
 #define REQUIRE_SHARED(path)                                                      \
