@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <vector>
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imagebuf.h>
@@ -172,4 +173,68 @@ TEST(CliDefocus, LensCharacterSprites)
     expect_clean_failure(bokehtool(format("{} --defocus:highlights=0 -o {}", kScene, out)), "highlights", out);
     expect_clean_failure(bokehtool(format("{} --defocus:lens=achromat:method=gather -o {}", kScene, out)),
                          "gather", out);
+}
+
+// The CoC options, each against what it means, on the signed CoC map (output=coc) of the
+// same frame: front= and back= multiply the CoC in front of and behind focus, maxcoc=
+// clamps it, negate=1 on a negated depth gives the same map, and range= makes depths
+// within half of it of the focus sharp and moves the rest half of it toward the focus
+// (so their blur shrinks).
+TEST(CliDefocus, CocOptionsDoWhatTheySay)
+{
+    const std::string dir = fresh_dir("cli_defocus_coc_options");
+    RunResult r = bokehtool(format("--scene lights:width=192:height=108:aa=1 -o {}/scene.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf scene(dir + "/scene.exr");
+    ASSERT_TRUE(scene.read(0, 0, true, OIIO::TypeFloat));
+    OIIO::ImageBuf negated = scene;
+    const int zc           = scene.spec().channelindex("Z");
+    for (int y = 0; y < 108; ++y)
+        for (int x = 0; x < 192; ++x) {
+            std::vector<float> px(size_t(scene.nchannels()));
+            scene.getpixel(x, y, px.data());
+            px[size_t(zc)] = -px[size_t(zc)];
+            negated.setpixel(x, y, px.data());
+        }
+    ASSERT_TRUE(negated.write(dir + "/negated.exr", OIIO::TypeFloat));
+    auto coc_map = [&](const std::string& in, const std::string& opts, const std::string& name) {
+        RunResult run = bokehtool(format("{0}/{1} --defocus:focus=6:fstop=2:output=coc{2} -o {0}/{3}.exr", dir, in,
+                                         opts, name));
+        EXPECT_EQ(run.status, 0) << name << ": " << run.err;
+        OIIO::ImageBuf map(dir + "/" + name + ".exr");
+        EXPECT_TRUE(map.read(0, 0, true, OIIO::TypeFloat)) << name;
+        return map;
+    };
+    const OIIO::ImageBuf base = coc_map("scene.exr", "", "base"), front = coc_map("scene.exr", ":front=2", "front"),
+                         back = coc_map("scene.exr", ":back=0.5", "back"),
+                         clamp = coc_map("scene.exr", ":maxcoc=2", "maxcoc"),
+                         neg = coc_map("negated.exr", ":negate=1", "negate"),
+                         range = coc_map("scene.exr", ":range=2", "range");
+    int in_front = 0, behind = 0, clamped = 0, sharp = 0, moved = 0;
+    for (int y = 0; y < 108; ++y)
+        for (int x = 0; x < 192; ++x) {
+            const float c = base.getchannel(x, y, 0, 0), z = scene.getchannel(x, y, 0, zc);
+            EXPECT_FLOAT_EQ(front.getchannel(x, y, 0, 0), c < 0 ? 2.0f * c : c) << x << "," << y;
+            EXPECT_FLOAT_EQ(back.getchannel(x, y, 0, 0), c > 0 ? 0.5f * c : c) << x << "," << y;
+            EXPECT_FLOAT_EQ(clamp.getchannel(x, y, 0, 0), std::clamp(c, -2.0f, 2.0f)) << x << "," << y;
+            EXPECT_EQ(neg.getchannel(x, y, 0, 0), c) << x << "," << y;
+            const float rc = range.getchannel(x, y, 0, 0);
+            if (std::abs(z - 6.0f) <= 1.0f) {
+                EXPECT_EQ(rc, 0.0f) << x << "," << y << " at " << z << " m";
+                sharp += 1;
+            } else {
+                EXPECT_LT(std::abs(rc), std::abs(c)) << x << "," << y << " at " << z << " m";
+                EXPECT_EQ(rc < 0, c < 0) << x << "," << y;
+                moved += 1;
+            }
+            in_front += c < 0;
+            behind += c > 0;
+            clamped += std::abs(c) > 2.0f;  // the post in front reaches -3.6 px at this width
+        }
+    // The frame holds every case the checks tell apart.
+    EXPECT_GT(in_front, 0);
+    EXPECT_GT(behind, 0);
+    EXPECT_GT(clamped, 0);
+    EXPECT_GT(sharp, 0);
+    EXPECT_GT(moved, 0);
 }
