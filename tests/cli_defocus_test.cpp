@@ -238,3 +238,66 @@ TEST(CliDefocus, CocOptionsDoWhatTheySay)
     EXPECT_GT(sharp, 0);
     EXPECT_GT(moved, 0);
 }
+
+// More options against what they mean: sensor= scales the CoC in pixels by the film back
+// (CoC px = CoC mm x width px / sensor mm: half the back, twice the CoC); the reference
+// makes a layer for each step=-wide CoC bin a pixel falls in; sprites= caps the highlights
+// drawn with the lens's PSF; supersample=2 doubles the output's pixels.
+TEST(CliDefocus, SensorStepSpritesSupersample)
+{
+    const std::string dir = fresh_dir("cli_defocus_more_options");
+    RunResult r = bokehtool(format("--scene lights:width=192:height=108:aa=1 -o {}/scene.exr", dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    const std::string scene = dir + "/scene.exr";
+    auto read = [](const std::string& path) {
+        OIIO::ImageBuf img(path);
+        EXPECT_TRUE(img.read(0, 0, true, OIIO::TypeFloat)) << path;
+        return img;
+    };
+    for (const char* back : { "36", "18" }) {
+        r = bokehtool(format("{} --defocus:focus=6:fstop=2:sensor={}:output=coc -o {}/coc{}.exr", scene, back, dir, back));
+        ASSERT_EQ(r.status, 0) << r.err;
+    }
+    const OIIO::ImageBuf full = read(dir + "/coc36.exr"), half = read(dir + "/coc18.exr");
+    for (int y = 0; y < 108; y += 3)
+        for (int x = 0; x < 192; x += 3) {
+            const float c = full.getchannel(x, y, 0, 0);
+            EXPECT_NEAR(half.getchannel(x, y, 0, 0), 2.0f * c, 1e-5f * (1.0f + std::abs(c))) << x << "," << y;
+        }
+
+    // The reference: a layer for each step-wide CoC bin (on the grid of whole steps) that
+    // some pixel's CoC falls in, counted here from the CoC map.
+    auto occupied_bins = [&](double step) {
+        std::vector<long> bins;
+        for (int y = 0; y < 108; ++y)
+            for (int x = 0; x < 192; ++x)
+                bins.push_back(long(std::floor(full.getchannel(x, y, 0, 0) / step)));
+        std::sort(bins.begin(), bins.end());
+        return int(std::unique(bins.begin(), bins.end()) - bins.begin());
+    };
+    auto layers = [&](const char* step) {
+        RunResult v = bokehtool(format("-v {} --defocus:focus=6:fstop=2:method=reference:step={} -o {}/ref.exr", scene,
+                                       step, dir));
+        EXPECT_EQ(v.status, 0) << v.err;
+        const size_t at = v.out.find(" layers");
+        const size_t from = v.out.rfind(' ', at - 1);
+        return at == std::string::npos ? -1 : std::atoi(v.out.substr(from + 1, at - from - 1).c_str());
+    };
+    EXPECT_EQ(layers("1"), occupied_bins(1.0));
+    EXPECT_EQ(layers("0.25"), occupied_bins(0.25));
+    EXPECT_GT(occupied_bins(0.25), occupied_bins(1.0)) << "the steps tell the cases apart";
+
+    // Lens character: at most sprites= highlights drawn; supersample=2 doubles the frame.
+    r = bokehtool(format("-v {} --defocus:focus=6:fstop=2:lens=achromat:sprites=5 -o {}/few.exr", scene, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    const size_t s = r.out.find(" sprites (");
+    ASSERT_NE(s, std::string::npos) << r.out;
+    const int sprites = std::atoi(r.out.substr(r.out.rfind(' ', s - 1) + 1).c_str());
+    EXPECT_GE(sprites, 1) << r.out;
+    EXPECT_LE(sprites, 5) << r.out;
+    r = bokehtool(format("{} --defocus:focus=6:fstop=2:lens=achromat:supersample=2 -o {}/ss.exr", scene, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    const OIIO::ImageBuf ss = read(dir + "/ss.exr");
+    EXPECT_EQ(ss.spec().full_width, 2 * 192);
+    EXPECT_EQ(ss.spec().full_height, 2 * 108);
+}
