@@ -14,6 +14,7 @@
 // changes layout; the host refuses a module built for another number.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <limits>
 #include <map>
@@ -104,6 +105,10 @@ struct CommandContext {
     /// library's `progress` options as it is: an empty one costs them nothing.
     std::function<void(float)> progress;
     std::string error;                ///< why the command failed
+    /// The memory a command may take for what the user's numbers ask it to make (the
+    /// host's --maxmemory; 0: default_memory_budget_bytes(), half the machine). Last in
+    /// the struct, so that plugins built before it still find every other field.
+    int64_t memory_budget_bytes = 0;
 
     /// Record the reason and return false: `return ctx.fail("...")`.
     bool fail(std::string why)

@@ -8,6 +8,7 @@
 
 #include "aperture_options.h"
 #include "defocus_options.h"
+#include "memory_budget.h"
 
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
@@ -214,6 +215,14 @@ bool scene(CommandContext& c)
     o.aa     = c.options.get_int("aa");
     o.seed   = uint32_t(c.options.get_int("seed"));
     const std::string& output = c.options.get_string("output");
+    // What it will hold, estimated before anything is allocated: a sharp frame is RGBA + Z
+    // float (20 bytes a pixel) and its copy on the way to the file; a truth's RGBA and its
+    // sums; a deep frame's samples (about 2 a pixel in the built-in scenes at 24 bytes,
+    // held twice while the image is assembled) and their counts.
+    const int64_t per_pixel = output == "deep" ? 160 : output == "truth" ? 48 : 40;
+    if (!bokeh::within_memory_budget(c, bokeh::image_bytes(o.width, o.height, per_pixel),
+                                     format("a {}x{} {} scene", o.width, o.height, output)))
+        return false;
     if (output != "truth")
         for (const auto& [key, given] : c.options.explicitly_given)
             if (given && is_truth_option(key))

@@ -7,6 +7,8 @@
 #include <bokeh/plugin.h>
 #include <bokeh/resample.h>
 
+#include "memory_budget.h"
+
 #include <cctype>
 #include <cerrno>
 #include <cmath>
@@ -93,6 +95,10 @@ template<class Run> bool to_new_size(CommandContext& c, Run run)
     std::string err;
     if (!parse_new_size(c.args[0], src.spec(), w, h, err))
         return c.fail(err);
+    // The result, float, before it is allocated.
+    if (!bokeh::within_memory_budget(c, bokeh::image_bytes(w, h, 4 * int64_t(src.nchannels())),
+                                     format("a {}x{} result of {} channels", w, h, src.nchannels())))
+        return false;
     auto out = std::make_shared<OIIO::ImageBuf>();
     if (!run(*out, src, w, h))
         return c.fail(out->geterror());
@@ -136,6 +142,13 @@ bool enlarge_command(CommandContext& c)
     double k = 0.0;
     if (!parse_number(c.args[0], k))
         return c.fail(format("'{}' is not a factor (a number >= 1)", c.args[0]));
+    const OIIO::ImageSpec& in = c.inputs[0].buf->spec();
+    if (k >= 1.0 && k < 1e9) {  // the library refuses the rest, naming the factor
+        const int64_t w = int64_t(std::ceil(in.width * k)), h = int64_t(std::ceil(in.height * k));
+        if (!bokeh::within_memory_budget(c, bokeh::image_bytes(w, h, 4 * int64_t(in.nchannels)),
+                                         format("a {}x{} result of {} channels", w, h, in.nchannels)))
+            return false;
+    }
     auto out = std::make_shared<OIIO::ImageBuf>();
     if (!bokeh::enlarge(*out, *c.inputs[0].buf, k, resample_options(c), c.nthreads))
         return c.fail(out->geterror());

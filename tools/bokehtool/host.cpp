@@ -182,9 +182,10 @@ void Host::register_host_commands()
                                   }),
                      true);
     add_host_command(host_command("--maxmemory", "SIZE", 0, 0,
-                                  "Memory one input file may take once read (4G, 512M, 100K or "
-                                  "bytes); a file whose header declares more is refused before "
-                                  "it is read. Default: half the physical memory",
+                                  "Memory one input file may take once read, and what a command "
+                                  "may make from the sizes given (a scene, a resize target): 4G, "
+                                  "512M, 100K or bytes; more is refused before it is allocated. "
+                                  "Default: half the physical memory",
                                   [this](CommandContext& c) {
                                       int64_t bytes = 0;
                                       if (!parse_memory_size(c.args[0], bytes))
@@ -681,6 +682,7 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     ctx.nthreads  = m_threads;
     ctx.verbosity = m_verbosity;
     ctx.colors    = &m_colors;
+    ctx.memory_budget_bytes = m_read_options.memory_budget_bytes;
     ctx.message   = [this](const std::string& s) { message(s); };
     std::shared_ptr<ProgressLine> progress;
     if (m_progress && m_verbosity > 0) {
