@@ -108,6 +108,23 @@ def test_blur_matches_bokehtool(tmp, scene_file, scene_array, size, options):
     assert np.array_equal(result, pixels(out))
 
 
+def test_blur_against_numpy(scene_array):
+    """Values, not only agreement with bokehtool: a box blur is the mean of its window,
+    computed here with numpy (5 x 3 window, zeros past the edge with border="black",
+    edge pixels repeated with border="clamp")."""
+    img = scene_array[:40, :56, :].astype(np.float64)
+    for border, mode in (("black", "constant"), ("clamp", "edge")):
+        padded = np.pad(img, ((1, 1), (2, 2), (0, 0)), mode=mode)
+        want = np.zeros_like(img)
+        for dy in range(3):
+            for dx in range(5):
+                want += padded[dy:dy + img.shape[0], dx:dx + img.shape[1], :]
+        want /= 15.0
+        got = ob.blur(img.astype(np.float32), (5, 3), kernel="box", border=border)
+        assert got.shape == img.shape
+        assert np.max(np.abs(got - want)) <= 1e-5 * (1.0 + np.max(np.abs(want))), border
+
+
 def test_blur_size_pair_is_WxH(scene_array):
     assert np.array_equal(ob.blur(scene_array, (7, 5), kernel="disk"),
                           ob.blur(scene_array, "7x5", kernel="disk"))
