@@ -2,7 +2,7 @@
 //
 // Conversions touch colour channels only: each layer's R, G, B (the unprefixed ones and
 // "diffuse.R"-style AOVs), never depth, alpha, IDs or data layers (normals, positions,
-// motion), which pass through bit for bit (docs/color.md has the rules). Colour is
+// motion), which pass through bit for bit (ocio/README.md, "Which channels are colour"). Colour is
 // unpremultiplied around the transform (IBA::colorconvert's unpremult), as a non-linear
 // encoding such as sRGB must be applied to colour, not to colour * alpha.
 
@@ -146,12 +146,6 @@ bool is_data_layer(const std::string& layer)
 
 std::vector<ColorChannels> color_channel_groups(const OIIO::ImageSpec& spec)
 {
-    auto index = [&](const std::string& name) {
-        for (int c = 0; c < spec.nchannels; ++c)
-            if (spec.channel_name(c) == name)
-                return c;
-        return -1;
-    };
     std::vector<ColorChannels> groups;
     std::vector<std::string> layers_seen;
     for (int c = 0; c < spec.nchannels; ++c) {
@@ -167,15 +161,15 @@ std::vector<ColorChannels> color_channel_groups(const OIIO::ImageSpec& spec)
         ColorChannels g;
         g.layer = layer;
         g.r     = c;
-        g.g     = index(prefix + "G");
-        g.b     = index(prefix + "B");
+        g.g     = spec.channelindex(prefix + "G");
+        g.b     = spec.channelindex(prefix + "B");
         if (g.g < 0 || g.b < 0)
             continue;
         // A layer's own alpha, else the image's (OpenEXR's channel naming: a layer
         // without its own "A" is covered by the main one).
-        g.a = index(prefix + "A");
+        g.a = spec.channelindex(prefix + "A");
         if (g.a < 0 && !prefix.empty())
-            g.a = index("A");
+            g.a = spec.channelindex("A");
         groups.push_back(g);
     }
     return groups;

@@ -771,12 +771,11 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
     // as one whose ZBack equals its Z is ("Interpreting OpenEXR Deep Pixels"), so the result
     // has ZBack when any input has it, and the channels are laid out as the first such
     // input's; an input without ZBack gets ZBack = Z (load_pixel).
-    size_t lead = 0;
+    std::vector<bool> has_zback(srcs.size());
     for (size_t i = 0; i < srcs.size(); ++i)
-        if (layout_of(*srcs[i]).zback >= 0) {
-            lead = i;
-            break;
-        }
+        has_zback[i] = layout_of(*srcs[i]).zback >= 0;
+    const auto first_volume = std::find(has_zback.begin(), has_zback.end(), true);
+    const size_t lead       = first_volume == has_zback.end() ? 0 : size_t(first_volume - has_zback.begin());
     const DeepLayout L = layout_of(*srcs[lead]);
     // Each image's channels mapped onto the lead's by name.
     std::vector<std::vector<int>> maps;
@@ -784,7 +783,7 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
     OIIO::ROI roi = srcs[0]->roi();
     for (size_t i = 0; i < srcs.size(); ++i) {
         const OIIO::ImageSpec& s = srcs[i]->spec();
-        const bool point_only    = L.zback >= 0 && layout_of(*srcs[i]).zback < 0;
+        const bool point_only    = L.zback >= 0 && !has_zback[i];
         if (s.nchannels != L.nch - (point_only ? 1 : 0)) {
             dst.errorfmt("deepmerge: image {} has channels {}, image {} has {}", i + 1,
                          OIIO::Strutil::join(s.channelnames, ","), lead + 1,
