@@ -1,5 +1,7 @@
 // defocus_layers.h — internal to the library: the layer machinery the flat and the deep
-// defocus share (core/defocus.cpp holds it; core/defocus_deep.cpp uses it).
+// defocus share. The frame's preparation is in core/defocus_prepare.cpp, the plan of
+// layers in core/defocus_plan.cpp, the engine that blurs and composites them in
+// core/defocus_engine.cpp, the references in core/defocus_reference.cpp.
 //
 // A frame is a data window of premultiplied RGBA pixels, each with its signed CoC; a
 // membership puts every pixel in one layer or shares it between two neighbouring rungs of
@@ -134,6 +136,37 @@ inline void scale_display_window(OIIO::ImageSpec& spec, const OIIO::ImageSpec& l
 /// Check the options that do not depend on the image. False + `err` naming the option.
 bool check_defocus_options(const DefocusOptions& o, std::string& err);
 
+/// A flat image made ready for a method (core/defocus_prepare.cpp): the options checked,
+/// the pixels premultiplied and scrubbed (counted in `rep`), each pixel's signed CoC, the
+/// depth dilation, bloom, the sprites taken out, iris space, the output region; the
+/// report's CoC range. False + `err`.
+bool prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport& rep,
+                   int nthreads, std::string& err);
+
+/// Iris-space colour (4 or more channels, premultiplied) back to linear, in place (no-op
+/// when iris mode is off).
+void from_iris_space(Plane& p, const IrisSpace& iris);
+
+/// The Layers method's plan over the frame's CoC range [lo, hi]: rungs, each pixel's
+/// shares, each layer's reduction.
+Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
+
+/// The Reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC,
+/// all at full resolution.
+Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step);
+
+/// The Reference method (core/defocus_reference.cpp): one layer a distinct CoC over the
+/// report's CoC range, composited into `out`; the layers into `rep`. False + `err` when
+/// the range holds more than 65535 steps.
+bool reference_layers(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads,
+                      std::string& err);
+
+/// What the layers leave transparent where the source is opaque (background a flat image
+/// never held, behind a blurred foreground's fringe) filled with the source pixel itself,
+/// up to the coverage it had: keeps an opaque image opaque. Only for pixels with a CoC
+/// nearer than `farthest` (something can lie behind them).
+void fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads);
+
 /// The rungs of the layered method for CoCs `cocs` spanning [lo, hi]: one per distinct
 /// CoC (0.25 px bins) for scenes of at most 64 (when `exact_allowed`), else the budget's
 /// geometric ladder; a rung at 0 always.
@@ -245,7 +278,7 @@ bool scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, const OIIO
                        int nthreads, std::string& err);
 
 /// The aperture at diameter |coc_px| / s (and the aspect), as exact weights; rotated half
-/// a turn in front of focus (core/defocus.cpp).
+/// a turn in front of focus (core/defocus_engine.cpp).
 KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads);
 
 /// One sub-aperture of DefocusOptions::aperture_views: cell (i, j) of an n x n grid over

@@ -1,6 +1,7 @@
 // defocus_sprites.cpp — lens character in the depth defocus: highlights scattered as
-// sprites carrying the lens's own PSF (optics.h), the rest left to the layers; and the
-// brute-force reference every pixel scattered with its own PSF.
+// sprites carrying the lens's own PSF (optics.h), the rest left to the layers (the
+// brute-force reference, every pixel scattered with its own PSF, is in
+// core/defocus_reference.cpp).
 //
 // The hybrid is SEEDS.md section 11's ("scatter only bright, important pixels; fringes and
 // onion rings only on scattered sprites"). Ours:
@@ -153,27 +154,6 @@ void bins_around(float c, double& c0, double& c1, double& t)
     c0 = sign * std::exp2(b0 / n);
     c1 = sign * std::exp2((b0 + 1.0) / n);
     t  = l - b0;
-}
-
-// Add `scale` * psf (per channel: rgb[c]) with its top-left pixel at (x0, y0) into rows
-// [band0, band1) of `target` (RGBA over `out`), pixel by pixel: the reference's scatter.
-void add_psf(Plane& target, const OIIO::ROI& out, const Psf& psf, int x0, int y0, const float rgb[3],
-             float scale, int band0, int band1)
-{
-    const int top = std::max(y0, band0), bottom = std::min(y0 + psf.height, band1);
-    const int left = std::max(x0, out.xbegin), right = std::min(x0 + psf.width, out.xend);
-    if (left >= right)
-        return;
-    const float k[3] = { rgb[0] * scale, rgb[1] * scale, rgb[2] * scale };
-    for (int y = top; y < bottom; ++y) {
-        float* d       = target.row(y - out.ybegin) + size_t(left - out.xbegin) * 4;
-        const float* p = psf.rgb.data() + (size_t(y - y0) * size_t(psf.width) + size_t(left - x0)) * 3;
-        for (int x = left; x < right; ++x, d += 4, p += 3) {
-            d[0] += k[0] * p[0];
-            d[1] += k[1] * p[1];
-            d[2] += k[2] * p[2];
-        }
-    }
 }
 
 // Pseudo-high resolution at 2x: `psf` convolved with a 2 x 2 box, (width + 1) x (height
@@ -693,174 +673,6 @@ std::string detail::sprite_summary(const DefocusReport& rep)
                                                       : std::string(),
                   rep.sprite_min_coc_px, rep.sprite_max_coc_px, rep.sprite_psfs, rep.sprites_drawn,
                   rep.sprite_seconds);
-}
-
-bool detail::scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec,
-                               int nthreads, std::string& err)
-{
-    LensCharacter lens;
-    if (!defocus_lens(o, spec, lens, err))
-        return false;
-    // Field positions matter only with field effects; then PSFs are kept per 1/64 of the
-    // half-diagonal (8 times the cache's bins).
-    const FieldFrame field(spec, lens);
-    const bool by_field = field.used;
-    const float step = o.reference_step_px;
-    using Key = std::tuple<int64_t, int, int>;  // CoC step, field x, field y
-    struct Point {
-        size_t at;
-        int x, y;
-        Key key;
-    };
-    std::vector<Point> points;
-    std::map<Key, std::shared_ptr<Psf>> psfs;
-    std::vector<int64_t> coc_step(f.coc.size());
-    for (size_t i = 0; i < f.coc.size(); ++i)
-        coc_step[i] = int64_t(std::llround(f.coc[i] / step));
-    auto empty = [&](size_t i) {
-        const float* px = f.img.rgba.data() + i * 4;
-        return px[0] == 0.0f && px[1] == 0.0f && px[2] == 0.0f && px[3] == 0.0f;
-    };
-    auto add_point = [&](size_t i, int x, int y) {
-        const double fx = (x + 0.5 - field.cx) / field.half_diagonal, fy = (field.cy - (y + 0.5)) / field.half_diagonal;
-        const Key key   = std::make_tuple(coc_step[i], by_field ? int(std::lround(64.0 * fx)) : 0,
-                                          by_field ? int(std::lround(64.0 * fy)) : 0);
-        points.push_back({ i, x, y, key });
-        psfs.emplace(key, nullptr);
-        psfs.emplace(std::make_tuple(coc_step[i], 0, 0), nullptr);  // the layer's, for visibility
-    };
-    float extent = 0.0f;
-    auto build_psfs = [&]() {
-        for (auto& [key, psf] : psfs) {
-            if (psf)
-                continue;
-            PsfRequest r;
-            r.coc_px  = double(std::get<0>(key)) * step;
-            r.field_x = std::get<1>(key) / 64.0;
-            r.field_y = std::get<2>(key) / 64.0;
-            psf       = std::make_shared<Psf>();
-            if (!lens_psf(*psf, lens, r, err, nthreads))
-                return false;
-            extent = std::max(extent, float(std::max(psf->width, psf->height) / 2));
-        }
-        return true;
-    };
-    const int w = f.data.width();
-    for (size_t i = 0; i < f.coc.size(); ++i)
-        if (!empty(i))
-            add_point(i, f.data.xbegin + int(i % size_t(w)), f.data.ybegin + int(i / size_t(w)));
-    if (!build_psfs())
-        return false;
-    // Past the data window the border rule's pixels are scattered too, as the layers
-    // blur them (clamp and mirror repeat the edge; black adds nothing).
-    const int reach = int(std::ceil(extent));
-    for (int y = f.data.ybegin - reach; y < f.data.yend + reach; ++y)
-        for (int x = f.data.xbegin - reach; x < f.data.xend + reach; ++x) {
-            if (x >= f.data.xbegin && x < f.data.xend && y >= f.data.ybegin && y < f.data.yend)
-                continue;
-            const int64_t i = f.source(x, y);
-            if (i >= 0 && !empty(size_t(i)))
-                add_point(size_t(i), x, y);
-        }
-    if (!build_psfs())
-        return false;
-    const float extreme = std::max({ std::abs(*std::min_element(f.coc.begin(), f.coc.end())),
-                                     std::abs(*std::max_element(f.coc.begin(), f.coc.end())), 2.0f * extent });
-    f.out = defocus_output_region(spec, f.data, extreme, o);
-    out   = Plane(f.out.width(), f.out.height(), 4);
-    std::fill_n(out.px.get(), out.size(), 0.0f);
-    // Layers back to front: points by CoC step (descending), then by y.
-    std::sort(points.begin(), points.end(), [](const Point& a, const Point& b) {
-        return std::get<0>(a.key) != std::get<0>(b.key) ? std::get<0>(a.key) > std::get<0>(b.key) : a.y < b.y;
-    });
-    // What hides a layer, over the output region grown by the PSFs' reach (the border
-    // rule's pixels included): the coverage of the pixels in nearer layers.
-    const int reach_all = int(std::ceil(extent));
-    const OIIO::ROI grown(f.out.xbegin - reach_all, f.out.xend + reach_all, f.out.ybegin - reach_all,
-                          f.out.yend + reach_all);
-    const size_t gw = size_t(grown.width());
-    std::vector<int64_t> grown_src(size_t(grown.npixels()));
-    for (int y = grown.ybegin; y < grown.yend; ++y)
-        for (int x = grown.xbegin; x < grown.xend; ++x)
-            grown_src[size_t(y - grown.ybegin) * gw + size_t(x - grown.xbegin)] = f.source(x, y);
-    std::vector<float> hides(grown_src.size());
-    Plane layer(f.out.width(), f.out.height(), 4);
-    for (size_t b = 0; b < points.size();) {
-        const int64_t layer_step = std::get<0>(points[b].key);
-        size_t e                 = b;
-        while (e < points.size() && std::get<0>(points[e].key) == layer_step)
-            ++e;
-        std::fill_n(layer.px.get(), layer.size(), 0.0f);
-        parallel_for_chunks(f.out.ybegin, f.out.yend, 16, nthreads, [&](int64_t y0, int64_t y1) {
-            auto first = std::lower_bound(points.begin() + int64_t(b), points.begin() + int64_t(e),
-                                          int(y0) - reach_all, [](const Point& p, int y) { return p.y < y; });
-            for (auto it = first; it != points.begin() + int64_t(e) && it->y < int(y1) + reach_all; ++it) {
-                const Psf& psf  = *psfs.at(it->key);
-                const float* px = f.img.rgba.data() + it->at * 4;
-                // Colour with its channel's PSF, alpha with their mean.
-                add_psf(layer, f.out, psf, it->x - psf.width / 2, it->y - psf.height / 2, px, 1.0f, int(y0), int(y1));
-                const int hw = psf.width / 2, hh = psf.height / 2;
-                for (int y = std::max(it->y - hh, int(y0)); y < std::min(it->y + hh + 1, int(y1)); ++y)
-                    for (int x = std::max(it->x - hw, f.out.xbegin); x < std::min(it->x + hw + 1, f.out.xend); ++x) {
-                        const float* p = &psf.rgb[(size_t(y - it->y + hh) * size_t(psf.width) + size_t(x - it->x + hw)) * 3];
-                        layer.row(y - f.out.ybegin)[size_t(x - f.out.xbegin) * 4 + 3] += px[3] * (p[0] + p[1] + p[2]) / 3.0f;
-                    }
-            }
-        });
-        // The layered model's visibility (composite_layers): the layer is divided by the
-        // blur of 1 - A over the pixels in nearer layers, here with the layer's own PSF
-        // (its mean of R, G, B; on axis), so what a nearer layer hides is continued from
-        // the layer's visible surroundings, as there.
-        bool any_nearer = false;
-        for (size_t q = 0; q < grown_src.size(); ++q) {
-            const int64_t i = grown_src[q];
-            hides[q]        = i >= 0 && coc_step[size_t(i)] < layer_step ? f.img.rgba[size_t(i) * 4 + 3] : 0.0f;
-            any_nearer      = any_nearer || hides[q] != 0.0f;
-        }
-        if (any_nearer) {
-            const Psf& vp = *psfs.at(std::make_tuple(layer_step, 0, 0));
-            std::vector<float> mean(size_t(vp.width) * size_t(vp.height));
-            for (size_t j = 0; j < mean.size(); ++j)
-                mean[j] = (vp.rgb[j * 3] + vp.rgb[j * 3 + 1] + vp.rgb[j * 3 + 2]) / 3.0f;
-            const int hw = vp.width / 2, hh = vp.height / 2;
-            parallel_for_chunks(0, layer.h, 8, nthreads, [&](int64_t y0, int64_t y1) {
-                for (int y = int(y0); y < int(y1); ++y) {
-                    float* l = layer.row(y);
-                    for (int x = 0; x < layer.w; ++x, l += 4) {
-                        if (l[0] == 0.0f && l[1] == 0.0f && l[2] == 0.0f && l[3] == 0.0f)
-                            continue;
-                        // Source q = p + (hw - i, hh - j) reaches p through PSF pixel (i, j).
-                        double hidden = 0.0;
-                        for (int j = 0; j < vp.height; ++j) {
-                            const float* h = &hides[size_t(y + reach_all + hh - j) * gw + size_t(x + reach_all + hw)];
-                            const float* m = &mean[size_t(j) * size_t(vp.width)];
-                            for (int i = 0; i < vp.width; ++i)
-                                hidden += double(m[i]) * h[-i];
-                        }
-                        if (hidden <= 0.0)
-                            continue;
-                        const double vis = 1.0 - hidden;
-                        const float inv  = vis > 1e-6 ? float(1.0 / vis) : 0.0f;
-                        for (int c = 0; c < 4; ++c)
-                            l[c] *= inv;
-                    }
-                }
-            });
-        }
-        parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
-            for (int y = int(y0); y < int(y1); ++y) {
-                float* d       = out.row(y);
-                const float* l = layer.row(y);
-                for (int x = 0; x < out.w; ++x, d += 4, l += 4) {
-                    const float behind = 1.0f - l[3];
-                    for (int c = 0; c < 4; ++c)
-                        d[c] = l[c] + behind * d[c];
-                }
-            }
-        });
-        b = e;
-    }
-    return true;
 }
 
 }  // namespace bokeh
