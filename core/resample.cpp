@@ -1,9 +1,9 @@
 // resample.cpp — reduction and enlargement (resample.h); the depth-aware enlargement
 // is in resample_depth_aware.cpp.
 //
-// Source: SEEDS.md section 4 (reduced buffers; the enlargement methods the seed compares:
-// bilinear, reduced-buffer blur, bicubic, Lanczos, Gaussian, upscale-blur, its fused and
-// two-stage forms). Kernels: Keys 1981
+// Source: Kawase, "Anti reduced-buffer artifacts" (reduced buffers; the enlargement methods
+// the talk compares: bilinear, reduced-buffer blur, bicubic, Lanczos, Gaussian,
+// upscale-blur, its fused and two-stage forms; docs/methods/resampling.md). Kernels: Keys 1981
 // ("Cubic convolution interpolation for digital image processing", a = -0.5 is
 // Catmull-Rom), Mitchell & Netravali 1988 (the cubic B-spline is their B = 1, C = 0),
 // Lanczos' windowed sinc.
