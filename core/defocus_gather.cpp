@@ -1,6 +1,6 @@
-// defocus_gather.cpp — the gather of hikita12312's depth-of-field article (「被写界深度表現の
-// 実装」, 2017), as published: a depth defocus from a few blurred copies of the frame
-// instead of layers (docs/methods/defocus.md, "Gather").
+// defocus_gather.cpp — the gather of hikita12312's blog post "Implementing depth of field"
+// (2017), as published: a depth defocus from a few blurred copies of the frame instead of
+// layers (docs/methods/defocus.md, "Gather").
 //
 // Blurred copies of the image at a few representative CoCs (4 behind focus, 3 in front;
 // those of 16 px and more in 1/2 and 1/4 buffers), a per-pixel smoothstep blend between
@@ -31,7 +31,7 @@ float smoothstep(float t)
 }
 
 // A blurred level: RGBA of the pixels `mask` accepts, blurred with CoC `c` at reduction
-// s and normalised by the blurred mask (the article's back-bokeh mask: masked texels are
+// s and normalised by the blurred mask (the post's back-bokeh mask: masked texels are
 // dropped from the weight), over the output region.
 struct Level {
     float coc_px = 0.0f;
