@@ -576,7 +576,7 @@ TEST(Blur, TranslationEquivariance)
 
 TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
 {
-    // DESIGN.md, "bad values": a NaN or an infinity reaches exactly the outputs whose kernel
+    // The bad-value rule: a NaN or an infinity reaches exactly the outputs whose kernel
     // has weight on it, as in the brute-force convolution (+inf or -inf where all it reaches
     // have that sign, NaN otherwise), and every other output is the blur of the image with
     // those values read as 0. Running and prefix sums alone would carry them along the rows

@@ -1,6 +1,6 @@
 // resample_task.cpp — bokeh-bench's resample task: large effects done in reduced buffers
 // (1/2 .. 1/16) and enlarged back with every method of resample.h, against the same effect
-// at full resolution (SEEDS.md section 4).
+// at full resolution (the comparison of Kawase's "Anti reduced-buffer artifacts").
 //
 // Effects, on the built-in "lights" scene (RGBA, premultiplied; Z dropped):
 //   glare  a Gaussian of sigma 32 px (bokeh::blur, exact, black border)
