@@ -23,10 +23,10 @@
 // output rows), then each output row is the weighted sum of a few strip rows, one
 // vectorised sweep per tap over the row.
 //
-// What we changed from the seed: the fused upscale-blur's offset defaults to the value
-// that gives its 2x step the variance of the unfused blur (the seed leaves it free); the
+// What differs from the talk: the fused upscale-blur's offset defaults to the value that
+// gives its 2x step the variance of the unfused blur (the talk leaves it free); the
 // Gaussian's sigma is fixed in source pixels (resample.h says why 0.6); min / max /
-// nearest-depth reducers for depth and CoC channels (the seed only averages colour).
+// nearest-depth reducers for depth and CoC channels (the talk only averages colour).
 //
 // Known limits: filters are separable (tensor-product), not radial; the compound methods
 // only enlarge.

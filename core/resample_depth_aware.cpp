@@ -13,7 +13,7 @@
 // vanishes (a surface the reduced layer does not hold), the texel nearest in depth is
 // taken rather than a zero weight's division.
 //
-// Known limits: the seed's "bicubic" PCF is not built; depth > 0 assumed (relative
+// Known limits: the talk's "bicubic" PCF is not built; depth > 0 assumed (relative
 // tolerances).
 
 #include <bokeh/image.h>
