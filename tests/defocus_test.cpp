@@ -444,9 +444,9 @@ TEST(DefocusOcclusion, InFocusObjectNeverBleedsIntoBackground)
                         "sum %.4g; rim alpha worst %.4f, blue worst %.4f\n",
                         shallow ? 3 : 16, method_name(m), red_max, red_sum, rim_a, rim_b);
             if (m == DefocusMethod::Gather) {
-                // The published gather's documented failure: in-focus colour bleeds into its first
-                // back level. Reported for (a) (no pixel of (a) is in that level); asserted for
-                // (b).
+                // The published gather's documented failure: in-focus colour bleeds into its
+                // first back level. Reported for (a) (no pixel of (a) is in that level);
+                // asserted for (b).
                 if (shallow) {
                     EXPECT_GT(red_max, 0.01) << "gather was expected to leak red (its known limit): " << red_max;
                 }
