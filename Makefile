@@ -80,6 +80,8 @@ fuzz: deps
 	/usr/bin/python3 tests/fuzz/make_seeds.py $(FUZZ_WORK)/seeds_read_image
 	tests/fuzz/run_fuzz.sh $(BUILD)/bin $(FUZZ_WORK) $(FUZZ_SECONDS) $(FUZZ_TARGETS)
 
+# ../shared/data: test images kept beside the repository; without it the defocus task
+# measures the built-in scenes only and the deep task is skipped, saying so.
 bench: build
 	@mkdir -p docs/bench
 	$(BUILD)/bin/bokeh-bench --threads 2 --reps 5 --csv docs/bench/blur.csv

@@ -1,5 +1,5 @@
-// aperture.cpp — the aperture as an edge-distance function of polar angle (SEEDS.md
-// section 8, the radial LUT that turns a round beam pattern into any aperture's).
+// aperture.cpp — the aperture as an edge-distance function of polar angle (the radial LUT
+// of Kawase's "Bokeh Deep Dive" that turns a round beam pattern into any aperture's).
 //
 // Round and bladed apertures are evaluated in closed form (the polygon rule of
 // core/kernel.cpp, shared through polygon_edge_distance, so a lens PSF and the flat

@@ -1,11 +1,13 @@
-// beam_map.cpp — a lens's longitudinal aberration LSA(s, l) and the seed's beam map
-// (SEEDS.md section 8, "light-beam map"; OPTICS.md section 4).
+// beam_map.cpp — a lens's longitudinal aberration LSA(s, l) and its beam map (the
+// "light-beam map" of Kawase's "Bokeh Deep Dive"; docs/methods/optics.md, "Longitudinal
+// aberration").
 //
 // LSA(s, l) = chromatic LCA(l) + monochromatic SA3 (1 + spherochromatism (l - 587.6) /
 // 100) (s^2 - correction s^4): third- and fifth-order spherical aberration (SA5 = -
-// correction SA3) plus axial colour. Magnitudes follow OPTICS.md section 4 and scale with
-// the lens: longitudinal spherical aberration as the focal length and as 1 / N^2 (third
-// order: LSA ~ y^2 / f, y = f / 2N), axial colour as the focal length.
+// correction SA3) plus axial colour. Magnitudes (docs/methods/optics.md, "The presets'
+// magnitudes") scale with the lens: longitudinal spherical aberration as the focal length
+// and as 1 / N^2 (third order: LSA ~ y^2 / f, y = f / 2N), axial colour as the focal
+// length.
 //   * uncorrected: SA3 = -1.0 mm at 50 mm f/2 (between a double-Gauss's -0.38 and a
 //     best-form singlet's ~ -3), no zonal correction; a singlet's axial colour, f(l) =
 //     f (n_d - 1) / (n(l) - 1) with BK7's Cauchy fit n = 1.5046 + 0.00420 um^2 / l^2
@@ -14,7 +16,7 @@
 //     0.38); secondary spectrum, a parabola through F (486.1 nm) and C (656.3 nm) whose
 //     vertex lies f / 2000 in front of them;
 //   * apochromat: SA3 -0.25 mm, correction 1.47; a cubic through 450, 550 and 650 nm a
-//     tenth of the achromat's size, of the sign that leaves the seed's example, a cyan
+//     tenth of the achromat's size, of the sign that leaves the talk's example, a cyan
 //     rim behind focus (at 50 mm that is 2.5 um of focus, a twentieth of a pixel of rim
 //     at 1080p: the `chromatic` knob shows it).
 // Sign: positive LSA focuses behind the paraxial focus of 587.6 nm; under-corrected
@@ -60,7 +62,7 @@ double axial_colour_mm_at_50(LensPreset p, double nm)
     }
     case LensPreset::Apochromat: {
         auto cubic = [](double l) { return (l - 450.0) * (l - 550.0) * (l - 650.0); };
-        // Negative: blue-green and deep red focus nearest (the seed's example, a cyan
+        // Negative: blue-green and deep red focus nearest (the talk's example, a cyan
         // rim behind focus); violet farthest.
         const double k = -(50.0 / 20000.0) / cubic(486.1);
         return k * (cubic(nm) - cubic(kReferenceNm));

@@ -8,7 +8,7 @@
 //   blur_fft.cpp            any kernel exactly, by FFT tiles
 //   blur_bands.cpp          disk and polygon approximated by bands
 //   blur_hexagon*.cpp       the hexagon by three parallelograms (hexagon.h)
-//   blur_taps.cpp           the seed's bilinear-tap disk
+//   blur_taps.cpp           Kawase's bilinear-tap disk
 //   blur_reduced.cpp        any shape at reduced resolution, enlarged
 //   blur_nonfinite.cpp      NaN and infinities kept within their footprint
 //   plane.cpp, plane.h      padded planes, the border rule, the shared inner loops

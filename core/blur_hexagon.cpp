@@ -2,7 +2,8 @@
 // which frame and path a hexagon takes, the direct path from the source, the path on a
 // padded plane (iris mode), and the method's reach, cost model and accuracy bound.
 //
-// Source: SEEDS.md section 5, seed 004; the rhombus split of McIntosh, Riecke and DiPaola
+// Source: Kawase, "Anti reduced-buffer artifacts" (a hexagon as three parallelograms, each
+// two skewed 1-D blurs); the rhombus split of McIntosh, Riecke and DiPaola
 // 2012, "Efficiently simulating the bokeh of polygonal apertures in a post-process depth
 // of field shader". A hexagon with centre O and vertices P0..P5 is the union of the rhombi
 // {a P(2j) + b P(2j+2) : a, b in [0, 1]}, j = 0, 1, 2 (P1 = P0 + P2 for any affine image of

@@ -1,5 +1,6 @@
 // blur_nonfinite.cpp — a blur of a source holding NaN or infinities, with each of them
-// kept within its own footprint (DESIGN.md, "bad values").
+// kept within its own footprint (docs/methods/uniform-kernels.md, "Non-finite source
+// values").
 //
 // Every fast method would carry a non-finite value beyond its footprint: the running and
 // prefix sums along the rest of its row and down the columns (and inf - inf is NaN), the
@@ -23,7 +24,7 @@
 
 namespace bokeh::detail {
 
-// Non-finite source values (DESIGN.md, "bad values": never beyond the pixel's footprint).
+// Non-finite source values: a bad value never spreads beyond its own pixel's footprint.
 // The running and prefix sums would carry a NaN or an infinity along the rest of its row
 // and down the columns (and inf - inf is NaN), the FFT over its tile. So the blur runs on
 // the source with them replaced (`clean`: by 0; in iris mode by the channel's least finite

@@ -1,5 +1,5 @@
-// blur_reduced.cpp — any kernel at reduced resolution (BlurMethod::Reduced; SEEDS.md
-// sections 4 and 6, the defocus's reduced buffers applied to one uniform kernel).
+// blur_reduced.cpp — any kernel at reduced resolution (BlurMethod::Reduced; the defocus's
+// reduced buffers applied to one uniform kernel, docs/methods/approximations.md).
 //
 // The source is reduced by N, any real factor (area mean; with the black border the blocks
 // straddling the data window count the outside as 0, so energy is kept), the kernel scaled

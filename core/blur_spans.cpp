@@ -6,8 +6,8 @@
 // decomposition: one bar per rise of the profile), so a kernel becomes a list of
 // (dy, x0, x1, weight) spans; a span's sum is a difference of two row prefix sums. Cost per
 // pixel is linear in the number of spans, about 3 per kernel row for convex anti-aliased
-// shapes, so linear in the diameter (SEEDS.md section 5 asks for cost that does not grow
-// with the area). Prefix sums are double so a 1e6 pixel leaves no drift.
+// shapes, so linear in the diameter, not in the area as brute force's is. Prefix sums are
+// double so a 1e6 pixel leaves no drift.
 //
 // The direct path (convolve_spans_direct) works per 128 x (>= 256)-pixel tile: the rows'
 // prefix sums in a ring, then 128 x 4 sub-tiles whose double accumulators stay in L1, each

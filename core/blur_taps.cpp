@@ -1,12 +1,12 @@
-// blur_taps.cpp — the seed's bilinear-tap disk (BlurMethod::BilinearTaps; SEEDS.md
-// section 5): the 9x9 disk from 25 bilinear fetches and the 17x17 one from 81 (77: the
-// four corner fetches cover none of the disk and are left out).
+// blur_taps.cpp — the bilinear-tap disk of Kawase's "Anti reduced-buffer artifacts"
+// (BlurMethod::BilinearTaps): the 9x9 disk from 25 bilinear fetches and the 17x17 one from
+// 81 (77: the four corner fetches cover none of the disk and are left out).
 //
 // The taps are grouped 2 (or 1, the centre) per axis; a fetch sits at the area-weighted
 // centroid of its group, weighted by the group's disk area, so its bilinear footprint
 // matches the group's marginals but not its joint weights. On a GPU the fetches are free;
 // on a CPU we convolve with the kernel they add up to (by row spans, blur.cpp).
-// Limits: the seed's two sizes only; the joint weights differ from the disk's, which is
+// Limits: the talk's two sizes only; the joint weights differ from the disk's, which is
 // the method's error (tests/blur_test.cpp measures it).
 
 #include <bokeh/blur.h>

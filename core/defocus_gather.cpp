@@ -1,5 +1,6 @@
-// defocus_gather.cpp — the seed's gather (SEEDS.md section 2, seed 001, as published): a
-// depth defocus from a few blurred copies of the frame instead of layers.
+// defocus_gather.cpp — the gather of hikita12312's blog post "Implementing depth of field"
+// (2017), as published: a depth defocus from a few blurred copies of the frame instead of
+// layers (docs/methods/defocus.md, "Gather").
 //
 // Blurred copies of the image at a few representative CoCs (4 behind focus, 3 in front;
 // those of 16 px and more in 1/2 and 1/4 buffers), a per-pixel smoothstep blend between
@@ -30,8 +31,8 @@ float smoothstep(float t)
 }
 
 // A blurred level: RGBA of the pixels `mask` accepts, blurred with CoC `c` at reduction
-// s and normalised by the blurred mask (SEEDS.md section 2: masked texels are dropped from
-// the weight), over the output region.
+// s and normalised by the blurred mask (the post's back-bokeh mask: masked texels are
+// dropped from the weight), over the output region.
 struct Level {
     float coc_px = 0.0f;
     int s        = 1;

@@ -3,8 +3,8 @@
 // brute-force reference, every pixel scattered with its own PSF, is in
 // core/defocus_reference.cpp).
 //
-// The hybrid is SEEDS.md section 11's ("scatter only bright, important pixels; fringes and
-// onion rings only on scattered sprites"). Ours:
+// The hybrid is that of Kawase's "Bokeh Deep Dive" talk, on giant bokeh ("scatter only
+// bright, important pixels; fringes and onion rings only on scattered sprites"). Ours:
 // * Selection: a pixel's sprite share is a smoothstep in log2 of its premultiplied
 //   luminance (Rec. 709 weights), 0 at threshold / 2 and 1 at threshold * 2, so a change
 //   of exposure or threshold moves energy between the layers and the sprite continuously.
@@ -36,7 +36,7 @@
 // * Pseudo-high resolution (supersample 2): the sprites are drawn on the output's pixels,
 //   half the frame's, with the lens PSF at the output's CoC and pixel pitch, box-folded
 //   (box_folded) so each sits centred on its frame pixel; the layers are enlarged.
-// * Drawing by rows (SEEDS.md section 11, "most of the disk needs no lookup"): each PSF
+// * Drawing by rows (the talk's "most of the disk needs no lookup"): each PSF
 //   once as ramps and literal runs (core/psf_runs.cpp, ramps within kSpriteRampTolerance
 //   of each pixel), added into a band of running sums, then into the layer times its gain.
 // Limits: a lens with field effects draws up to eight PSFs a sprite; out of focus, dim
@@ -550,10 +550,10 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
         Drawn d;
         d.x = s.x, d.y = s.y;
         d.counted = first;
-        // The seed's decimation (SEEDS.md section 11): sources of a large PSF are drawn once
-        // per block of b x b pixels, b the largest power of two up to its width / 32 (at
-        // most 8), at the block's brightest-weighted pixel: a shift of at most b / 2 px, a
-        // 1/64 of the PSF's width.
+        // The talk's decimation (one sprite per 2 x 2 sources for large bokeh): sources of a
+        // large PSF are drawn once per block of b x b pixels, b the largest power of two up
+        // to its width / 32 (at most 8), at the block's brightest-weighted pixel: a shift of
+        // at most b / 2 px, a 1/64 of the PSF's width.
         const int width = s.psf[0]->width / f.up;  // in frame pixels
         int b           = 1;
         while (b < 8 && 2 * b * 32 <= width)

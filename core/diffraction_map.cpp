@@ -1,17 +1,18 @@
-// diffraction_map.cpp — the seed's pseudo-diffraction map (SEEDS.md section 9), built by
-// every rule the seed lists, so that its error against the exact PSF can be measured.
+// diffraction_map.cpp — the pseudo-diffraction map of Kawase's "Bokeh Deep Dive", built by
+// every rule the talk lists, so that its error against the exact PSF can be measured.
 //
-// Source: Kawase, "Bokeh Deep Dive" (seed 000; SEEDS.md section 9): an isotropic 1-D radial
-// fringe pattern stored as a 2-D map, U = log of the fringe width relative to the CoC, V =
-// radius; a made-up trigonometric pattern (the seed's own words: crude, inaccurate near focus
-// and at the centre) calibrated by w2 ~ 0.75 sqrt(Fe c lambda) for the second fringe.
-// The seed does not publish its function. Ours (seed_fringe_pattern) is the simplest
+// Source: Kawase, "Bokeh Deep Dive", its diffraction-pattern part (docs/methods/
+// diffraction.md, "Kawase's pseudo-diffraction map"): an isotropic 1-D radial fringe
+// pattern stored as a 2-D map, U = log of the fringe width relative to the CoC, V =
+// radius; a made-up trigonometric pattern (the talk's own words: crude, inaccurate near
+// focus and at the centre) calibrated by w2 ~ 0.75 sqrt(Fe c lambda) for the second fringe.
+// The talk does not publish its function. Ours (seed_fringe_pattern) is the simplest
 // periodic one that follows its description: an outermost fringe made separately (the
-// seed: "the outermost fringe is hard to generalise, so it is made separately and joined")
+// talk: "the outermost fringe is hard to generalise, so it is made separately and joined")
 // and a cosine of constant spacing w2 inside, decaying as 1 / (1 + fringes) and tapered off
 // over the band's last two fringe widths (so the clamped interior is flat); its edge value
 // 1/4 and first height 1.35 are the classic straight-edge figures, its first maximum one
-// fringe width in. Every fringe position it has therefore follows the seed's calibration.
+// fringe width in. Every fringe position it has therefore follows the talk's calibration.
 //
 // The rules, as implemented:
 // * U: log x, x = width_scale sqrt(lambda N / c) from min to max_width_ratio; V: a band from
@@ -23,7 +24,7 @@
 // * outside the edge: a smoothstep to 0 over outside_widths;
 // * area-weighted energy normalisation: each column divided by its mean over the disc of
 //   radius extent(x), the clamped interior counted at its clamped value, a ring at rho
-//   weighted by rho (the seed's 3:1 example);
+//   weighted by rho (the talk's 3:1 example);
 // * wavelength: horizontal lookup at x_ref (lambda / lambda_ref)^0.5, the geometric edge held
 //   at rho = 1 (the vertical squeeze), intensity divided by the squared extent (the inverse
 //   square of the squeeze): unit energy at every wavelength;
@@ -31,7 +32,7 @@
 //   spectral sum its tint is blended toward white by (1 - 1/X)^2, X = 1 / (2 x band_widths);
 // * white normalisation: after the spectral sum each channel is scaled to unit energy.
 // Limits: isotropic (an aperture shape is a radial distortion applied by the caller); no
-// centre spot and no focus-side pattern (the seed's own limits); bilinear table lookups mix
+// centre spot and no focus-side pattern (the talk's own limits); bilinear table lookups mix
 // neighbouring columns whose bands differ slightly, as a texture fetch does.
 
 #include <bokeh/wave_optics.h>
@@ -127,7 +128,7 @@ double SeedDiffractionMap::lookup(double rho, double x_ref, double wavelength_ra
                                   double pixel_rho) const
 {
     const SeedMapOptions& o = options_;
-    // The seed's horizontal lookup: fringe widths scale as sqrt(lambda).
+    // The talk's horizontal lookup: fringe widths scale as sqrt(lambda).
     const double x = x_ref * std::sqrt(wavelength_ratio);
     rho            = std::abs(rho);
     const double rho_in = clamp_radius(x), rho_out = extent(x);

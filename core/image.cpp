@@ -3,7 +3,8 @@
 // Channel names follow OpenEXR (R, G, B, A, Z, ZBack; "layer.R" for layers). OIIO
 // associates (premultiplies) alpha on read unless the file says "oiio:UnassociatedAlpha",
 // so most images arrive premultiplied; the working image is always premultiplied.
-// The non-finite policy is DESIGN.md's: colour -> 0, depth -> "no depth" (+inf, far).
+// The non-finite policy (docs/io.md, "Errors and bad values"): colour -> 0, depth -> "no
+// depth" (+inf, far), counted; NonFinitePolicy::Error fails instead.
 
 #include <bokeh/image.h>
 #include <bokeh/parallel.h>

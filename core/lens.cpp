@@ -1,6 +1,7 @@
 // lens.cpp — thin-lens CoC, depth modes, the signed CoC map and its diagnostics.
 //
-// Source: SEEDS.md section 1 (seed 001), the thin-lens circle of confusion
+// Source: the thin-lens circle of confusion as hikita12312's blog post "Implementing depth
+// of field" (2017) gives it (derived in docs/methods/optics.md, "The thin lens")
 //     CoC(d) = |d - d0| / d * f^2 / (F (d0 - f)) / eps,    eps = sensor width / image width,
 // here signed (negative in front of focus). The depth modes follow Nuke ZDefocus's "math"
 // choices by name; "far = 1" is read as 1 - 1/d (near 1 unit = 0, infinity = 1), our reading

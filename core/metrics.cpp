@@ -2,9 +2,9 @@
 // enlargement (metrics.h). Sums are per row in double and combined in row order, so the
 // figures do not depend on the thread count.
 //
-// The artifact metrics measure what SEEDS.md section 4 names (Mach bands, ringing,
-// temporal twinkling, lost detail); the seed judges them by eye, so the formulas are ours
-// and metrics.h states each. Their scenes are analytic and area-sampled exactly (erf for
+// The artifact metrics measure what Kawase's "Anti reduced-buffer artifacts" names (Mach
+// bands, ringing, temporal twinkling, lost detail); the talk judges them by eye, so the
+// formulas are ours and metrics.h states each. Their scenes are analytic and area-sampled exactly (erf for
 // Gaussians, sinc attenuation for plane waves), so the low-resolution scene is the true
 // reduction of the content and only the enlargement is measured.
 

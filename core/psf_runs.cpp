@@ -1,8 +1,8 @@
 // psf_runs.cpp — a lens PSF as ramps and literal runs along its rows, and the band of
 // running sums sprites are drawn into (psf_runs.h says why).
 //
-// Source: SEEDS.md section 11, scatter by rows ("most of the disk needs no lookup"). Ours
-// replaces the seed's flat span by a ramp found greedily: from a run's first pixel, the
+// Source: scatter by rows, as Kawase's "Bokeh Deep Dive" does it ("most of the disk needs no
+// lookup"). Ours replaces the talk's flat span by a ramp found greedily: from a run's first pixel, the
 // longest ramp is the farthest pixel whose chord stays within each channel's allowance of
 // every pixel between, kept as the cone of slopes those pixels allow (one pass, O(length)).
 // Ramps shorter than kMinRamp are drawn as literal pixels. Limit: a ramp's end points are

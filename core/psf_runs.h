@@ -2,8 +2,8 @@
 // band of running sums sprites are drawn into (core/psf_runs.cpp; used by
 // core/defocus_sprites.cpp).
 //
-// SEEDS.md section 11 scatters a sprite by rows: "most of the disk needs no lookup". A
-// lens PSF's disk is not flat (an achromat's secondary spectrum, the rim's diffraction
+// Kawase's "Bokeh Deep Dive" scatters a sprite by rows: "most of the disk needs no
+// lookup". A lens PSF's disk is not flat (an achromat's secondary spectrum, the rim's diffraction
 // ripples reaching inwards), so ours generalises the flat span to a ramp: each row is cut
 // into ramps, where every channel is a straight line within a tolerance of each pixel's value,
 // and literal runs, drawn pixel by pixel where the PSF is too bumpy for ramps (the rim's

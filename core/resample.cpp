@@ -1,9 +1,9 @@
 // resample.cpp — reduction and enlargement (resample.h); the depth-aware enlargement
 // is in resample_depth_aware.cpp.
 //
-// Source: SEEDS.md section 4 (reduced buffers; the enlargement methods the seed compares:
-// bilinear, reduced-buffer blur, bicubic, Lanczos, Gaussian, upscale-blur, its fused and
-// two-stage forms). Kernels: Keys 1981
+// Source: Kawase, "Anti reduced-buffer artifacts" (reduced buffers; the enlargement methods
+// the talk compares: bilinear, reduced-buffer blur, bicubic, Lanczos, Gaussian,
+// upscale-blur, its fused and two-stage forms; docs/methods/resampling.md). Kernels: Keys 1981
 // ("Cubic convolution interpolation for digital image processing", a = -0.5 is
 // Catmull-Rom), Mitchell & Netravali 1988 (the cubic B-spline is their B = 1, C = 0),
 // Lanczos' windowed sinc.
@@ -23,10 +23,10 @@
 // output rows), then each output row is the weighted sum of a few strip rows, one
 // vectorised sweep per tap over the row.
 //
-// What we changed from the seed: the fused upscale-blur's offset defaults to the value
-// that gives its 2x step the variance of the unfused blur (the seed leaves it free); the
+// What differs from the talk: the fused upscale-blur's offset defaults to the value that
+// gives its 2x step the variance of the unfused blur (the talk leaves it free); the
 // Gaussian's sigma is fixed in source pixels (resample.h says why 0.6); min / max /
-// nearest-depth reducers for depth and CoC channels (the seed only averages colour).
+// nearest-depth reducers for depth and CoC channels (the talk only averages colour).
 //
 // Known limits: filters are separable (tensor-product), not radial; the compound methods
 // only enlarge.

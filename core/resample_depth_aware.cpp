@@ -2,8 +2,8 @@
 // enlarge_depth_aware): each full-resolution pixel takes the low-resolution texels whose
 // depth matches its own.
 //
-// Source: SEEDS.md section 6 (the reduced blend buffer, looked up with percentage-closer
-// filtering). PCF: Reeves, Salesin & Cook 1987 — the 2 x 2 bilinear footprint, each
+// Source: Kawase, "Anti reduced-buffer artifacts" (the reduced blend buffer, looked up with
+// percentage-closer filtering). PCF: Reeves, Salesin & Cook 1987 — the 2 x 2 bilinear footprint, each
 // texel kept where it lies in front of (or at) the pixel's surface, as a shadow map's
 // depth test. Joint bilateral: Kopf et al. 2007 — the 4 x 4 cubic B-spline footprint, each
 // texel weighted by a Gaussian of the relative depth difference.
@@ -13,7 +13,7 @@
 // vanishes (a surface the reduced layer does not hold), the texel nearest in depth is
 // taken rather than a zero weight's division.
 //
-// Known limits: the seed's "bicubic" PCF is not built; depth > 0 assumed (relative
+// Known limits: the talk's "bicubic" PCF is not built; depth > 0 assumed (relative
 // tolerances).
 
 #include <bokeh/image.h>

@@ -59,7 +59,8 @@ constexpr double kInf           = std::numeric_limits<double>::infinity();
 constexpr double kPi            = 3.14159265358979323846;
 
 // The lens each scene is meant to be defocused with. Thin-lens CoC diameter in pixels
-// (SEEDS.md section 1), f = 50 mm, d0 = focus, F = f-number, at 1920 px wide:
+// (docs/methods/optics.md, "The thin lens"), f = 50 mm, d0 = focus, F = f-number, at
+// 1920 px wide:
 //   CoC_px(d) = |d - d0| / d * f^2 / (F (d0 - f)) / (sensor_width_mm / image_width_px)
 //   lights: d0 = 6 m,   F = 1.27: nearest light (1.3 m) 63.8 px, back wall (40 m) 15.0 px.
 //   edges:  d0 = 3 m,   F = 1.06: near panel (1.2 m) 64.0 px, far wall (30 m) 38.4 px.

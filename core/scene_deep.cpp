@@ -4,7 +4,7 @@
 //
 // Source: the coverage-to-alpha rule of deep compositing (a fragment covering n of the N
 // rays still open in front of it gets alpha n / open, so that "over" weighs it n / N:
-// "Interpreting OpenEXR Deep Pixels", and ../shared/DEEP.md), applied per layer of a depth
+// "Interpreting OpenEXR Deep Pixels"; docs/methods/deep.md), applied per layer of a depth
 // peel (Everitt, "Interactive Order-Independent Transparency", 2001: layer k + 1 is each
 // ray's next surface behind layer k).
 //

@@ -6,7 +6,7 @@
 // three compare pixel for pixel. A ray from sensor point P (pixels) with aperture offset s
 // (ApertureSampler: px per px of CoC, y down) is at image position Q(z) = P - s c(z) at
 // depth z, with the signed thin-lens CoC c(z) = K (1/z_f - 1/z), K = z_f CoC(infinity)
-// (thin_lens_coc_px; SEEDS.md section 1). In ray tangents (t = 2 half_w / width per px,
+// (thin_lens_coc_px; docs/methods/optics.md, "The thin lens"). In ray tangents (t = 2 half_w / width per px,
 // image y down, tangent y up) that ray is the straight line
 //     X(z) = O + D z,  O = (s_x t K, -s_y t K, 0),  D = d(P) + (-s_x t K / z_f, s_y t K / z_f, 0)
 // with d(P) the pinhole ray of P (d.z = 1): O is the point on the lens plane, the

@@ -1,6 +1,6 @@
 // spectrum.cpp — the CIE 1931 colour-matching functions and the per-wavelength RGB
-// weights of a spectral PSF (OPTICS.md section 3; SEEDS.md section 9, "spectral
-// integration": 400-710 nm through XYZ to the working RGB).
+// weights of a spectral PSF (docs/methods/optics.md, "The spectrum"; the spectral
+// integration of Kawase's "Bokeh Deep Dive": 400-710 nm through XYZ to the working RGB).
 //
 // The colour-matching functions are the analytic multi-lobe fit of Wyman, Sloan and
 // Shirley (JCGT 2(2), 2013, table 1): each lobe a exp(-t^2 / 2), t = (l - mu) s with s
@@ -10,7 +10,7 @@
 // OCIO config's XYZ space, so the weights follow the config the frames are in.
 // White balance: each channel's weights are normalised to sum 1, PSF_c = sum_l w_c(l)
 // PSF_l, so every channel keeps the PSF's unit energy and a white light stays white
-// (OPTICS.md section 3's formula with S the illuminant).
+// (w_c(l) = [M S cmf]_c / sum over l, S the illuminant).
 
 #include <bokeh/color.h>
 #include <bokeh/spectrum.h>

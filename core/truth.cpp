@@ -2,11 +2,12 @@
 // (or its area) over the aperture, walked through the deep image's pixel cells in depth
 // order.
 //
-// Sources: the thin-lens geometry of ../shared/DEEP.md ("The thin-lens truth from a deep
-// image"), with the flat defocus's orientation (core/defocus.cpp, aperture_weights); the
-// cell walk is Amanatides and Woo's grid traversal ("A Fast Voxel Traversal Algorithm",
-// 1987) run over the CoC instead of a ray length; the volume split and "over" are the
-// OpenEXR deep rules (deep.h); the sampler (Owen-scrambled Sobol', truth_sampler.h) is
+// Sources: the thin-lens geometry (a ray from sensor point P through lens point U is at
+// P + U s (1/z_f - 1/z) at depth z, linear in 1/z; docs/methods/truth.md), with the flat
+// defocus's orientation (core/defocus.cpp, aperture_weights); the cell walk is Amanatides
+// and Woo's grid traversal ("A Fast Voxel Traversal Algorithm", 1987) run over the CoC
+// instead of a ray length; the volume split and "over" are the OpenEXR deep rules (deep.h,
+// docs/methods/deep.md); the sampler (Owen-scrambled Sobol', truth_sampler.h) is
 // shared with the built-in scenes' geometric truth (scene_truth.cpp), so both draw the
 // same rays for a pixel and seed.
 //

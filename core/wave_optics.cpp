@@ -1,6 +1,6 @@
 // wave_optics.cpp — Fresnel integrals and the straight-edge law for the fringes at a
-// bokeh's rim (../shared/OPTICS.md section 2); the exact defocused PSF of a round pupil by
-// its Hankel integral and Lommel's series (section 1); the radial profiles built on them.
+// bokeh's rim; the exact defocused PSF of a round pupil by its Hankel integral and
+// Lommel's series; the radial profiles built on them (docs/methods/diffraction.md).
 //
 // Sources: Born & Wolf, "Principles of Optics", 7th ed., section 8.7 (Fresnel diffraction
 // at a straight edge, the Cornu spiral) and 8.8 (the defocused circular pupil, Lommel);
@@ -17,8 +17,8 @@
 //
 // Edge law: the bokeh's rim, seen over a few fringe widths, is a straight edge lit by a
 // converging wave of radius of curvature ~ the sensor distance; the Fresnel number gives
-// v = d sqrt(2 / (lambda N c)) (OPTICS.md section 2; its table of extrema was checked
-// against the exact defocused-pupil integral at W20 = 100 waves). Limits: no free
+// v = d sqrt(2 / (lambda N c)) (docs/methods/diffraction.md, "The edge law"; its extrema
+// agree with the exact defocused-pupil integral at W20 = 100 waves). Limits: no free
 // parameter, but it ignores the far rim's lambda N ripple and the disc's curvature, so it
 // fails within a few fringe widths of focus (c of a few lambda N).
 //

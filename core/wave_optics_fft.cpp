@@ -1,5 +1,6 @@
 // wave_optics_fft.cpp — the exact PSF of an arbitrary pupil (bladed, vignetted, rippled,
-// aberrated) by a zero-padded 2-D FFT of the pupil function (../shared/OPTICS.md section 1).
+// aberrated) by a zero-padded 2-D FFT of the pupil function (docs/methods/diffraction.md,
+// "Any pupil: the FFT PSF").
 //
 // Source: Fraunhofer diffraction of the pupil function P(x, y) exp(i 2 pi W(x, y)) into the
 // focal plane of the converging wave, defocus being part of W (Goodman, "Introduction to
@@ -8,7 +9,7 @@
 // transform in double (Frigo and Johnson 2005), planned with FFTW_ESTIMATE under the
 // library's one planner lock (fftw_planner.h).
 //
-// Sampling (OPTICS.md section 1): M pupil samples across the diameter, zero-padded to F; the
+// Sampling: M pupil samples across the diameter, zero-padded to F; the
 // PSF pixel is lambda N M / F (pi M / F in v) and the PSF repeats every M lambda N, so M must
 // exceed the CoC in units of lambda N (8 W20) for the disc not to wrap onto itself, and the
 // pupil phase must change by less than pi per sample (M > 4 max |dW/drho|). The default
@@ -18,7 +19,7 @@
 // Limits: the pupil is sampled on [-1, 1]^2 only; the Fraunhofer form is paraxial (as is
 // every model here); cost F^2 log F: a 1 mm CoC at f/2 and 550 nm is ~900 waves of slope,
 // far beyond an affordable grid, so large bokeh are computed at a reduced scale and carried
-// by the scaling law (fringes scale with sqrt(lambda N c), OPTICS.md section 2).
+// by the scaling law (fringes scale with sqrt(lambda N c), the edge law's scale).
 
 #include <bokeh/parallel.h>
 #include <bokeh/wave_optics.h>

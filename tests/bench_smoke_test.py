@@ -89,7 +89,8 @@ for task in tasks:
         check(os.path.isfile(path) and os.path.getsize(path) > 1000, f"chart {path}")
 
 # The deep task's rows against the truth (as bokeh-bench --task deep writes them, which
-# needs ../shared/data, so written here): one chart for every frame, a table per frame.
+# needs the test images in ../shared/data, so written here): one chart for every frame, a
+# table per frame.
 truth_csv = os.path.join(scratch, "deep.csv")
 with open(truth_csv, "w") as f:
     f.write("task,method,peer,size_px,threads,median_ms,reps,rmse_linear,psnr_db_tonemapped,max_abs_linear\n")

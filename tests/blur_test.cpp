@@ -115,7 +115,7 @@ std::vector<BlurMethod> exact_methods(const Kernel& k)
 }
 
 // The approximations that apply to `k` (each against its own effective kernel elsewhere):
-// the bands, the parallelograms, the three boxes, the seed's bilinear taps, and fast.
+// the bands, the parallelograms, the three boxes, Kawase's bilinear taps, and fast.
 std::vector<BlurMethod> approximations(const Kernel& k)
 {
     std::vector<BlurMethod> m{ BlurMethod::Fast };
@@ -410,7 +410,7 @@ TEST(Blur, AZeroSideIsTheIdentityForShapesAndOneAxisForSeparableKernels)
 
 TEST(Blur, ALoneBrightPixelGivesTheKernelExactly)
 {
-    // Every exact method gives the kernel; the seed's bilinear taps and the three boxes give
+    // Every exact method gives the kernel; Kawase's bilinear taps and the three boxes give
     // theirs (the bands' own test is BandsGiveTheirKernelFromALone1e6Pixel). One, three and
     // four channels: the running sums have a loop for each (RGBA in vector types).
     for (int nc : { 1, 3, 4 })
@@ -576,7 +576,7 @@ TEST(Blur, TranslationEquivariance)
 
 TEST(Blur, NonFiniteValuesStayWithinTheirFootprint)
 {
-    // DESIGN.md, "bad values": a NaN or an infinity reaches exactly the outputs whose kernel
+    // The bad-value rule: a NaN or an infinity reaches exactly the outputs whose kernel
     // has weight on it, as in the brute-force convolution (+inf or -inf where all it reaches
     // have that sign, NaN otherwise), and every other output is the blur of the image with
     // those values read as 0. Running and prefix sums alone would carry them along the rows
@@ -1583,7 +1583,7 @@ OIIO::ImageBuf image_over(const OIIO::ImageBuf& src, const OIIO::ROI& roi, Value
 
 // The hexagon of `k` over the data window of `src` (grown by the reach with `grow`), the
 // outside by the border rule; with `iris`, of exp(iris x) and back by log / iris, alpha
-// plain (seed 002's iris filter, as blur.h defines it).
+// plain (the iris filter, as blur.h defines it).
 OIIO::ImageBuf hexagon(const OIIO::ImageBuf& src, const Kernel& k, Border border, bool grow,
                        double iris = 0.0)
 {
@@ -2296,7 +2296,7 @@ TEST(BlurApprox, SeedBilinearTapDisks)
         disk.width_px = disk.height_px = size;
         int fetches = 0;
         const KernelWeights taps = bilinear_tap_weights(disk, &fetches);
-        // The seed's grids: 5 x 5 = 25 fetches for 9 x 9; 9 x 9 = 81 for 17 x 17, of
+        // Kawase's grids: 5 x 5 = 25 fetches for 9 x 9; 9 x 9 = 81 for 17 x 17, of
         // which the four corner ones cover none of the disk and are left out.
         EXPECT_EQ(fetches, size == 9.0f ? 25 : 77);
         double sum = 0.0;

@@ -440,7 +440,7 @@ TEST(Cli, NoClobber)
     EXPECT_EQ(file_bytes(dir + "/out.exr"), "keep");
 }
 
-// The bad-input rule (DESIGN.md): one line, exit 1, nothing written,
+// The bad-input rule (docs/io.md, "Errors and bad values"): one line, exit 1, nothing written,
 // inputs untouched.
 TEST(Cli, BadInput)
 {

@@ -444,8 +444,9 @@ TEST(DefocusOcclusion, InFocusObjectNeverBleedsIntoBackground)
                         "sum %.4g; rim alpha worst %.4f, blue worst %.4f\n",
                         shallow ? 3 : 16, method_name(m), red_max, red_sum, rim_a, rim_b);
             if (m == DefocusMethod::Gather) {
-                // The seed's documented failure: in-focus colour bleeds into its first back
-                // level. Reported for (a) (no pixel of (a) is in that level); asserted for (b).
+                // The published gather's documented failure: in-focus colour bleeds into its
+                // first back level. Reported for (a) (no pixel of (a) is in that level);
+                // asserted for (b).
                 if (shallow) {
                     EXPECT_GT(red_max, 0.01) << "gather was expected to leak red (its known limit): " << red_max;
                 }
@@ -500,7 +501,7 @@ TEST(DefocusOcclusion, ForegroundSilhouetteSpreadsSoftly)
                     "background > 9 px away differs by up to %.4g\n",
                     method_name(m), lo, hi, full, blur_far);
         if (m == DefocusMethod::Gather)
-            continue;  // reported only: the seed's silhouettes stay partly hard
+            continue;  // reported only: the gather's silhouettes stay partly hard
         EXPECT_NEAR(full, 1.0, 1e-3);
         EXPECT_GE(lo, 0.15) << "the silhouette does not spread: red at 4 px " << lo;
         EXPECT_LE(hi, 0.85) << "the silhouette stays hard: red at 4 px " << hi;

@@ -138,7 +138,7 @@ TEST_F(Determinism, BlurEveryKernelAndMethod)
     std::vector<Output> outputs;
     for (const auto& [kernel, methods] : kernels)
         for (const std::string& m : methods) {
-            // Sizes each method takes: taps is the seed's 9 and 17 only; reduced at factor 2.
+            // Sizes each method takes: taps is Kawase's 9 and 17 only; reduced at factor 2.
             const std::vector<std::string> sizes = m == "taps"      ? std::vector<std::string>{ "9", "17" }
                                                    : m == "reduced" ? std::vector<std::string>{ "21" }
                                                                     : std::vector<std::string>{ "9", "21x13.5" };

@@ -1,9 +1,9 @@
 // Lens character (aperture.h, spectrum.h, optics.h) against what it must equal: the
 // polygon rule of the flat kernels, the CIE colour-matching functions' published values,
 // unit energy per channel, the flat disk kernel when every effect is off, the caustic
-// where dr/ds = 0 (OPTICS.md section 4), the seed's front/back asymmetry and rim colours
-// (SEEDS.md section 8), the edge law's first fringe at the rim (OPTICS.md section 2), and
-// the field effects' geometry (cat's eye, anamorphic focus split).
+// where dr/ds = 0, the front/back asymmetry and rim colours that Kawase's "Bokeh Deep Dive"
+// describes, the edge law's first fringe at the rim, and the field effects' geometry (cat's
+// eye, anamorphic focus split); docs/methods/optics.md has the formulas.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -352,7 +352,7 @@ TEST(LensPsf, CausticWhereTheLandingRadiusTurns)
     // Pure third-order spherical aberration (no colour, no zonal correction):
     // r(s) = s (c/2 - a3 s^2), a3 = NA SA3 / pitch. For c/2 and a3 of one sign the
     // landing radius turns at s_c = sqrt(c / (6 a3)): the bright caustic rim sits at
-    // |r(s_c)| (OPTICS.md section 4).
+    // |r(s_c)| (docs/methods/optics.md, "Longitudinal aberration").
     bokeh::LensCharacter lens;
     lens.preset        = bokeh::LensPreset::Uncorrected;
     lens.chromatic     = 0.0;
@@ -375,7 +375,7 @@ TEST(LensPsf, CausticWhereTheLandingRadiusTurns)
 TEST(LensPsf, FrontHardBackSoftAndTheReverse)
 {
     // Under-corrected spherical aberration: front bokeh hard-edged (a bright rim), back
-    // bokeh soft (SEEDS.md section 8); reversing the aberration's sign reverses them. The
+    // bokeh soft (as Kawase's talk shows); reversing the aberration's sign reverses them. The
     // rim is the outer fifth of the bokeh's own extent (aberration changes its size).
     auto rim_ratio = [](const bokeh::Psf& p) {
         const double R = outer_radius(p);
@@ -399,7 +399,7 @@ TEST(LensPsf, FrontHardBackSoftAndTheReverse)
 TEST(LensPsf, AnamorphicFocusSplitSwapsAcrossFocus)
 {
     // Horizontal and vertical CoC differ by 20 px: at +10 px the bokeh is a horizontal
-    // line 20 px long, at -10 px a vertical one (SEEDS.md section 12).
+    // line 20 px long, at -10 px a vertical one (Kawase's anamorphic bokeh).
     bokeh::LensCharacter lens;
     lens.anamorphic_focus_px = 20.0;
     auto extent = [](const bokeh::Psf& p, bool horizontal) {
@@ -442,7 +442,7 @@ TEST(LensPsf, EdgeLawFringeAtTheRim)
 {
     // One wavelength, a large CoC at f/8 so the first fringe is several px wide: the rim
     // intensity (relative to the plateau) peaks at d = 0.861 sqrt(l N c) inside the
-    // geometric edge at 1.37 I_geo (OPTICS.md section 2), averaged over a pixel.
+    // geometric edge at 1.37 I_geo (the edge law's first maximum), averaged over a pixel.
     bokeh::LensCharacter lens;
     lens.diffraction      = bokeh::DiffractionModel::EdgeLaw;
     lens.fstop            = 8.0;
@@ -468,8 +468,8 @@ TEST(LensPsf, EdgeLawFringeAtTheRim)
     // At the geometric edge a quarter of the plateau.
     EXPECT_NEAR(prof[size_t(coc / 2.0)] / plateau, 0.25, 0.1);
 
-    // The seed's pseudo-diffraction map in its place: unit energy, and a first fringe
-    // within the seed's own stated 30 % of the exact law's position.
+    // Kawase's pseudo-diffraction map in its place: unit energy, and a first fringe
+    // within the talk's own stated 30 % of the exact law's position.
     lens.diffraction   = bokeh::DiffractionModel::SeedMap;
     const bokeh::Psf q = psf_of(lens, coc);
     EXPECT_NEAR(channel_sum(q, 1), 1.0, 1e-5);
@@ -487,10 +487,10 @@ TEST(LensPsf, EdgeLawFringeAtTheRim)
 
 TEST(LensPsf, AchromatAndApochromatRimColours)
 {
-    // SEEDS.md section 8: an achromat leaves a purple soft edge on front bokeh and a green
-    // hard edge behind; an apochromat a cyan fringe behind. Measured as the outer rim's
-    // colour (each channel over its own interior level) near focus, where axial colour
-    // is strongest relative to the CoC.
+    // As Kawase's talk describes them: an achromat leaves a purple soft edge on front bokeh
+    // and a green hard edge behind; an apochromat a cyan fringe behind. Measured as the
+    // outer rim's colour (each channel over its own interior level) near focus, where axial
+    // colour is strongest relative to the CoC.
     auto rim_colour = [](const bokeh::Psf& p, double, int c) {
         const double R = outer_radius(p);
         return annulus_mean(p, c, 0.8 * R, 1.05 * R) / annulus_mean(p, c, 0.0, 0.5 * R);
@@ -509,7 +509,7 @@ TEST(LensPsf, AchromatAndApochromatRimColours)
         }
     }
     // The apochromat's own colour is 2.5 um of focus at 50 mm, a twentieth of a pixel at
-    // the rim: shown ten times over, as the seed's chromatic knob allows.
+    // the rim: shown ten times over, as the `chromatic` knob allows.
     bokeh::LensCharacter apo;
     apo.preset    = bokeh::LensPreset::Apochromat;
     apo.fstop     = 1.4;

@@ -1063,9 +1063,9 @@ TEST(ResampleMetrics, MachBandsFailBilinearAndPassSmoothMethods)
     // The glare scene enlarged 8x (figures measured, within 2 %): bilinear is piecewise
     // linear (19.1), 16 times the Gaussian (1.21); the C2 cubic B-spline is the floor (1.18,
     // the glare's own change of curvature) and the Gaussian's sigma 0.65 is chosen to sit
-    // on it. As in the seed's table, the reduced-buffer blur still shows the bands (16.4)
+    // on it. As in Kawase's table, the reduced-buffer blur still shows the bands (16.4)
     // and upscale-blur reduces them (10.5: its last bilinear step is 4x here); the two-stage
-    // form removes them (1.14). Unlike the seed's table, Catmull-Rom (5.5) and Lanczos-3
+    // form removes them (1.14). Unlike Kawase's table, Catmull-Rom (5.5) and Lanczos-3
     // (4.2) score better than bilinear on this smooth glare: they reproduce curves closely
     // and overshoot only at edges, which the ringing test measures.
     const std::pair<ResampleFilter, double> measured[] = {
@@ -1176,7 +1176,7 @@ TEST(ResampleMetrics, DetailFailsTheSmoothMethods)
     ASSERT_TRUE(detail_error(score, flat, ref, err));
     EXPECT_NEAR(score, 100.0, 1e-3);
     // The plane-wave pattern enlarged 8x (percent of its contrast, measured, within 2 %):
-    // Lanczos-3 keeps the most (27.0), Catmull-Rom 38.2 (the seed: bicubic best on
+    // Lanczos-3 keeps the most (27.0), Catmull-Rom 38.2 (Kawase: bicubic best on
     // detail), bilinear 51.4, and the methods without Mach bands pay in softness:
     // B-spline 67.3, Gaussian 72.9, upscale-blur 69.3, two-stage 72.7.
     const std::pair<ResampleFilter, double> measured[] = {

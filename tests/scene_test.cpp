@@ -26,7 +26,7 @@ Pixel pixel(const OIIO::ImageBuf& img, int x, int y)
     return p;
 }
 
-// Thin-lens CoC diameter (SEEDS.md section 1) at depth z metres, in pixels of a 1920-wide
+// Thin-lens CoC diameter (docs/methods/optics.md) at depth z metres, in pixels of a 1920-wide
 // image, for the lens the scene's metadata asks for.
 double coc_px_1920(const OIIO::ImageSpec& s, double z)
 {

@@ -16,7 +16,7 @@ namespace bokeh_test {
 namespace paths {
 extern const char* const bokehtool;       ///< the built bokehtool
 extern const char* const source_dir;      ///< the checkout
-extern const char* const shared_data;     ///< ../shared/data beside it
+extern const char* const shared_data;     ///< ../shared/data: test images kept beside it
 extern const char* const test_tmp;        ///< scratch space under the build tree
 extern const char* const bad_plugin_dir;  ///< the plugins that fail on purpose
 extern const char* const ocio_config;     ///< ocio/config.ocio
@@ -77,7 +77,8 @@ double max_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b);
 #define BOKEH_BAD_PLUGIN_DIR (::bokeh_test::paths::bad_plugin_dir)
 #define BOKEH_OCIO_CONFIG (::bokeh_test::paths::ocio_config)
 
-// Tests on the real files in ../shared/data are skipped, with a message, when it is absent.
+// Tests on the real files in ../shared/data (test images kept beside the repository) are
+// skipped, with a message naming the folder, when it is absent.
 #define REQUIRE_SHARED(path)                                                      \
     if ((path).empty())                                                           \
     GTEST_SKIP() << "../shared/data is not beside the project"

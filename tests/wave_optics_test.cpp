@@ -1,7 +1,7 @@
 // Wave optics (wave_optics.h): Fresnel integrals, the straight-edge fringe law and its
-// figures in ../shared/OPTICS.md section 2, the seed's fringe-width law (SEEDS.md section 9),
-// the exact defocused PSF of a circular pupil (Hankel and Lommel forms, OPTICS.md section 1)
-// and the onion-ring contrast law (section 4).
+// extrema, the fringe-width law of Kawase's "Bokeh Deep Dive" and its pseudo-diffraction
+// map, the exact defocused PSF of a circular pupil (Hankel and Lommel forms, Born & Wolf
+// 8.8) and the onion-ring contrast law (docs/methods/diffraction.md and optics.md).
 #include <bokeh/wave_optics.h>
 
 #include <gtest/gtest.h>
@@ -48,8 +48,8 @@ std::vector<Extremum> extrema(const std::function<double(double)>& f, double a, 
     return out;
 }
 
-// OPTICS.md section 2's table: edge, then max 1, min 1, max 2, min 2, max 3, min 3, as
-// (d / sqrt(lambda N c), I / I_geo).
+// The edge law's extrema (docs/methods/diffraction.md): max 1, min 1, max 2, min 2, max 3,
+// min 3, as (d / sqrt(lambda N c), I / I_geo).
 struct TableRow {
     double position;
     double height;
@@ -108,9 +108,9 @@ TEST(WaveOptics, FresnelIntegralsDerivative)
     }
 }
 
-// The edge law: 1/4 at the edge, -> 1 inside, -> 0 outside, and its extrema where
-// OPTICS.md's table puts them (positions within 2 %, heights within 1 %, as the optics
-// issue asks; the table's 3 decimals are ~0.1 %).
+// The edge law: 1/4 at the edge, -> 1 inside, -> 0 outside, and its extrema where the
+// table puts them (positions within 2 %, heights within 1 %; the table's 3 decimals are
+// ~0.1 %).
 TEST(WaveOptics, EdgeLawExtremaMatchTable)
 {
     EXPECT_NEAR(fresnel_edge_intensity(0.0), 0.25, 1e-15);
@@ -133,10 +133,10 @@ TEST(WaveOptics, EdgeLawExtremaMatchTable)
     }
 }
 
-// The seed's calibration (SEEDS.md section 9): second-fringe width w2 ~ 0.75 sqrt(Fe CoC
-// lambda), "20-30 % error possible". The exact second fringe measured between its minima
-// (min 1 to min 2) is 0.613, between its maxima (max 1 to max 2) 0.796 fringe scales: the
-// seed's 0.75 is within 30 % of both.
+// Kawase's calibration on photographs: second-fringe width w2 ~ 0.75 sqrt(Fe CoC lambda),
+// "20-30 % error possible". The exact second fringe measured between its minima (min 1 to
+// min 2) is 0.613, between its maxima (max 1 to max 2) 0.796 fringe scales: the talk's 0.75
+// is within 30 % of both.
 TEST(WaveOptics, SeedSecondFringeWidthLaw)
 {
     const auto law = [](double s) { return fresnel_edge_intensity(std::sqrt(2.0) * s); };
@@ -151,9 +151,9 @@ TEST(WaveOptics, SeedSecondFringeWidthLaw)
     EXPECT_LT(std::abs(0.75 / max_to_max - 1.0), 0.30);
 }
 
-// The seed's worked example: Fe 2, CoC 12 mm (half a 24 mm frame), 500 nm: 0.75 sqrt(2 x 12
-// x 0.0005) mm. The seed prints 0.0826 mm = 13.76 px (4000 px over 24 mm); the formula gives
-// 0.0822 mm = 13.69 px (the seed's rounding: 0.5 % apart), so 1 % tolerance.
+// The talk's worked example: Fe 2, CoC 12 mm (half a 24 mm frame), 500 nm: 0.75 sqrt(2 x 12
+// x 0.0005) mm. The talk prints 0.0826 mm = 13.76 px (4000 px over 24 mm); the formula gives
+// 0.0822 mm = 13.69 px (the talk's rounding: 0.5 % apart), so 1 % tolerance.
 TEST(WaveOptics, SeedWorkedExample)
 {
     const double w2_mm = 0.75 * fringe_scale(0.0005, 2.0, 12.0);
@@ -174,7 +174,7 @@ TEST(WaveOptics, SeedWorkedExample)
 }
 
 // ---------------------------------------------------------------------------------------
-// The exact defocused PSF of a circular pupil (OPTICS.md section 1).
+// The exact defocused PSF of a circular pupil (Born & Wolf 8.8).
 
 namespace {
 
@@ -207,7 +207,7 @@ double ls_vertex(const std::function<double(double)>& f, double xc, double h, in
 }
 
 // The mean of f over one period (pi) of the far rim's ripple in v, by 4 midpoints (which
-// cancel a sinusoid of that period exactly): OPTICS.md section 2's "averaging over a pixel".
+// cancel a sinusoid of that period exactly): what averaging over a pixel does.
 double rim_ripple_mean(const HankelPsf& psf, double v)
 {
     double s = 0;
@@ -300,7 +300,7 @@ TEST(WaveOptics, HankelInsideMeanIsGeometric)
 }
 
 // The edge law against the exact PSF near the rim at W20 = 100 waves: each of the six
-// extrema of OPTICS.md's table, found on the exact PSF averaged over the far rim's ripple,
+// extrema of the table above, found on the exact PSF averaged over the far rim's ripple,
 // within 0.5 % in position (measured <= 0.1 %) and 2 % in height (measured ~1.2 %; the
 // law's heights are the limit W20 -> inf, approached as 1 / sqrt(W20)).
 TEST(WaveOptics, EdgeLawMatchesExactNearRim)
@@ -327,13 +327,13 @@ TEST(WaveOptics, EdgeLawMatchesExactNearRim)
     }
 }
 
-// Onion rings (OPTICS.md section 4): a ripple a cos(pi K rho) on the pupil modulates the
+// Onion rings (docs/methods/optics.md): a ripple a cos(pi K rho) on the pupil modulates the
 // disc by C ~ 2 (2 pi a) sin(pi K^2 / (8 W20)). Exact contrast: the amplitude of the
 // fundamental (K / 2 cycles per unit rho) fitted by least squares to the ratio of the rippled
 // to the smooth exact PSF over rho 0.2 .. 0.8 (both averaged over the far rim's ripple).
 // K 10, a 0.02 waves, W20 50 / 100 / 400: the law within 8 % of the exact contrast (measured
-// <= 3 %); OPTICS.md quotes exact 0.186 / 0.104 / 0.026 (within 10 %: ours, a fit of the
-// fundamental, is 5-8 % below those).
+// <= 3 %); a peak-to-peak estimate of the exact contrast gives 0.186 / 0.104 / 0.026
+// (within 10 %: ours, a fit of the fundamental, is 5-8 % below those).
 TEST(WaveOptics, OnionRingContrastLaw)
 {
     const double a = 0.02, K = 10;
@@ -375,7 +375,7 @@ TEST(WaveOptics, OnionRingContrastLaw)
         }
         const double contrast = std::hypot(x[1], x[2]) / x[0];
         const double law      = 2 * (2 * kPi * a) * std::sin(kPi * K * K / (8 * w));
-        std::printf("onion rings W20 %g: exact contrast %.4f, law %.4f (%+.1f %%), OPTICS.md %.3f\n",
+        std::printf("onion rings W20 %g: exact contrast %.4f, law %.4f (%+.1f %%), peak-to-peak %.3f\n",
                     w, contrast, law, 100 * (law / contrast - 1), quoted[idx]);
         EXPECT_NEAR(law, contrast, 0.08 * contrast) << w;
         EXPECT_NEAR(contrast, quoted[idx], 0.10 * quoted[idx]) << w;
@@ -605,7 +605,7 @@ TEST(WaveOptics, FftPsfBadInput)
 }
 
 // ---------------------------------------------------------------------------------------
-// The seed's pseudo-diffraction map (SEEDS.md section 9).
+// Kawase's pseudo-diffraction map ("Bokeh Deep Dive").
 
 namespace {
 
@@ -614,7 +614,7 @@ double fringe_s(double rho, double w) { return (1 - rho) * std::sqrt(2 * w); }
 
 }  // namespace
 
-// Unit energy at every fringe-width ratio and every wavelength of the seed's range (the
+// Unit energy at every fringe-width ratio and every wavelength of the talk's range (the
 // column normalisation and the inverse-square squeeze), within 5e-3 (the lookup's bilinear
 // fetch between columns whose bands differ: measured 3.3e-3 near focus); the geometric edge stays at rho = 1 for every
 // wavelength (the lookup anchored there), reading the pattern's edge value.
@@ -640,8 +640,8 @@ TEST(WaveOptics, SeedMapEnergyAndEdgeAnchor)
     EXPECT_EQ(map.lookup(map.extent(map.width_ratio(10.0)) + 1e-9, map.width_ratio(10.0)), 0.0);
 }
 
-// The seed's fringe positions against the exact ones. The exact extrema of OPTICS.md's
-// table (checked against the Hankel integral above) and the map's at W20 = 100 waves
+// The pseudo-map's fringe positions against the exact ones. The exact extrema of the edge
+// law's table (checked against the Hankel integral above) and the map's at W20 = 100 waves
 // (x = 0.0265) and 1000, in d / sqrt(lambda N c). The map's spacing is constant (one w2),
 // the exact spacing shrinks inward, so the error grows fringe by fringe: bounded loosely
 // at 30 % for the first six (measured -13 % .. +10 % at W20 100); docs/methods/diffraction.md
@@ -735,7 +735,7 @@ TEST(WaveOptics, SeedMapSpectralWhite)
 // The common factory: the four methods from the project's units, interchangeable (unit
 // energy within 5e-3, the exact one's far tail beyond 1.25 R excepted: 1e-2; the same
 // interior mean within 3 %, at CoC 40 px, f/2, 550 nm, 0.006 mm = W20 27 waves); the
-// seed's worked example's bokeh (CoC 12 mm = 2000 px at 0.006 mm, f/2, 500 nm) has
+// talk's worked example's bokeh (CoC 12 mm = 2000 px at 0.006 mm, f/2, 500 nm) has
 // W20 = 12 / (8 x 2 x 0.0005) = 1500 waves; bad values give null.
 TEST(WaveOptics, DiffractionRadialProfileFactory)
 {

@@ -1,6 +1,6 @@
 // color.h — colour handling: which OCIO config, what a file's pixels are, conversions.
 //
-// All filtering happens in scene-linear light (DESIGN.md, "Colour"). EXR and other float
+// All filtering happens in scene-linear light (docs/io.md, "Colour"). EXR and other float
 // files are taken as scene-linear; 8/16-bit display images as sRGB. The config is the
 // one the user names, else $OCIO, else the small config shipped in ocio/. OpenColorIO 2.1
 // has no built-in configs, hence the shipped file.
@@ -54,7 +54,7 @@ public:
 
     /// The space a file's pixels are in, judged from its native spec: float and half data
     /// are scene-linear, integer data display-referred (OIIO calls every EXR "Linear",
-    /// a label we do not use; DESIGN.md).
+    /// a label we do not use: it names no primaries).
     std::string space_of_file(const OIIO::ImageSpec& native) const;
 
     /// Convert the colour channels of `img` (color_channel_groups) in place; every other

@@ -77,7 +77,7 @@ OIIO::ImageSpec derived_spec(const OIIO::ImageSpec& like, const std::vector<std:
 bool metadata_number(const OIIO::ImageSpec& spec, const std::string& name, double& value,
                      std::string& err);
 
-/// What to do with NaN and Inf pixel values (DESIGN.md, "bad values").
+/// What to do with NaN and Inf pixel values (docs/io.md, "Errors and bad values").
 enum class NonFinitePolicy {
     Zero,   ///< colour -> 0, depth -> +inf ("no depth": infinitely far); counted
     Error,  ///< fail, naming the count

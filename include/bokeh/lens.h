@@ -1,12 +1,12 @@
 // lens.h — thin-lens circle of confusion, depth-channel interpretation, and the signed
 // CoC map every depth-defocus method starts from.
 //
-// Signed CoC (SEEDS.md section 1): the diameter in pixels of the blur disk of a point,
-// negative in front of the focus plane (near, "front bokeh"), positive behind it (far,
-// "back bokeh"). Depth channels come in the forms Nuke's ZDefocus reads ("math": direct,
-// depth, far = 0, far = 1, each possibly negated); a depth of 0 or a non-finite one means
-// "no depth here" and is taken as infinitely far (the Beachball renders hold Z = 0 where
-// nothing was rendered).
+// Signed CoC (docs/methods/optics.md, "The thin lens"): the diameter in pixels of the blur
+// disk of a point, negative in front of the focus plane (near, "front bokeh"), positive
+// behind it (far, "back bokeh"). Depth channels come in the forms Nuke's ZDefocus reads
+// ("math": direct, depth, far = 0, far = 1, each possibly negated); a depth of 0 or a
+// non-finite one means "no depth here" and is taken as infinitely far (the Beachball
+// renders hold Z = 0 where nothing was rendered).
 #pragma once
 
 #include <string>
@@ -58,7 +58,7 @@ struct CocOptions {
 };
 
 /// Signed CoC diameter in pixels of a point at `distance` (depth units; +inf allowed)
-/// for an image `image_width_px` wide on the lens's sensor (SEEDS.md section 1):
+/// for an image `image_width_px` wide on the lens's sensor (docs/methods/optics.md):
 ///     CoC = (d - d0) / d * f^2 / (F (d0 - f)) / (sensor_width / image_width)
 /// No gains, range or limit: those are signed_coc's.
 double thin_lens_coc_px(const Lens& lens, double distance, int image_width_px);

@@ -4,11 +4,11 @@
 // fixed tone map x / (1 + |x|) per channel (peak 1), so that HDR highlights (fairy lights
 // at 300) do not swamp the measure and a dark-area error still counts.
 //
-// Artifact metrics (SEEDS.md section 4: what an enlarged reduced buffer shows): Mach
-// bands, ringing, shimmer and loss of detail, each a number computed from images, plus
-// the standard protocol that runs an enlargement method on the four test scenes. Every
-// channel counts alike; sums are in double and combined in a fixed order, so the figures
-// do not depend on the thread count.
+// Artifact metrics (what an enlarged reduced buffer shows, as Kawase's "Anti reduced-buffer
+// artifacts" names it): Mach bands, ringing, shimmer and loss of detail, each a number
+// computed from images, plus the standard protocol that runs an enlargement method on the
+// four test scenes. Every channel counts alike; sums are in double and combined in a fixed
+// order, so the figures do not depend on the thread count.
 #pragma once
 
 #include <array>
@@ -67,7 +67,7 @@ bool ringing(Ringing& r, const OIIO::ImageBuf& result, const OIIO::ImageBuf& sou
 
 /// Shimmer: `frames[i]` is the enlargement of the same content moved by `shifts_px[i]`
 /// destination pixels (x, y). Each frame is moved back; a shift-invariant method gives
-/// identical frames, so whatever differs is the temporal twinkling of the seed. score =
+/// identical frames, so whatever differs is the temporal twinkling the talk shows. score =
 /// 100 * RMS over frames and pixels of (aligned frame - mean of the aligned frames) /
 /// RMS(mean). `roi` (aligned coordinates; default: where every aligned frame has data,
 /// less the largest shift on each side).

@@ -1,19 +1,20 @@
 // optics.h — lens character: the PSF of a real lens at a signed CoC and field position,
-// from its aperture, aberrations (the seed's beam map), spectrum, diffraction fringes,
-// onion rings and field effects (SEEDS.md sections 8-12; OPTICS.md sections 2-4).
+// from its aperture, aberrations (the light-beam map of Kawase's "Bokeh Deep Dive"),
+// spectrum, diffraction fringes, onion rings and field effects (docs/methods/optics.md has
+// the formulas and their sources).
 //
 // The model is geometric optics plus diffraction at the rim. A ray through the pupil at
 // normalised radius s (0..1, the aperture's circumscribed circle) and direction psi lands
 // on the sensor at the signed radius
 //     r(s) = s (c / 2 - a(s, l)),   a(s, l) = NA LSA(s, l) / pixel_pitch      [px]
 // along psi (negative: across the centre, as front bokeh are point-reflected), c the
-// signed CoC in px and LSA the longitudinal aberration (OPTICS.md section 4):
+// signed CoC in px and LSA the longitudinal aberration:
 //     LSA(s, l) = chromatic LCA(l) + monochromatic SA3 (1 + spherochromatism dl) (s^2 - correction s^4)
 // The intensity at image radius R is the density of the rays landing there, sum s ds /
-// (R dR) (the seed's beam map column, rotated about the axis and shaped by the
-// aperture's edge distance, SEEDS.md section 8). Many wavelengths are summed to RGB
-// (spectrum.h). Diffraction multiplies the rim by the exact straight-edge law (OPTICS.md
-// section 2; the fringe scale from c_eff = 2 |dr/ds| at the rim, so aberrated beams get
+// (R dR) (a column of the beam map, rotated about the axis and shaped by the aperture's
+// edge distance, as the talk draws its bokeh). Many wavelengths are summed to RGB
+// (spectrum.h). Diffraction multiplies the rim by the exact straight-edge law (Born & Wolf
+// 8.7; the fringe scale from c_eff = 2 |dr/ds| at the rim, so aberrated beams get
 // their own fringes). Field position adds the cat's eye (the pupil cut by a barrel circle
 // shifted with the field height), field curvature, astigmatism (tangential and sagittal
 // CoC differ: ovals that swap across focus) and the anamorphic squeeze and focus split.
@@ -37,7 +38,7 @@
 
 namespace bokeh {
 
-/// A lens's design, which sets its aberrations' kind and size (OPTICS.md section 4).
+/// A lens's design, which sets its aberrations' kind and size (docs/methods/optics.md).
 enum class LensPreset {
     Off,          ///< no aberration (the plain aperture)
     Uncorrected,  ///< a singlet: under-corrected spherical aberration and the full axial
@@ -50,8 +51,8 @@ enum class LensPreset {
 /// How the rim's diffraction is modelled.
 enum class DiffractionModel {
     Off,       ///< geometric rim
-    EdgeLaw,   ///< the exact Fresnel straight-edge law at the rim (OPTICS.md section 2)
-    SeedMap,   ///< the seed's pseudo-diffraction map (SEEDS.md section 9; its fringes sit
+    EdgeLaw,   ///< the exact Fresnel straight-edge law at the rim
+    SeedMap,   ///< Kawase's pseudo-diffraction map ("Bokeh Deep Dive"; its fringes sit
                ///< 4-16 % off the exact ones, docs/methods/diffraction.md)
 };
 
@@ -67,24 +68,25 @@ struct LensCharacter {
     double focal_mm       = 50.0;
     double pixel_pitch_mm = 36.0 / 1920.0;  ///< sensor width / image width
 
-    // The seed's knobs (SEEDS.md section 8), each a multiple of the preset's own amount.
+    // The talk's knobs, each a multiple of the preset's own amount.
     double monochromatic = 1.0;  ///< scales the spherical aberration (0 = none; negative
                                  ///< reverses its sign: marginal rays focus farther)
     double chromatic     = 1.0;  ///< scales the axial colour; negative reverses it
     /// The zonal correction: SA5 = -correction SA3, so LSA at the rim is SA3 (1 -
     /// correction); 0 uncorrected, 1 corrected at the rim, 1.6 over-corrected ("bubble"
     /// bokeh). Negative: the preset's own (uncorrected 0, achromat and apochromat 1.47,
-    /// the double-Gauss figure in OPTICS.md section 4: SA5 / SA3 = 0.56 / 0.38).
+    /// a double-Gauss 50 mm f/2's fit: SA5 / SA3 = 0.56 / 0.38).
     double correction       = -1.0;
     double spherochromatism = 0.0;  ///< relative change of SA3 per 100 nm above 587.6 nm
 
     DiffractionModel diffraction = DiffractionModel::Off;
     SpectrumOptions spectrum;
 
-    // Onion rings (SEEDS.md section 10): rings in the pupil, centre offset with field.
+    // Onion rings (machining marks on aspheric elements): rings in the pupil, centre
+    // offset with field.
     double onion            = 0.0;   ///< procedural ring contrast (0..1)
     double onion_waves      = 0.0;   ///< physical: ripple amplitude in waves; contrast by
-                                     ///< OPTICS.md's law 2 (2 pi a) sin(pi K^2 / (8 w))
+                                     ///< the law 2 (2 pi a) sin(pi K^2 / (8 w))
     double onion_cycles     = 10.0;  ///< K, rings per pupil diameter
     double onion_sharpness  = 1.0;   ///< 1 = sinusoidal; larger = thin bright rings
     double onion_offset     = 0.3;   ///< ring-centre shift at the frame corner, pupil radii
@@ -137,8 +139,8 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
 bool lens_psf_image(OIIO::ImageBuf& dst, const LensCharacter& lens, const PsfRequest& req,
                     int nthreads = 0);
 
-/// The seed's beam map (SEEDS.md section 8): U (x) the signed CoC from `coc_min_px` to
-/// `coc_max_px`, V (y, up) the ray height, each column normalised by its own spread (the
+/// The light-beam map of Kawase's "Bokeh Deep Dive": U (x) the signed CoC from `coc_min_px`
+/// to `coc_max_px`, V (y, up) the ray height, each column normalised by its own spread (the
 /// largest landing radius) and its peak; RGB from the spectrum.
 bool beam_map_image(OIIO::ImageBuf& dst, const LensCharacter& lens, double coc_min_px,
                     double coc_max_px, int width, int height, int nthreads = 0);

@@ -3,7 +3,7 @@
 // `nthreads` follows ImageBufAlgo: 0 = all cores, N = at most N threads (mapped onto a
 // tbb::task_arena). Work is split into fixed chunks whose boundaries do not depend on the
 // thread count, and reductions combine chunk results in chunk order, so every result is
-// bit-identical for any thread count (DESIGN.md, "Numbers, determinism").
+// bit-identical for any thread count (docs/robustness.md, "Determinism").
 #pragma once
 
 #include <cstdint>

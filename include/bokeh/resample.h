@@ -1,7 +1,7 @@
-// resample.h — reduced buffers and their enlargement (SEEDS.md sections 4 and 6): reduce
-// by an integer factor or to any size, enlarge by any factor with every method the seed
-// compares, and depth-aware (PCF, joint-bilateral) enlargement of a low-resolution layer
-// over a full-resolution depth.
+// resample.h — reduced buffers and their enlargement (Kawase, "Anti reduced-buffer
+// artifacts"; docs/methods/resampling.md): reduce by an integer factor or to any size,
+// enlarge by any factor with every method the talk compares, and depth-aware (PCF,
+// joint-bilateral) enlargement of a low-resolution layer over a full-resolution depth.
 //
 // Geometry. Pixel (x, y) is the square [x, x+1) x [y, y+1); its value stands for its centre.
 // Destination pixel x samples the source at u = (x + 0.5) / factor - 0.5 (in source pixels,
@@ -31,16 +31,16 @@
 //               tests/resample_test.cpp.
 //   Box         area-exact: the weight of a source pixel is the part of the destination
 //               pixel's footprint it covers (nearest at integer enlargements)
-//   ReducedBlur the seed's "reduced-buffer blur": a small Gaussian at low resolution
+//   ReducedBlur the talk's "reduced-buffer blur": a small Gaussian at low resolution
 //               (sigma = blur_sigma, default 0.5 source pixels, pixel-integrated weights
 //               as blur.h's gaussian_weights_1d), then bilinear
-//   UpscaleBlur the seed's upscale-blur: bilinear 2x, the binomial blur [1 2 1] / 4 on the
+//   UpscaleBlur the talk's upscale-blur: bilinear 2x, the binomial blur [1 2 1] / 4 on the
 //               2x grid, bilinear to the final size
 //   UpscaleBlurFused   its fused form: the 2x image is the mean of 4 bilinear reads of the
 //               source at (u +- d, v +- d), d = fused_offset source pixels (default
 //               sqrt(1/8) = 0.354, which gives the 2x step the same variance as the
 //               unfused bilinear + [1 2 1] / 4), then bilinear to the final size
-//   UpscaleBlurTwoStage   the seed's two-stage variant: bilinear 2x + [1 2 1] / 4, twice,
+//   UpscaleBlurTwoStage   the talk's two-stage variant: bilinear 2x + [1 2 1] / 4, twice,
 //               then bilinear to the final size
 // A stage of the compound methods (the last four) enlarges by 2 only while at least 2 is
 // left; below that it enlarges by what is left.
@@ -246,10 +246,10 @@ bool resize(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int width, int heigh
 bool resample(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int width, int height,
               bool interpolate = true, int nthreads = 0);
 
-// --- depth-aware enlargement (SEEDS.md section 6) ------------------------------------
+// --- depth-aware enlargement (the talk's reduced blend buffer) -----------------------
 
 enum class DepthAwareMethod {
-    /// Percentage-closer filtering (Reeves, Salesin & Cook 1987, as the seed uses it for
+    /// Percentage-closer filtering (Reeves, Salesin & Cook 1987, as the talk uses it for
     /// reduced blend buffers): out = sum_n w_n pass_n L_n over the 2 x 2 low-resolution
     /// texels n around the sample, w_n the bilinear weights, pass_n = 1 where the texel's
     /// depth is in front of (or at) the full-resolution pixel's depth:

@@ -1,7 +1,7 @@
 // scene.h — built-in synthetic test scenes with known depth.
 //
 // Real footage rarely holds bright point lights at known depths, yet those are what
-// bokeh is judged on (REFERENCE.md, "Test data"). These scenes are generated, so the
+// bokeh is judged on: the real test images hold few. These scenes are generated, so the
 // depth of every pixel, and therefore the exact defocus reference, is known.
 //
 //   lights  fairy lights at 1.3..35 m over a floor and wall (40 m), an in-focus sphere at

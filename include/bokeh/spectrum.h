@@ -1,6 +1,6 @@
 // spectrum.h — wavelengths to RGB for spectral PSFs: the CIE 1931 2-degree colour-matching
 // functions, XYZ to the working space, and the per-wavelength weights that make a white
-// light stay white (OPTICS.md section 3).
+// light stay white (docs/methods/optics.md, "The spectrum").
 #pragma once
 
 #include <array>
@@ -30,9 +30,9 @@ struct SpectralSample {
 };
 
 struct SpectrumOptions {
-    double first_nm = 400.0;  ///< the seed's range is 400-710 nm (SEEDS.md section 9)
+    double first_nm = 400.0;  ///< 400-710 nm: the range of Kawase's spectral integration
     double last_nm  = 710.0;
-    double step_nm  = 10.0;   ///< fringe positions scale as sqrt(lambda): 10 nm suffices (OPTICS.md 3)
+    double step_nm  = 10.0;   ///< fringe positions scale as sqrt(lambda): 10 nm suffices
     Illuminant illuminant = Illuminant::EqualEnergy;
 };
 

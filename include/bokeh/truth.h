@@ -27,14 +27,15 @@
 // thin lens's exact answer, a few more where the curve is bent). The CoC must not fall as
 // Z grows within a pixel (a depth mode that reads Z backwards is refused).
 //
-// The sensor point (TruthPixel): a deep pixel's samples are already its area's average
-// (the render's pixel filter), so the rays start at the pixel's centre by default; starting
-// them over the pixel's square as well (TruthPixel::Area, ../shared/DEEP.md's wording)
-// filters the image by the pixel a second time once the aperture is open. Against the
-// built-in scenes' geometric truth (thin-lens rays against the surfaces themselves, over
-// the pixel's area: the physics), 960x540, 1024 rays a pixel, 4 x 4 block averages, the
-// centre is nearer: edges 46.1 dB against 45.1, lights 51.2 against 49.0
-// (docs/methods/truth.md has the commands and figures). At a zero aperture both are the flatten.
+// The sensor point (TruthPixel): a deep pixel's samples are already its area's average (the
+// render's pixel filter), so the rays start at the pixel's centre by default; starting them
+// over the pixel's square as well (TruthPixel::Area: pixel area times aperture, read
+// literally) filters the image by the pixel a second time once the aperture is open.
+// Against the built-in scenes' geometric truth (thin-lens rays against the surfaces
+// themselves, over the pixel's area: the physics), 960x540, 1024 rays a pixel, 4 x 4 block
+// averages, the centre is nearer: edges 46.1 dB against 45.1, lights 51.2 against 49.0
+// (docs/methods/truth.md has the commands and figures). At a zero aperture both are the
+// flatten.
 //
 // Sampling: per output pixel, a 4-D Sobol' sequence (Joe and Kuo's direction numbers)
 // with hash-based Owen scrambling (Burley, "Practical Hash-based Owen Scrambling", JCGT

@@ -1,6 +1,6 @@
 // wave_optics.h — scalar wave optics of a defocused lens: Fresnel integrals and the exact
 // straight-edge law for the fringes at a bokeh's rim; the exact defocused PSF of a round
-// pupil (Hankel integral, Lommel series) and of any pupil (FFT); the seed's
+// pupil (Hankel integral, Lommel series) and of any pupil (FFT); Kawase's
 // pseudo-diffraction map; radial profiles that make the models interchangeable.
 // docs/methods/diffraction.md has the formulas, the checks and the figures.
 //
@@ -9,7 +9,7 @@
 // millimetres returns millimetres. Helpers with `_px`, `_nm`, `_mm` in their names convert
 // from the project's units (CoC in pixels, wavelength in nanometres, pixel pitch in mm).
 //
-// Symbols (../shared/OPTICS.md): N working f-number, lambda wavelength, c geometric CoC
+// Symbols (docs/methods/optics.md): N working f-number, lambda wavelength, c geometric CoC
 // diameter on the sensor, d distance inward from the geometric edge of the bokeh.
 #pragma once
 
@@ -56,7 +56,7 @@ inline double edge_v(double distance, double fringe_scale_length)
 }
 
 // ---------------------------------------------------------------------------------------
-// The exact defocused PSF of a circular pupil (OPTICS.md section 1; Born & Wolf 8.8)
+// The exact defocused PSF of a circular pupil (Born & Wolf 8.8)
 //
 //     I(v) = | 2 int_0^1 exp(i 2 pi W(rho)) J0(v rho) rho drho |^2,   v = k NA r = pi r / (lambda N)
 //
@@ -68,7 +68,7 @@ inline double edge_v(double distance, double fringe_scale_length)
 
 /// A rotationally symmetric pupil wavefront, all amplitudes in waves (units of lambda):
 /// W(rho) = W20 rho^2 + W40 rho^4 + W60 rho^6 + a cos(pi K rho), K = ripple cycles across the
-/// pupil diameter (concentric machining marks: onion rings, OPTICS.md section 4).
+/// pupil diameter (concentric machining marks: onion rings, docs/methods/optics.md).
 struct RadialWavefront {
     double defocus_waves     = 0.0;  ///< W20
     double spherical_waves   = 0.0;  ///< W40
@@ -121,7 +121,7 @@ double radius_v_px(double r_px, double fnumber, double wavelength_nm, double pix
 // ---------------------------------------------------------------------------------------
 // Radial profiles: interchangeable models of a round bokeh's intensity against rho = r / R
 // (R the geometric CoC radius), each at one wavelength, given w = W20 / lambda = c / (8 N lambda)
-// (the only parameter of a defocused aberration-free pupil: OPTICS.md section 1).
+// (the only parameter of a defocused aberration-free pupil).
 // Normalised to unit energy with R as the unit of length, int_0^inf 2 pi rho I drho = 1, so a
 // flat disc is 1 / pi inside.
 
@@ -159,7 +159,7 @@ struct Pupil {
     std::function<double(double x, double y)> wavefront_waves;
 };
 
-/// Sampling of pupil_psf_fft. OPTICS.md section 1: pupil samples across the diameter at
+/// Sampling of pupil_psf_fft: pupil samples across the diameter at
 /// least the CoC in units of lambda N (8 W20), with a 1.5-2x margin; the FFT at least twice
 /// that. The PSF pixel is then lambda N / Q, Q = fft_size / pupil_samples (pi / Q in v).
 struct PupilSampling {
@@ -189,16 +189,16 @@ bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
 Pupil round_pupil(const RadialWavefront& wavefront);
 
 // ---------------------------------------------------------------------------------------
-// The seed's pseudo-diffraction map (SEEDS.md section 9; core/diffraction_map.cpp)
+// Kawase's pseudo-diffraction map ("Bokeh Deep Dive"; core/diffraction_map.cpp)
 //
-// A 2-D table of a made-up trigonometric fringe pattern, read the way the seed reads it:
+// A 2-D table of a made-up trigonometric fringe pattern, read the way the talk reads it:
 // U = log of the fringe width relative to the CoC (x = scale sqrt(lambda N / c)), V = radius
 // in a band around the geometric edge; each column energy-normalised with area weighting,
 // faded to its local mean where its fringes pass the Nyquist limit (of the table, and of
 // the output pixels at lookup), faded to zero a little outside the edge, clamped inside the
-// band. The seed publishes the rules and the fringe-width calibration (w2 ~ 0.75 sqrt(Fe c
+// band. The talk publishes the rules and the fringe-width calibration (w2 ~ 0.75 sqrt(Fe c
 // lambda)), not its function: ours, below, is the simplest periodic one that follows them.
-// Use it to compare with the exact PSF (the seed asks for a better approximation: the edge
+// Use it to compare with the exact PSF (the talk asks for a better approximation: the edge
 // law answers, with the numbers in docs/methods/diffraction.md).
 
 struct SeedMapOptions {
@@ -206,13 +206,13 @@ struct SeedMapOptions {
     int rows                 = 256;     ///< V samples across a column's band
     double min_width_ratio   = 1e-4;    ///< x at the map's large-bokeh end
     double max_width_ratio   = 0.25;    ///< x at its near-focus end
-    double width_scale       = 0.75;    ///< the seed's w2 / sqrt(lambda N c) (its scale knob)
+    double width_scale       = 0.75;    ///< the talk's w2 / sqrt(lambda N c) (its scale knob)
     double band_widths       = 8.0;     ///< fringe widths stored inside the edge (then clamped)
     double outside_widths    = 1.5;     ///< fringe widths stored outside the edge (fade to 0)
     double first_max_widths  = 1.0;     ///< the first bright fringe, in fringe widths from the edge
     double edge_value        = 0.25;    ///< intensity at the geometric edge (flat interior = 1)
     double first_amplitude   = 0.35;    ///< the first bright fringe's height above 1
-    double reference_nm      = 710.0;   ///< the wavelength the map is made for (the seed's)
+    double reference_nm      = 710.0;   ///< the wavelength the map is made for (the talk's)
 };
 
 /// The trig fringe pattern against s = distance inward from the geometric edge in fringe
@@ -229,7 +229,7 @@ public:
     const SeedMapOptions& options() const { return options_; }
     /// Monochrome intensity at rho = r / R, unit energy (int 2 pi rho I drho = 1), for a
     /// bokeh whose fringe width relative to its CoC is `width_ratio_ref` at the reference
-    /// wavelength, seen at `wavelength_ratio` = lambda / lambda_ref: the seed's horizontal
+    /// wavelength, seen at `wavelength_ratio` = lambda / lambda_ref: the talk's horizontal
     /// lookup at x_ref (lambda / lambda_ref)^0.5, its vertical squeeze keeping the geometric
     /// edge at rho = 1, intensity scaled by the inverse square of the squeeze.
     /// `pixel_rho` (> 0: one output pixel in units of R) fades the fringes to the local
@@ -264,10 +264,10 @@ std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod meth
                                                           double pixel_pitch_mm,
                                                           const SeedDiffractionMap* map = nullptr);
 
-/// The seed map as a RadialProfile at W20 / lambda = defocus_waves, looked up at the map's
-/// reference wavelength's column for this W20 (so profiles at several wavelengths follow the
-/// seed's wavelength rule when built with their own defocus_waves). `pixel_rho` as in
-/// lookup. The map must outlive the profile. Null on bad values.
+/// The pseudo-diffraction map as a RadialProfile at W20 / lambda = defocus_waves, looked up
+/// at the map's reference wavelength's column for this W20 (so profiles at several
+/// wavelengths follow the talk's wavelength rule when built with their own defocus_waves).
+/// `pixel_rho` as in lookup. The map must outlive the profile. Null on bad values.
 std::unique_ptr<RadialProfile> seed_map_radial_profile(const SeedDiffractionMap& map,
                                                        double defocus_waves, double pixel_rho = 0.0);
 
@@ -277,7 +277,7 @@ struct RgbRadialProfile {
     std::vector<std::array<double, 3>> values;
 };
 
-/// The seed's spectral path for one bokeh (CoC `coc_px` pixels, f-number, pixel pitch mm):
+/// The talk's spectral path for one bokeh (CoC `coc_px` pixels, f-number, pixel pitch mm):
 /// the map looked up per wavelength (horizontal (lambda / lambda_ref)^0.5, squeeze, inverse
 /// square), summed with the weights; the clamped interior's tint blended toward white by
 /// (1 - 1/X)^2, X = 1 / (2 x_ref band_widths) the map's shrink (when X > 1); then each

@@ -1,6 +1,7 @@
 // defocus_task.cpp — bokeh-bench's defocus task: the layered method at several accuracy
-// budgets and the seed's gather, against the reference (one full-resolution layer per
-// CoC value), on the built-in scenes and on the real files in ../shared/data.
+// budgets and the published gather, against the reference (one full-resolution layer per
+// CoC value), on the built-in scenes and on the real files in ../shared/data (test images
+// kept beside the repository; without them, the built-in scenes only).
 //
 // Each scene is defocused with the lens its metadata suggests (bokeh:focus_m, bokeh:fstop)
 // or, for the files, the lens stated below; times are in-process medians, errors are

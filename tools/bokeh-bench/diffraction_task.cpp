@@ -1,7 +1,7 @@
 // diffraction_task.cpp — bokeh-bench's diffraction task: the fringe models of a round
 // bokeh's rim (wave_optics.h) timed and measured against the exact defocused PSF.
 //
-// Setting: f/2, 550 nm, a 0.006 mm pixel (the seed's example: a 24 mm sensor 4000 px tall),
+// Setting: f/2, 550 nm, a 0.006 mm pixel (Kawase's example: a 24 mm sensor 4000 px tall),
 // CoC 15 .. 255 px, i.e. W20 = c / (8 N lambda) = 10 .. 174 waves. Product of each method:
 // the radial profile a PSF image is rasterised from, averaged over each 1 px ring out to
 // 1.25 R (R = CoC / 2), in unit-energy units (a flat disc is 1 / pi). Sub-samples per ring:
@@ -9,8 +9,8 @@
 // R / (4 W20) = 0.18 px here), 4 for the others. The reference is the exact profile itself,
 // so its error is 0 by construction; its time is the cost of the truth.
 // Errors: area-weighted RMS and largest ring difference, relative to the flat level.
-// The seed map's table is built once outside the timing (it is a texture made in advance);
-// its build time is printed.
+// The pseudo-diffraction map's table is built once outside the timing (it is a texture made
+// in advance); its build time is printed.
 
 #include "diffraction_task.h"
 #include "timing.h"

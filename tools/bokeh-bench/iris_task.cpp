@@ -1,5 +1,5 @@
-// iris_task.cpp — bokeh-bench's iris task: each approximation in iris mode (seed 002's
-// log(mean(exp(k x))) / k) against the exact iris blur of its own shape, as |k| times the
+// iris_task.cpp — bokeh-bench's iris task: each approximation in iris mode (the iris
+// filter's log(mean(exp(k x))) / k) against the exact iris blur of its own shape, as |k| times the
 // channels' range grows towards its limit (30, kIrisMaxExponent). Accuracy only: the timing
 // of iris mode is the exact path's plus two passes over the plane.
 //

@@ -1,6 +1,6 @@
 // resample_task.cpp — bokeh-bench's resample task: large effects done in reduced buffers
 // (1/2 .. 1/16) and enlarged back with every method of resample.h, against the same effect
-// at full resolution (SEEDS.md section 4).
+// at full resolution (the comparison of Kawase's "Anti reduced-buffer artifacts").
 //
 // Effects, on the built-in "lights" scene (RGBA, premultiplied; Z dropped):
 //   glare  a Gaussian of sigma 32 px (bokeh::blur, exact, black border)
@@ -20,7 +20,7 @@
 //
 // The headline figures are timed separately at 480x270 -> 1920x1080: our enlargement also
 // through resample_plane into a buffer allocated once (the compute alone), OIIO's resize
-// into an existing ImageBuf; the seed's cost claim as the median of alternating runs of the
+// into an existing ImageBuf; the talk's cost claim as the median of alternating runs of the
 // two pipelines, so that the machine's slow phases hit both alike.
 
 #include "resample_task.h"
@@ -473,7 +473,7 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
                                      p_ms / o_ms, p_ms / o_ms >= 10.0 ? "yes" : "no"));
     }
 
-    // The seed's cost claim: upscale-blur adds under 10 % to a 1/8-buffer effect.
+    // The talk's cost claim: upscale-blur adds under 10 % to a 1/8-buffer effect.
     {
         const int s8 = 8;
         for (const Effect& eff : effects()) {

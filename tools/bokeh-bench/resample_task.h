@@ -13,7 +13,7 @@ namespace bokeh_bench {
 /// Run the task and print its tables. Appends CSV rows in the blur task's columns (size_px
 /// = the reduction factor) to `rows`; the artifact metrics per method and factor to
 /// `artifact_rows` and the headline figures (timings against targets, peer ratios, the
-/// seed's cost claim) to `figure_rows`, each starting with its own header line.
+/// upscale-blur's cost claim) to `figure_rows`, each starting with its own header line.
 /// args.images_dir, if set, receives enlarge_sheet.png. False on an error, reported on
 /// stderr.
 bool run_resample_task(const BenchArgs& args, std::vector<std::string>& rows,
