@@ -1,7 +1,7 @@
 // deep.cpp — the deep compositing operations of deep.h, by the OpenEXR rules.
 //
 // Source: "Interpreting OpenEXR Deep Pixels" (OpenEXR documentation) and P. Hillman, "The
-// Theory of OpenEXR Deep Samples" (the rules are summarised in ../shared/DEEP.md):
+// Theory of OpenEXR Deep Samples" (the rules are written out in docs/methods/deep.md):
 // * a volume [Z, ZBack) of alpha a cut to the fraction x of its depth keeps
 //   a' = 1 - (1 - a)^x, computed as -expm1(x log1p(-a)) so a thin slice of a faint medium
 //   keeps its digits; its colour scales by a'/a (by x when a = 0: additive light);

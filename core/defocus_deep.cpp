@@ -1,8 +1,9 @@
 // defocus_deep.cpp — depth defocus of a deep image: every sample blurred with its own CoC,
 // in layers, with the background that the render holds behind each foreground.
 //
-// The flat defocus (defocus.cpp) must invent what a foreground hides (SEEDS.md section 12:
-// disocclusion); a deep image holds it. Here every sample of the tidy image takes the
+// The flat defocus (defocus.cpp) must invent what a foreground hides (the disocclusion
+// problem Kawase's "Bokeh Deep Dive" answers with deep compositing; docs/methods/deep.md);
+// a deep image holds it. Here every sample of the tidy image takes the
 // signed CoC of its own depth (CocOfDepth, so the depth math modes, gains and limits are
 // the flat defocus's), a volume is cut where its CoC crosses a rung of the layer ladder
 // (expm1/log1p, as deep.cpp cuts), and each piece is shared between the two rungs around

@@ -60,7 +60,7 @@ struct SpriteSet {
 };
 
 
-// Iris mode (SEEDS.md section 3) in the layers: colour is carried as
+// Iris mode (docs/methods/iris.md) in the layers: colour is carried as
 // A (exp(k (colour / A - shift)) - 1) (premultiplied exp-space colour), so each layer
 // averages exp(k x) weighted by coverage; every layer comes back by
 // shift + log(1 + mean) / k before it is composited ("over" is linear). The shift (the
@@ -368,8 +368,9 @@ inline void sample_sub(const Plane& p, const OIIO::ROI& low, int gx, int gy, int
              (float(y - gy) + (float(sy) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.ybegin), out);
 }
 
-/// The seed 001 gather (core/defocus_gather.cpp): blurred levels blended per pixel by its
-/// CoC, the front-edge blur; into `out` (RGBA over f.out). lo, hi: the frame's CoC range.
+/// The gather of hikita12312's "Implementing depth of field" (core/defocus_gather.cpp):
+/// blurred levels blended per pixel by its CoC, the front-edge blur; into `out` (RGBA over
+/// f.out). lo, hi: the frame's CoC range.
 void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
 
 /// The defocus of a deep image (core/defocus_deep.cpp); bokeh::defocus calls it.

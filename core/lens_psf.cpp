@@ -2,8 +2,8 @@
 // (optics.h has the model), and the contact sheet `--bokeh:sheet=1` draws. The caches the
 // defocus reads PSFs from are core/psf_cache.cpp's.
 //
-// How a PSF is drawn (SEEDS.md section 8: a beam-map column rotated about the axis and
-// distorted by the aperture's radial LUT):
+// How a PSF is drawn (Kawase, "Bokeh Deep Dive": a light-beam-map column rotated about the
+// axis and distorted by the aperture's radial LUT; docs/methods/lens-character.md):
 //  1. Per wavelength, a radial table: rays at 8K pupil radii s in (0, 1) land at r(s) =
 //     s (c/2 - a(s, l)); each ray's mass s ds is spread over the R interval its s step
 //     covers, into bins 0.5 px wide; the bins' densities (mass over annulus area) are
@@ -21,12 +21,12 @@
 //  3. Diffraction at the rim (DiffractionModel::EdgeLaw): the geometric rim of the span
 //     is at |r(hi)|; the intensity near it is the plateau density times the Fresnel edge
 //     law F(v) (core/wave_optics.cpp), v = sqrt(2) d / sqrt(l N c_eff), d the distance
-//     across the edge in image px and c_eff = 2 |dr/ds| at the rim (OPTICS.md section 2).
-//     DiffractionModel::SeedMap puts the seed's pseudo-diffraction map in place of F: pi
+//     across the edge in image px and c_eff = 2 |dr/ds| at the rim (docs/methods/optics.md, "Diffraction at the rim").
+//     DiffractionModel::SeedMap puts the talk's pseudo-diffraction map in place of F: pi
 //     times its lookup at rho = 1 - d / (c_eff / 2), at the wavelength's own fringe width.
 //     Where the rim is not the outermost ray (a caustic), the law does not hold and the
 //     rim stays geometric. The fringe factor is F's mean over a pixel-wide box (from F's
-//     tabulated integral), so fringes finer than a pixel fade to their mean (the seed's
+//     tabulated integral), so fringes finer than a pixel fade to their mean (the talk's
 //     Nyquist fade).
 //  4. Onion rings and surface noise multiply the density by a pattern in the pupil
 //     (the pupil point a pixel comes from taken as s = R / |c/2|); the rings' cosine is
@@ -65,7 +65,7 @@ constexpr double kFadeV = 6.0;   // from here to kBandV, F fades to its mean (1 
 
 // The edge law F(v) (core/wave_optics.cpp) tabulated over the band once, 1/256 apart in v
 // (a period is 2 / v: 32 entries at the band's edge), faded to its mean from kFadeV on,
-// so a pixel past the band gets F's mean without a step (the seed's Nyquist fade); F is
+// so a pixel past the band gets F's mean without a step (the talk's Nyquist fade); F is
 // linear between entries. A pixel takes F's mean over its width, from F's integral G
 // (exact for the linear pieces): (G(v1) - G(v0)) / (v1 - v0).
 struct EdgeLawTable {
@@ -372,7 +372,7 @@ Geometry make_geometry(const LensCharacter& lens, const PsfRequest& req)
 }
 
 // The pupil span [lo, hi] along direction psi: the aperture's [hole e, e] cut by the
-// barrel circle |p - o| < 1 (OPTICS.md section 4, cat's eye). False when empty.
+// barrel circle |p - o| < 1 (docs/methods/optics.md, "Field effects": cat's eye). False when empty.
 bool pupil_span(const LensCharacter& lens, const Geometry& g, double psi, double& lo, double& hi)
 {
     const double e = lens.aperture.edge(psi);
@@ -582,7 +582,8 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
     static const SeedDiffractionMap seed_map;
     const SeedDiffractionMap* map = seed ? &seed_map : nullptr;
     const EdgeLawTable& law = edge_law_table();
-    constexpr int kSubsamples = 8;  // the seed's map: per distance step, then a pixel-wide box
+    // The talk's pseudo-diffraction map: per distance step, then a pixel-wide box.
+    constexpr int kSubsamples = 8;
     // The rows are independent (each writes its own entries): in parallel.
     parallel_for_chunks(0, t.Kf + 1, 1, nthreads, [&](int64_t j_begin, int64_t) {
         const int j = int(j_begin);
@@ -591,7 +592,7 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
         const double slope = Lmid.drds(s);
         const int sd       = r_mid > 0.0 ? 1 : -1;
         // The rim bounds the beam when it moves outward with s there; toward a caustic
-        // (dr/ds -> 0, where the edge law fails: OPTICS.md section 2) the fringes fade
+        // (dr/ds -> 0, where the edge law fails: docs/methods/optics.md) the fringes fade
         // out, from a slope of a quarter of the unaberrated one (c/2) to a twentieth, so
         // that a rim crossing the caustic as the aperture's edge turns shows no seam.
         // Rim and plateau radii are kept for every j, fringed or not: rim_at interpolates
@@ -618,11 +619,11 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
             const double xl    = std::clamp((rel_l - 0.05) / 0.2, 0.0, 1.0);
             const double gain_l = xl * xl * (3.0 - 2.0 * xl);
             const double slope_l = std::max(drds, 0.05 * 0.5 * std::abs(g.c_ref));
-            // The geometric density at the rim, s / (R |dr/ds|) (OPTICS.md section 4).
+            // The geometric density at the rim, s / (R |dr/ds|) (docs/methods/optics.md, "Longitudinal aberration").
             const double p     = s / (std::max(r, 1e-6) * slope_l);
             const double c_eff = std::max(2.0 * slope_l * g.kappa, 1e-3);
             const double scale = fringe_scale_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm);
-            // The seed's map at this wavelength's own fringe-width ratio: its horizontal
+            // The talk's pseudo-diffraction map at this wavelength's own fringe-width ratio: its horizontal
             // lookup at (l / l_ref)^0.5 is the width ratio's own sqrt(l) scaling.
             const double seed_width
                 = seed ? map->width_ratio(defocus_waves_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm))
@@ -744,7 +745,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
         add_fringes(table, lens, g, spectrum, na_per_pitch, nthreads);
 
     // Onion-ring contrast per channel: procedural, plus the physical law per wavelength
-    // 2 (2 pi a) sin(pi K^2 / (8 w)), w = W20 / l = c / (8 N l) in waves (OPTICS.md 4).
+    // 2 (2 pi a) sin(pi K^2 / (8 w)), w = W20 / l = c / (8 N l) in waves (docs/methods/optics.md, "Onion rings").
     std::array<double, 3> onion{ lens.onion, lens.onion, lens.onion };
     if (lens.onion_waves > 0.0)
         for (const SpectralSample& smp : spectrum) {

@@ -386,7 +386,7 @@ Plane convolve_banded(const Plane& in, const KernelWeights& banded, int nthreads
 /// (its darkest red 0.03) and stays within the input's range at 29.
 constexpr double kIrisMaxExponent = 30.0;
 
-/// Iris mode (SEEDS.md section 3): values go to exp(k (x - shift)) - 1 before the blur and
+/// Iris mode (docs/methods/iris.md): values go to exp(k (x - shift)) - 1 before the blur and
 /// come back by shift + log(1 + v) / k (the mean of exp less 1 is the mean of (exp - 1):
 /// the weights sum to 1). The shift (the channel's minimum for k > 0, maximum for k < 0)
 /// keeps every exponent in [0, kIrisMaxExponent], so nothing overflows, no dark value

@@ -1,6 +1,6 @@
 // aperture.h — an aperture as the distance from its centre to its edge at each polar
-// angle (the seed's radial LUT, SEEDS.md section 8: "distort the radial coordinate with
-// a LUT"), the description the lens-character PSFs draw with.
+// angle (the radial LUT of Kawase's "Bokeh Deep Dive": "distort the radial coordinate
+// with a LUT"), the description the lens-character PSFs draw with.
 //
 // Coordinates are the pupil's, normalised so the circumscribed circle has radius 1, x
 // right and y up; the polar angle phi is measured from +x, counter-clockwise. A point at

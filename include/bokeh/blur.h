@@ -59,10 +59,10 @@ enum class BlurMethod {
     ThreeBoxes,      ///< Gaussian: three fractional-width boxes with the same variance
     Parallelograms,  ///< hexagon (6 straight blades): three sheared parallelograms
     Bands,           ///< disk, polygon: rows grouped into BlurOptions::bands bands, by running sums
-    BilinearTaps,    ///< disk: the seed's 9x9 (25 fetches) or 17x17 (81 fetches) kernel
+    BilinearTaps,    ///< disk: Kawase's 9x9 (25 fetches) or 17x17 (81 fetches) kernel
     Reduced,         ///< any shape but OIIO's filters: blurred exactly at 1/N resolution (area reduction, the
-                     ///< kernel scaled by 1/N) and enlarged back bilinearly (SEEDS.md
-                     ///< sections 4 and 6); N = BlurOptions::reduction, any real >= 1
+                     ///< kernel scaled by 1/N) and enlarged back bilinearly (docs/methods/approximations.md,
+                     ///< "Reduced"); N = BlurOptions::reduction, any real >= 1
     Spans,           ///< disk, polygon: exact, by row spans of prefix sums
     Fft,             ///< disk, polygon, Gaussian, OIIO's filters: exact, by FFT in overlap-save tiles
     Separable,       ///< Gaussian, OIIO's separable filters: exact, by the separable convolution
@@ -95,7 +95,7 @@ struct BlurOptions {
                                 ///< not symmetric in y, a pentagon: twice that over its
                                 ///< height); 0: the method's choice (Bands: 8; Fast: the
                                 ///< fewest, 3..8, within its accuracy bound, fast_band_count)
-    /// Iris mode (SEEDS.md section 3): average exp(iris * x) and return log(mean) / iris,
+    /// Iris mode (docs/methods/iris.md): average exp(iris * x) and return log(mean) / iris,
     /// so bright values dominate the average as in a real lens; 0 = a plain average.
     /// Applies to every channel but alpha and depth (Z); iris * (max - min) must stay
     /// within 30 (past it the sums in exp space lose the dark values: refused).

@@ -8,7 +8,7 @@
 // coincident samples merge with the -log1p(-a) weights; tidy = split, merge, sort. Where
 // OpenImageIO 2.4 departs from them (no tidy before flatten, culling behind single opaque
 // samples in merge, holdout at the first opaque sample), these functions follow the rules
-// (../shared/DEEP.md lists the differences; tests/deep_test.cpp shows each).
+// (docs/methods/deep.md lists the differences; tests/deep_test.cpp shows each).
 //
 // Channels: Z and ZBack (or Zback) are depths; A, AR, AG, AB are alphas; R, G, B take AR,
 // AG, AB where present and A otherwise; every other float or half channel is a colour

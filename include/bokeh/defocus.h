@@ -48,7 +48,7 @@ struct DefocusOptions {
     /// multiplied by `bloom_gain` before the blur (ZDefocus's bloom). Gain 1 = off.
     float bloom_threshold = 1.0f;
     float bloom_gain      = 1.0f;
-    /// Iris mode (SEEDS.md section 3, as blur's `iris`): each layer averages
+    /// Iris mode (docs/methods/iris.md, as blur's `iris`): each layer averages
     /// exp(iris * colour) weighted by coverage and returns log(mean) / iris, so bright
     /// values dominate the bokeh as in a real lens. 0 = off; |iris| times each colour
     /// channel's range must stay within 80.
@@ -98,7 +98,7 @@ struct DefocusOptions {
     /// At most this many sprites, the brightest (by the sprite's luminance); the rest stay
     /// in the layers. A cost guard: a pixel crossing the cut does pop.
     int max_sprites = 20000;
-    /// Pseudo-high resolution (SEEDS.md section 11): the output at this many times the
+    /// Pseudo-high resolution (Kawase, "Bokeh Deep Dive"; docs/methods/lens-character-sprites.md): the output at this many times the
     /// input's resolution (1 or 2; its data and display windows scaled alike). The layers
     /// are built from the frame's own pixels as at 1 and enlarged bilinearly as they are
     /// composited; the sprites are drawn at the output's resolution (the lens PSF at the
