@@ -5,7 +5,7 @@
 // depth u = -log(1 - a) spread evenly over it, and emits c u / a per unit of u; a point is
 // the limit of zero thickness), and the pixel's light is integrated in closed form between
 // consecutive depths where a sample starts or ends. It shares no code with the splitting
-// and merging of core/deep.cpp.
+// and merging of core/deep/deep.cpp.
 #include <gtest/gtest.h>
 
 #include <algorithm>

@@ -1,4 +1,4 @@
-// Lens character in the depth defocus (defocus.h: lens_character; core/defocus_sprites.cpp):
+// Lens character in the depth defocus (defocus.h: lens_character; core/defocus/defocus_sprites.cpp):
 // off is bit for bit the plain defocus, energy is counted once, a lone bright pixel is the
 // lens PSF, an exposure ramp does not pop sprites, nearer layers hide sprites, deep input,
 // and the brute-force scatter reference.
@@ -74,7 +74,7 @@ float at(const OIIO::ImageBuf& img, int x, int y, int c)
 
 // A sprite is drawn as ramps within 1e-3 of each PSF pixel's own value (below 1e-6 of the
 // channel's peak, of that level) and literal runs, each PSF then rescaled to its exact sum
-// (core/psf_runs.h): `got` against `want` in units of that allowance's reference, so the
+// (core/optics/psf_runs.h): `got` against `want` in units of that allowance's reference, so the
 // bound 2e-3 holds the ramps' error plus the rescale's.
 double ramp_error(double got, double want, double peak)
 {

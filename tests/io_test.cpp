@@ -338,7 +338,7 @@ TEST(Multipart, WriteReadRoundTripAndBudget)
     EXPECT_NE(err.find("more than the memory budget"), std::string::npos) << err;
 }
 
-// Zip and zips files are compressed by the library (core/exr_deflate.cpp), not by
+// Zip and zips files are compressed by the library (core/io/exr_deflate.cpp), not by
 // OpenEXR: they must read back bit for bit through OpenEXR's own zlib decoder, carry the
 // header OIIO writes, be no larger than OpenEXR's, and not depend on the thread count.
 TEST(Write, ZipChunksReadBackThroughOpenExr)

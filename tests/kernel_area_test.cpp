@@ -14,6 +14,7 @@
 // pixels at most 0.001. The bounds, 1/64 on any pixel and 1/512 on the mean, leave twice
 // that and catch a misjudged pixel (a 5 x 5 look inside the pixel alone erred by 0.035 on
 // the 31 px disk's rim and 0.08 at a polygon's tip).
+#include <bokeh/base.h>
 #include <bokeh/blur.h>
 
 #include <gtest/gtest.h>
@@ -26,7 +27,6 @@ using namespace bokeh;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 // Area of {x0 <= x <= x1, y0 <= y <= y1} inside the circle of radius R at the origin.
 double disk_pixel_area(double R, double x0, double x1, double y0, double y1)

@@ -14,6 +14,7 @@
 
 #include <OpenImageIO/imagebufalgo.h>
 
+#include <bokeh/base.h>
 #include <bokeh/aperture.h>
 #include <bokeh/blur.h>
 #include <bokeh/color.h>
@@ -23,9 +24,10 @@
 
 #include "test_util.h"
 
+using bokeh::kPi;
+
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 bokeh::Psf psf_of(const bokeh::LensCharacter& lens, double coc, double fx = 0.0, double fy = 0.0, int size = 0)
 {
@@ -278,7 +280,7 @@ TEST(LensPsf, EnergyPerChannelAndSymmetry)
 
 TEST(LensPsf, OctantCopyIsTheFullComputation)
 {
-    // A radially symmetric PSF is computed over one octant and copied (core/lens_psf.cpp).
+    // A radially symmetric PSF is computed over one octant and copied (core/optics/lens_psf.cpp).
     // An anamorphic focus split of 1e-9 px breaks the symmetry test without changing the
     // physics past 1e-9: that PSF is computed pixel by pixel, and the two agree within
     // 1e-6 of the peak (only each pixel's sub-sample sum runs in another order), for an
@@ -316,7 +318,7 @@ TEST(LensPsf, OffIsTheFlatDiskKernel)
 {
     // Every effect off: the anti-aliased disk kernel of the flat defocus. The kernel's rim
     // is the exact pixel-area coverage; the PSF's is its sub-samples' under 16 px and a
-    // pixel-wide tent along the radius above (core/lens_psf.cpp). Under 16 px they differ
+    // pixel-wide tent along the radius above (core/optics/lens_psf.cpp). Under 16 px they differ
     // at rim pixels by up to 4 % of the disk's level, 1 % rms over the square (measured
     // 2.7 %, 0.5 % at 9 px); above, where the tent stands in for the pixel's area, by up to
     // 15 %, 3 % rms (measured 14 %, 2.4 % at 31 px). Under a pixel of CoC both are a point.

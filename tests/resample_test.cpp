@@ -1,6 +1,7 @@
 // Reduction and enlargement (resample.h) against plain brute-force references, their
 // properties, their relation to OIIO's resize, and the artifact metrics (metrics.h)
 // showing each artifact on the methods that have it.
+#include <bokeh/base.h>
 #include <bokeh/blur.h>
 #include <bokeh/metrics.h>
 #include <bokeh/resample.h>
@@ -22,7 +23,6 @@ using bokeh_test::max_difference;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 // Deterministic texture, `nc` channels in 0..1 with one bright pixel of 20.
 OIIO::ImageBuf texture(int w, int h, int nc = 4, int x0 = 0, int y0 = 0)

@@ -12,15 +12,17 @@
 
 #include <OpenImageIO/imagebufalgo.h>
 
+#include <bokeh/base.h>
 #include <bokeh/deep.h>
 #include <bokeh/defocus.h>
 #include <bokeh/truth.h>
 
 #include "test_util.h"
 
+using bokeh::kPi;
+
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 using Smp   = bokeh_test::DeepSample;
 using Pixel = bokeh_test::DeepPixel;

@@ -2,6 +2,7 @@
 // extrema, the fringe-width law of Kawase's "Bokeh Deep Dive" and its pseudo-diffraction
 // map, the exact defocused PSF of a circular pupil (Hankel and Lommel forms, Born & Wolf
 // 8.8) and the onion-ring contrast law (docs/methods/diffraction.md and optics.md).
+#include <bokeh/base.h>
 #include <bokeh/wave_optics.h>
 
 #include <gtest/gtest.h>
@@ -19,7 +20,6 @@ using namespace bokeh;
 
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 
 struct Extremum {
     double x;

@@ -1,8 +1,11 @@
-// aperture.h — an aperture as the distance from its centre to its edge at each polar
-// angle (the radial LUT of Kawase's "Bokeh Deep Dive": "distort the radial coordinate
-// with a LUT"), the description the lens-character PSFs draw with.
+// aperture.h — the shapes light is spread with. First the kernels (Kernel: box, Gaussian,
+// disk, bladed polygon or one of OIIO's filters, with a size) and their exact weights,
+// which every blur and the defocus's layers use; then the Aperture, an aperture as the
+// distance from its centre to its edge at each polar angle (the radial LUT of Kawase's
+// "Bokeh Deep Dive": "distort the radial coordinate with a LUT"), the description the
+// lens-character PSFs draw with.
 //
-// Coordinates are the pupil's, normalised so the circumscribed circle has radius 1, x
+// An Aperture's coordinates are the pupil's, normalised so the circumscribed circle has radius 1, x
 // right and y up; the polar angle phi is measured from +x, counter-clockwise. A point at
 // radius r and angle phi is inside when hole * edge(phi) <= r < edge(phi). Every shape
 // here is star-shaped about its centre (each ray from the centre crosses the edge once),
@@ -10,19 +13,95 @@
 // described by its outer edge along each ray (its notches filled).
 #pragma once
 
-#include <bokeh/blur.h>
+#include <bokeh/base.h>
 
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <OpenImageIO/imagebuf.h>
 
 namespace bokeh {
 
+enum class KernelShape {
+    Box,       ///< rectangle, exact area weights for fractional sizes
+    Gaussian,  ///< sigma = width / 4 as in oiiotool (or Kernel::sigma_px); anti-aliased:
+               ///< not truncated; hard edge: oiiotool's, truncated at the footprint
+    Disk,      ///< circle / ellipse
+    Polygon,   ///< N straight or curved blades
+    Filter,    ///< one of OIIO's named filters (Kernel::filter, oiio_filter_names()): the
+               ///< weights of make_kernel(filter, width, height), as oiiotool's
+               ///< `--blur:kernel=NAME`; exact methods only (separable ones by rows and
+               ///< columns, the others by FFT)
+};
+
+/// How the kernel's edge is sampled.
+enum class KernelEdge {
+    Antialiased,  ///< each pixel weighted by the area of it inside the shape
+    Hard,         ///< the shape sampled at whole-pixel offsets, OIIO's make_kernel rule:
+                  ///< disk, polygon and box 0/1 by the pixel centre, the Gaussian its
+                  ///< value there, cut at the footprint (|x| < width / 2)
+};
+
+struct Kernel {
+    KernelShape shape = KernelShape::Disk;
+    float width_px  = 0.0f;  ///< full footprint; 0 x 0 is the identity
+    float height_px = 0.0f;
+    float sigma_px  = 0.0f;  ///< Gaussian: > 0 overrides width / 4 (and height / 4)
+    int blades      = 6;     ///< Polygon: number of aperture blades (3..64)
+    float rotation_deg = 0.0f;  ///< Polygon: rotation; 0 puts a vertex straight up
+    float curvature    = 0.0f;  ///< Polygon: 0 straight blades .. 1 a circle
+    float hole         = 0.0f;  ///< Disk/Polygon: catadioptric hole, fraction of the radius
+    KernelEdge edge    = KernelEdge::Antialiased;
+    std::string filter;  ///< Filter: its name (triangle, lanczos3, ...; see oiio_filter_names())
+};
+/// The names KernelShape::Filter takes: OIIO's 2-D filters and make_kernel's "binomial",
+/// less those the other shapes are (box, gaussian, disk: theirs with a hard edge).
+std::vector<std::string> oiio_filter_names();
+
+/// A kernel's normalised weights on a (2 rx + 1) x (2 ry + 1) grid centred on (0, 0).
+struct KernelWeights {
+    int rx = 0, ry = 0;
+    std::vector<double> w;  ///< row-major, sum 1
+    double at(int dx, int dy) const { return w[size_t((dy + ry) * (2 * rx + 1) + (dx + rx))]; }
+    bool is_identity() const { return rx == 0 && ry == 0; }
+};
+
+/// The Gaussian's sigma along x and y in pixels: `sigma_px` if set, else width / 4 and
+/// height / 4 (oiiotool's width-to-sigma rule for `--blur:kernel=gaussian WxH`).
+std::pair<double, double> gaussian_sigma(const Kernel& k);
+
+/// Check a kernel's parameters; false + `err` naming the bad one.
+bool validate(const Kernel& k, std::string& err);
+
+/// Check an aperture as the depth-defocus methods take it: the kernel's shape at unit size
+/// (each depth's CoC sets the size) and the anamorphic aspect (bokeh height / width,
+/// 0.05..20). False + `err` naming the bad one.
+bool validate_aperture(const Kernel& aperture, float aspect, std::string& err);
+
+/// The exact weights of `k` (what every exact method computes with). Anti-aliased edges
+/// use 64 x 64 stratified samples per boundary pixel (area error below 3e-4 of a pixel).
+/// `nthreads` as for the blurs; the weights do not depend on it.
+KernelWeights kernel_weights(const Kernel& k, int nthreads = 0);
+
+/// One-dimensional weights of the separable shapes, centred, sum 1.
+std::vector<double> box_weights_1d(double width_px);
+std::vector<double> gaussian_weights_1d(double sigma_px);
+/// The box's or the Gaussian's weights along x and along y under its edge rule (each
+/// centred, sum 1): anti-aliased, box_weights_1d and gaussian_weights_1d; hard, OIIO's
+/// make_kernel("box" | "gaussian", width, height) factors: samples at whole offsets, the
+/// box's where |i| <= width / 2, the Gaussian's exp(-i^2 / 2 sigma^2) where |i| < width / 2
+/// (no width: 4 sigma); a separable Filter, its make_kernel weights' column and row sums.
+/// Shapes that are not separable (is_separable): {1}, {1}.
+std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kernel& k);
+/// Box, Gaussian, and the Filters OIIO calls separable (and binomial).
+bool is_separable(const Kernel& k);
+
+
 /// The edge distance of a polygon of `blades` blades with circumradius 1, at angle
 /// `phi_from_vertex` (radians) from one of its vertices: cos(pi/N) / cos(psi), psi the
 /// angle from the nearest edge normal; curved blades blend it toward the circle,
-/// d + curvature (1 - d). The rule blur.h's Polygon kernel draws with (core/kernel.cpp).
+/// d + curvature (1 - d). The rule the Polygon kernel draws with (core/aperture/kernel.cpp).
 double polygon_edge_distance(int blades, double curvature, double phi_from_vertex);
 
 class Aperture {

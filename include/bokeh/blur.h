@@ -1,5 +1,6 @@
-// blur.h — uniform (spatially constant) blur kernels: box, Gaussian, disk, bladed
-// polygon; their exact weights; and the brute-force reference they are tested against.
+// blur.h — uniform (spatially constant) blurs with the kernels of aperture.h (box,
+// Gaussian, disk, bladed polygon, OIIO's filters): the methods that compute them, their
+// effective kernels, and the brute-force reference they are tested against.
 //
 // Sizes are the kernel's full footprint in pixels (width x height, like oiiotool's
 // `--blur WxH`); width != height gives an anamorphic (elliptical) kernel. A kernel of
@@ -9,6 +10,9 @@
 // All channels of the image are filtered alike, as oiiotool's --blur does.
 #pragma once
 
+#include <bokeh/aperture.h>
+#include <bokeh/base.h>
+
 #include <functional>
 #include <string>
 #include <utility>
@@ -17,26 +21,6 @@
 #include <OpenImageIO/imagebuf.h>
 
 namespace bokeh {
-
-enum class KernelShape {
-    Box,       ///< rectangle, exact area weights for fractional sizes
-    Gaussian,  ///< sigma = width / 4 as in oiiotool (or Kernel::sigma_px); anti-aliased:
-               ///< not truncated; hard edge: oiiotool's, truncated at the footprint
-    Disk,      ///< circle / ellipse
-    Polygon,   ///< N straight or curved blades
-    Filter,    ///< one of OIIO's named filters (Kernel::filter, oiio_filter_names()): the
-               ///< weights of make_kernel(filter, width, height), as oiiotool's
-               ///< `--blur:kernel=NAME`; exact methods only (separable ones by rows and
-               ///< columns, the others by FFT)
-};
-
-/// How the kernel's edge is sampled.
-enum class KernelEdge {
-    Antialiased,  ///< each pixel weighted by the area of it inside the shape
-    Hard,         ///< the shape sampled at whole-pixel offsets, OIIO's make_kernel rule:
-                  ///< disk, polygon and box 0/1 by the pixel centre, the Gaussian its
-                  ///< value there, cut at the footprint (|x| < width / 2)
-};
 
 /// Which algorithm computes the blur. Auto, Exact and Reference give the kernel's exact
 /// result; the others approximate it, each at a cost that does not grow with the size
@@ -68,25 +52,6 @@ enum class BlurMethod {
     Separable,       ///< Gaussian, OIIO's separable filters: exact, by the separable convolution
 };
 
-/// Pixels outside the source's data window.
-enum class Border { Black, Clamp, Mirror };
-
-struct Kernel {
-    KernelShape shape = KernelShape::Disk;
-    float width_px  = 0.0f;  ///< full footprint; 0 x 0 is the identity
-    float height_px = 0.0f;
-    float sigma_px  = 0.0f;  ///< Gaussian: > 0 overrides width / 4 (and height / 4)
-    int blades      = 6;     ///< Polygon: number of aperture blades (3..64)
-    float rotation_deg = 0.0f;  ///< Polygon: rotation; 0 puts a vertex straight up
-    float curvature    = 0.0f;  ///< Polygon: 0 straight blades .. 1 a circle
-    float hole         = 0.0f;  ///< Disk/Polygon: catadioptric hole, fraction of the radius
-    KernelEdge edge    = KernelEdge::Antialiased;
-    std::string filter;  ///< Filter: its name (triangle, lanczos3, ...; see oiio_filter_names())
-};
-/// The names KernelShape::Filter takes: OIIO's 2-D filters and make_kernel's "binomial",
-/// less those the other shapes are (box, gaussian, disk: theirs with a hard edge).
-std::vector<std::string> oiio_filter_names();
-
 struct BlurOptions {
     Border border     = Border::Black;
     bool grow         = false;  ///< enlarge the data window by the kernel radius
@@ -110,50 +75,12 @@ struct BlurOptions {
     std::function<void(float)> progress;
 };
 
-/// A kernel's normalised weights on a (2 rx + 1) x (2 ry + 1) grid centred on (0, 0).
-struct KernelWeights {
-    int rx = 0, ry = 0;
-    std::vector<double> w;  ///< row-major, sum 1
-    double at(int dx, int dy) const { return w[size_t((dy + ry) * (2 * rx + 1) + (dx + rx))]; }
-    bool is_identity() const { return rx == 0 && ry == 0; }
-};
-
-/// The Gaussian's sigma along x and y in pixels: `sigma_px` if set, else width / 4 and
-/// height / 4 (oiiotool's width-to-sigma rule for `--blur:kernel=gaussian WxH`).
-std::pair<double, double> gaussian_sigma(const Kernel& k);
-
 /// BlurMethod::Reduced's automatic factor: the kernel's narrower side (a Gaussian: 4 sigma)
 /// over 25, so the reduced kernel is 25 pixels across (a polygon's: 30, for its corners),
 /// at most 8; 1 (the exact blur) when that is under 1.5 (kernels under 37.5 pixels, a
 /// polygon under 45), where the reduction saves too little.
 /// docs/benchmarks.md charts what it costs and loses.
 double reduction_factor(const Kernel& k);
-
-/// Check a kernel's parameters; false + `err` naming the bad one.
-bool validate(const Kernel& k, std::string& err);
-
-/// Check an aperture as the depth-defocus methods take it: the kernel's shape at unit size
-/// (each depth's CoC sets the size) and the anamorphic aspect (bokeh height / width,
-/// 0.05..20). False + `err` naming the bad one.
-bool validate_aperture(const Kernel& aperture, float aspect, std::string& err);
-
-/// The exact weights of `k` (what every exact method computes with). Anti-aliased edges
-/// use 64 x 64 stratified samples per boundary pixel (area error below 3e-4 of a pixel).
-/// `nthreads` as for the blurs; the weights do not depend on it.
-KernelWeights kernel_weights(const Kernel& k, int nthreads = 0);
-
-/// One-dimensional weights of the separable shapes, centred, sum 1.
-std::vector<double> box_weights_1d(double width_px);
-std::vector<double> gaussian_weights_1d(double sigma_px);
-/// The box's or the Gaussian's weights along x and along y under its edge rule (each
-/// centred, sum 1): anti-aliased, box_weights_1d and gaussian_weights_1d; hard, OIIO's
-/// make_kernel("box" | "gaussian", width, height) factors: samples at whole offsets, the
-/// box's where |i| <= width / 2, the Gaussian's exp(-i^2 / 2 sigma^2) where |i| < width / 2
-/// (no width: 4 sigma); a separable Filter, its make_kernel weights' column and row sums.
-/// Shapes that are not separable (is_separable): {1}, {1}.
-std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kernel& k);
-/// Box, Gaussian, and the Filters OIIO calls separable (and binomial).
-bool is_separable(const Kernel& k);
 
 /// The effective kernel of BlurMethod::Bands: the exact kernel's rows grouped into at
 /// most `bands` bands per half, each band one anti-aliased interval of the band's mean
@@ -196,7 +123,7 @@ OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOption
 /// below). NaN and infinite source values reach exactly the
 /// outputs whose kernel channel has weight on them, as for blur() (an infinity through a
 /// negative weight changes sign). opts.method and opts.bands are ignored; opts.iris applies.
-/// Computed in overlap-save tiles (core/blur_fft.cpp) in double.
+/// Computed in overlap-save tiles (core/blur/blur_fft.cpp) in double.
 bool convolve_image(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& kernel,
                     const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
 

@@ -2,12 +2,13 @@
 // layered scatter with occlusion, and the exact reference they are measured against.
 //
 // Every method turns the signed CoC map (lens.h) into a depth-of-field image whose out-of-
-// focus points take the aperture's shape (blur.h's Kernel: disk, bladed polygon with
+// focus points take the aperture's shape (aperture.h's Kernel: disk, bladed polygon with
 // curvature and hole; an anamorphic aspect), composites nearer over farther, and grows
 // the data window to hold bokeh that spread past it.
 #pragma once
 
-#include <bokeh/blur.h>
+#include <bokeh/aperture.h>
+#include <bokeh/base.h>
 #include <bokeh/image.h>
 #include <bokeh/lens.h>
 #include <bokeh/optics.h>

@@ -56,7 +56,7 @@ enum class DiffractionModel {
                ///< 4-16 % off the exact ones, docs/methods/diffraction.md)
 };
 
-/// (same_lens, core/lens_psf.cpp, compares every field: a new field goes there too.)
+/// (same_lens, core/optics/lens_psf.cpp, compares every field: a new field goes there too.)
 struct LensCharacter {
     LensPreset preset = LensPreset::Off;
     Aperture aperture;          ///< the stop's shape (round by default)

@@ -33,7 +33,7 @@
 //               pixel's footprint it covers (nearest at integer enlargements)
 //   ReducedBlur the talk's "reduced-buffer blur": a small Gaussian at low resolution
 //               (sigma = blur_sigma, default 0.5 source pixels, pixel-integrated weights
-//               as blur.h's gaussian_weights_1d), then bilinear
+//               as aperture.h's gaussian_weights_1d), then bilinear
 //   UpscaleBlur the talk's upscale-blur: bilinear 2x, the binomial blur [1 2 1] / 4 on the
 //               2x grid, bilinear to the final size
 //   UpscaleBlurFused   its fused form: the 2x image is the mean of 4 bilinear reads of the
@@ -84,7 +84,7 @@
 // elsewhere use double). Results are bit-identical for any thread count.
 #pragma once
 
-#include <bokeh/blur.h>
+#include <bokeh/base.h>
 
 #include <cstddef>
 #include <string>

@@ -26,7 +26,8 @@
 
 #include <OpenImageIO/imagebuf.h>
 
-#include <bokeh/blur.h>
+#include <bokeh/aperture.h>
+#include <bokeh/base.h>
 #include <bokeh/lens.h>
 
 namespace bokeh {

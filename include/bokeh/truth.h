@@ -4,7 +4,7 @@
 //
 // Geometry (the flat defocus's, so that methods compare): a point of signed CoC c (px,
 // negative in front of focus) spreads over the aperture scaled to |c| and, in front of
-// focus, point-reflected (core/defocus.cpp's aperture_weights). Equivalently the ray from
+// focus, point-reflected (core/defocus/defocus.cpp's aperture_weights). Equivalently the ray from
 // sensor position P through aperture point s (an offset of the aperture shape of diameter
 // 1 px, y down, height times the aspect) meets the depth of CoC c at image position
 //     Q(c) = P - s c,
@@ -50,7 +50,7 @@
 // Solid surfaces: an opaque point sample (alpha at least 1 - 1e-3) is met over half the
 // CoC gap to the nearest opaque point of each 4-neighbour pixel, where that gap is at most
 // 1 px, so a ray cannot slip between the tiles of a surface seen at a grazing angle
-// (core/truth.cpp, kConnectedCocPx).
+// (core/truth/truth.cpp, kConnectedCocPx).
 //
 // Limits: exact for the scene the file encodes (its opaque points joined as above) —
 // surfaces seen only from the side of the aperture (silhouettes' flanks) are not in it; alpha is opacity spread over the cell, not
@@ -66,7 +66,8 @@
 
 #include <OpenImageIO/imagebuf.h>
 
-#include <bokeh/blur.h>
+#include <bokeh/aperture.h>
+#include <bokeh/base.h>
 #include <bokeh/deep.h>
 #include <bokeh/image.h>
 #include <bokeh/lens.h>
@@ -129,7 +130,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& deep_src, const Tr
                    TruthReport* report = nullptr, int nthreads = 0);
 
 /// Area-uniform points of an aperture shape (disk or polygon with blades, rotation,
-/// curvature and hole; blur.h's Shape rules: a polygon's edge distance cos(pi/N) / cos(phi)
+/// curvature and hole; the Polygon kernel's rules: a polygon's edge distance cos(pi/N) / cos(phi)
 /// blended to the circle by the curvature, the hole the same shape scaled by `hole`).
 /// A point (u1, u2) of the unit square maps by angle (u1; a polygon's sectors take equal
 /// shares, and inside a sector the angle follows the tabulated inverse of the area's

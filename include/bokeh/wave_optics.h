@@ -189,7 +189,7 @@ bool pupil_psf_fft(PupilPsf& out, const Pupil& pupil, double max_slope_waves,
 Pupil round_pupil(const RadialWavefront& wavefront);
 
 // ---------------------------------------------------------------------------------------
-// Kawase's pseudo-diffraction map ("Bokeh Deep Dive"; core/diffraction_map.cpp)
+// Kawase's pseudo-diffraction map ("Bokeh Deep Dive"; core/optics/diffraction_map.cpp)
 //
 // A 2-D table of a made-up trigonometric fringe pattern, read the way the talk reads it:
 // U = log of the fringe width relative to the CoC (x = scale sqrt(lambda N / c)), V = radius

@@ -1,7 +1,7 @@
 // defocus_commands.cpp — `--defocus`: depth of field from an RGBA + Z image, with the
 // lens, depth modes, aperture, method and diagnostics as options. The work is
 // bokeh::defocus, bokeh::coc_map, bokeh::focal_plane_view and bokeh::layer_map
-// (core/defocus.cpp, core/lens.cpp); the options become bokeh::DefocusOptions in
+// (core/defocus/defocus.cpp, core/optics/lens.cpp); the options become bokeh::DefocusOptions in
 // plugins/shared/defocus_options.cpp, which the Python module shares.
 
 #include <bokeh/deep.h>

@@ -1,5 +1,5 @@
 // metrics_commands.cpp — `--diff`: how far the top image is from the one below it (the
-// reference), as RMSE, tone-mapped PSNR and max error (bokeh::compare, core/metrics.cpp).
+// reference), as RMSE, tone-mapped PSNR and max error (bokeh::compare, core/metrics/metrics.cpp).
 // Like oiiotool's --diff it consumes both images; unlike it, it does not fail on a
 // difference: `:fail=DB` makes it fail below a PSNR, for scripts.
 

@@ -1,5 +1,5 @@
 // optics_commands.cpp — `--bokeh`: the PSF of a lens with character at one signed CoC and
-// field position (bokeh::lens_psf, core/lens_psf.cpp), or a contact sheet of them across
+// field position (bokeh::lens_psf, core/optics/lens_psf.cpp), or a contact sheet of them across
 // defocus and field (`:sheet=1`, bokeh::bokeh_sheet_image); `:map=1` the light-beam map
 // (bokeh::beam_map_image). The PSF's data window is centred on (0, 0), so the result
 // serves as `--blur:kernel=image` or `--convolve`'s kernel.

@@ -2,7 +2,7 @@
 // (also N% and Wx0, as oiiotool spells it), `--resample WxH` (oiiotool's, bilinear or
 // nearest, unfiltered), `--reduce:z=min|max|nearest|mean N` and
 // `--enlarge:filter=NAME N`. The work is bokeh::resize, resample, reduce and enlarge
-// (core/resample.cpp).
+// (core/resample/resample.cpp).
 
 #include <bokeh/plugin.h>
 #include <bokeh/resample.h>

@@ -1,6 +1,6 @@
 // aperture_options.h — the rule the plugins that take an aperture (`--blur`, `--defocus`)
 // share for its options: which of them each `kernel=NAME` uses. It lives with those
-// plugins, not in the registry (core/plugin.cpp), which knows no kernel or algorithm.
+// plugins, not in the registry (core/plugin/plugin.cpp), which knows no kernel or algorithm.
 #pragma once
 
 #include <bokeh/blur.h>

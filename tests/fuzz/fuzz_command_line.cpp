@@ -8,7 +8,7 @@
 // target sits beside bokehtool in bin/), so every registered command and option is there.
 // A fresh Host a run: no state leaks between inputs.
 //
-// Instrumented: tools/bokehtool/{host,sequence,guard,help_markdown}.cpp and core/plugin.cpp;
+// Instrumented: tools/bokehtool/{host,sequence,guard,help_markdown}.cpp and core/plugin/plugin.cpp;
 // the rest of libOpenBokeh and the plugin modules are the Release build's.
 #include "host.h"
 

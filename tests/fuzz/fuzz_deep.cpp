@@ -18,7 +18,7 @@
 // * holding out never adds opacity, merging never removes it (flat alpha; to 1e-5 in float,
 //   4e-3 in half, where the pieces cut are rounded).
 //
-// Instrumented: core/deep.cpp; the rest of libOpenBokeh is the Release build's.
+// Instrumented: core/deep/deep.cpp; the rest of libOpenBokeh is the Release build's.
 #include <bokeh/deep.h>
 
 #include <cmath>

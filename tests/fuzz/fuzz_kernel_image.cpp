@@ -13,7 +13,7 @@
 // * a kernel of non-negative weights gives a weighted mean: every output value lies within
 //   the source channel's range, to 1e-4 of that range (iris mode included: a mean in exp space).
 //
-// Instrumented: core/io.cpp, io_budget.cpp, blur_fft.cpp and resample.cpp; the rest of
+// Instrumented: core/io/io.cpp, io_budget.cpp, blur_fft.cpp and resample.cpp; the rest of
 // libOpenBokeh is the Release build's.
 #include <bokeh/blur.h>
 #include <bokeh/io.h>

@@ -15,6 +15,7 @@
 #include "diffraction_task.h"
 #include "timing.h"
 
+#include <bokeh/base.h>
 #include <bokeh/wave_optics.h>
 
 #include <algorithm>
@@ -29,9 +30,10 @@ namespace bokeh_bench {
 
 using OIIO::Strutil::fmt::format;
 
+using bokeh::kPi;
+
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 constexpr double kFnumber = 2.0, kWavelengthNm = 550.0, kPitchMm = 0.006, kExtent = 1.25;
 
 // The mean of `profile` over each 1 px ring (area-weighted, `sub` sub-radii), R px radius.

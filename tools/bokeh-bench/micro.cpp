@@ -1,5 +1,5 @@
 // micro.cpp — bokeh-micro: Google Benchmark microbenchmarks behind the exact methods' cost
-// models (core/blur_spans.cpp, core/blur_separable.cpp, core/blur_fft.cpp).
+// models (core/blur/blur_spans.cpp, core/blur/blur_separable.cpp, core/blur/blur_fft.cpp).
 //
 // * BM_FftwTile: FFTW's in-place real 2-D transform of one tile, forward and back, with
 //   FFTW_ESTIMATE plans as blur_fft.cpp makes them: the ns per transformed point that

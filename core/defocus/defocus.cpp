@@ -1,0 +1,256 @@
+// defocus.cpp — depth defocus of a flat RGBA + Z image: the options checked, the frame
+// prepared (core/defocus/defocus_prepare.cpp) and the method dispatched.
+//
+// The methods, each in its own file:
+// * Layers (auto): the planner's layers (core/defocus/defocus_plan.cpp) blurred and composited by
+//   the layer engine (core/defocus/defocus_engine.cpp, where the layer model is written out).
+// * Reference: one full-resolution layer a distinct CoC through the same engine; and the
+//   brute-force scatter, every pixel with its own PSF (core/defocus/defocus_reference.cpp).
+// * Gather (core/defocus/defocus_gather.cpp): the source talk's first method as published,
+//   blurred copies at a few representative CoCs blended per pixel.
+// * Lens character (core/defocus/defocus_sprites.cpp): highlights drawn as the lens's PSF into the
+//   layer of their depth; sub-aperture views (core/defocus/defocus_views.cpp): the layers
+//   composited once a cell of the pupil; a deep image (core/defocus/defocus_deep.cpp): the layers
+//   come ready made from its samples.
+//
+// Known limits of the model: a flat image holds no background behind its foreground, so
+// the hidden background is extrapolated from its visible neighbours (deep images remove
+// this: deep.h); alpha is taken as coverage, so a semi-transparent pixel lets the layers
+// behind it through.
+
+#include <bokeh/defocus.h>
+#include <bokeh/parallel.h>
+
+#include "defocus/defocus_layers.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using namespace detail;
+
+namespace {
+
+using OIIO::Strutil::fmt::format;
+
+}  // namespace
+
+bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
+{
+    if (!validate_aperture(o.aperture, o.aspect, err))
+        return false;
+    if (o.layers < 0 || o.layers > 1024) {
+        err = format("layers {} is outside 0..1024 (0: automatic)", o.layers);
+        return false;
+    }
+    // Any bound 1..16: the buffers are powers of two, the largest up to it (reduction_for).
+    if (o.max_reduction < 1 || o.max_reduction > 16) {
+        err = format("max reduction {} is outside 1..16", o.max_reduction);
+        return false;
+    }
+    if (!(o.min_reduced_coc_px >= 0.0f && o.min_reduced_coc_px <= 256.0f)) {
+        err = format("minimum reduced CoC {} is outside 0..256", o.min_reduced_coc_px);
+        return false;
+    }
+    if (!(o.budget_db > 0.0f && o.budget_db <= 120.0f)) {
+        err = format("budget {} dB is outside 0..120", o.budget_db);
+        return false;
+    }
+    if (!std::isfinite(o.bloom_threshold) || !(o.bloom_gain >= 0.0f && o.bloom_gain <= 1e4f)) {
+        err = format("bloom threshold {} / gain {}: finite, gain 0..10000", o.bloom_threshold,
+                     o.bloom_gain);
+        return false;
+    }
+    if (!(std::abs(o.iris) <= 1000.0f)) {
+        err = format("iris {} is outside -1000..1000", o.iris);
+        return false;
+    }
+    if (o.depth_dilate_px < 0 || o.depth_dilate_px > 64) {
+        err = format("depth dilation {} px is outside 0..64", o.depth_dilate_px);
+        return false;
+    }
+    if (!(o.reference_step_px >= 1.0f / 64.0f && o.reference_step_px <= 8.0f)) {
+        err = format("reference step {} px is outside 1/64..8", o.reference_step_px);
+        return false;
+    }
+    if (o.supersample != 1 && o.supersample != 2) {
+        err = format("supersample {} is not 1 or 2", o.supersample);
+        return false;
+    }
+    if (o.supersample > 1 && o.method == DefocusMethod::Gather) {
+        err = "supersample enlarges layers as they are composited; the gather method has none (use "
+              "method=layers, auto or reference)";
+        return false;
+    }
+    if (o.aperture_views < 1 || o.aperture_views > 8) {
+        err = format("views {} is outside 1..8", o.aperture_views);
+        return false;
+    }
+    if (o.aperture_views > 1 && o.aperture.shape != KernelShape::Disk && o.aperture.shape != KernelShape::Polygon
+        && o.aperture.shape != KernelShape::Box) {
+        err = "views cut the pupil of a disk, polygon or box aperture; this one has no pupil edge to cut within";
+        return false;
+    }
+    if (o.aperture_views > 1 && o.method == DefocusMethod::Gather) {
+        err = "views cut the aperture for the layers' compositing; the gather method has no layers (use "
+              "method=layers, auto or reference)";
+        return false;
+    }
+    if (o.aperture_views > 1 && o.deep_output) {
+        err = "views average flat compositings; a deep result keeps one sample a layer (use output=image)";
+        return false;
+    }
+    if (o.supersample > 1 && o.deep_output) {
+        err = "supersample gives a flat image; a deep result is not supersampled";
+        return false;
+    }
+    return check_sprite_options(o, err);
+}
+
+const char* method_name(DefocusMethod m)
+{
+    switch (m) {
+    case DefocusMethod::Auto: return "auto";
+    case DefocusMethod::Layers: return "layers";
+    case DefocusMethod::Gather: return "gather";
+    case DefocusMethod::Reference: return "reference";
+    }
+    return "?";
+}
+
+namespace {
+
+// The result plane (RGBA over f.out) into dst: R, G, B(, A) as float, src's metadata.
+void write_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Plane& out, int nthreads)
+{
+    const int nc = f.img.has_alpha ? 4 : 3;
+    const OIIO::ROI region = scaled_roi(f.out, f.up);
+    OIIO::ImageSpec spec   = derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
+                                                              : std::vector<std::string>{ "R", "G", "B" },
+                                          region);
+    scale_display_window(spec, src.spec(), f.up);
+    record_lens(spec, f.lens);
+    reset_uninitialised(dst, spec);
+    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
+        for (int y = int(y0); y < int(y1); ++y) {
+            float* d       = static_cast<float*>(dst.pixeladdr(region.xbegin, region.ybegin + y));
+            const float* s = out.row(y);
+            for (int x = 0; x < out.w; ++x)
+                for (int c = 0; c < nc; ++c)
+                    d[size_t(x) * size_t(nc) + size_t(c)] = s[size_t(x) * 4 + size_t(c)];
+        }
+    });
+}
+
+}  // namespace
+
+bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
+             DefocusReport* report, int nthreads)
+{
+    if (src.initialized() && src.deep())
+        return defocus_deep(dst, src, opts, report, nthreads);
+    DefocusReport rep;
+    Frame f;
+    std::string err;
+    if (!prepare_frame(f, src, opts, rep, nthreads, err)) {
+        dst.errorfmt("defocus: {}", err);
+        return false;
+    }
+    if (opts.deep_output) {
+        dst.errorfmt("defocus: a deep result needs a deep image (--deepen makes one)");
+        return false;
+    }
+    rep.method = opts.method == DefocusMethod::Auto ? DefocusMethod::Layers : opts.method;
+    Plane out(f.out.width() * f.up, f.out.height() * f.up, 4);
+    std::fill_n(out.px.get(), out.size(), 0.0f);
+    switch (rep.method) {
+    case DefocusMethod::Gather:
+        gather(out, f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
+        from_iris_space(out, f.iris);  // the blend of levels, averaged in iris space
+        break;
+    case DefocusMethod::Reference:
+        if (!reference_layers(out, f, opts, rep, nthreads, err)) {
+            dst.errorfmt("defocus: {}", err);
+            return false;
+        }
+        break;
+    default: {
+        const Membership m  = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
+        rep.layer_coc_px    = m.coc_px;
+        rep.layer_reduction = m.reduction;
+        if (!composite_layers(out, f, m, opts, nthreads, err)) {
+            dst.errorfmt("defocus: {}", err);
+            return false;
+        }
+    }
+    }
+    if (rep.method != DefocusMethod::Gather)
+        fill_disocclusions(out, f, rep.max_coc_px, nthreads);
+    report_sprites(rep, f.sprites.get());
+    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}", method_name(rep.method),
+                         rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width() * f.up,
+                         f.out.height() * f.up,
+                         rep.nonfinite.total() ? format(", {} non-finite values replaced",
+                                                        rep.nonfinite.total())
+                                               : std::string(),
+                         sprite_summary(rep));
+
+    write_result(dst, src, f, out, nthreads);
+    if (report)
+        *report = std::move(rep);
+    return true;
+}
+
+bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
+                               int nthreads)
+{
+    DefocusOptions o  = opts;
+    o.lens_character  = false;  // every pixel is scattered here; none is taken out
+    o.method          = DefocusMethod::Reference;
+    o.supersample     = 1;      // at the frame's resolution
+    DefocusReport rep;
+    Frame f;
+    std::string err;
+    Plane out;
+    if (src.initialized() && src.deep()) {
+        dst.errorfmt("defocus scatter reference: a flat image only (--flatten a deep one)");
+        return false;
+    }
+    if (opts.aperture_views > 1) {
+        dst.errorfmt("defocus scatter reference: every pixel is scattered with the whole aperture; views do not apply");
+        return false;
+    }
+    if (!prepare_frame(f, src, o, rep, nthreads, err) || !scatter_reference(out, f, o, src.spec(), nthreads, err)) {
+        dst.errorfmt("defocus scatter reference: {}", err);
+        return false;
+    }
+    fill_disocclusions(out, f, rep.max_coc_px, nthreads);  // as the layered method ends
+    write_result(dst, src, f, out, nthreads);
+    return true;
+}
+
+bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts, int nthreads)
+{
+    DefocusReport rep;
+    Frame f;
+    std::string err;
+    if (!prepare_frame(f, src, opts, rep, nthreads, err)) {
+        dst.errorfmt("layer map: {}", err);
+        return false;
+    }
+    const Membership m = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
+    reset_uninitialised(dst, derived_spec(src.spec(), { "layer" }));
+    for (int y = f.data.ybegin; y < f.data.yend; ++y) {
+        float* d = static_cast<float*>(dst.pixeladdr(f.data.xbegin, y));
+        for (int x = f.data.xbegin; x < f.data.xend; ++x) {
+            const size_t i      = f.img.index(x, y);
+            d[x - f.data.xbegin] = float(m.lower[i]) + m.upper[i];
+        }
+    }
+    return true;
+}
+
+}  // namespace bokeh

@@ -1,0 +1,381 @@
+// defocus_layers.h — internal to the library: the layer machinery the flat and the deep
+// defocus share. The frame's preparation is in core/defocus/defocus_prepare.cpp, the plan of
+// layers in core/defocus/defocus_plan.cpp, the engine that blurs and composites them in
+// core/defocus/defocus_engine.cpp, the references in core/defocus/defocus_reference.cpp.
+//
+// A frame is a data window of premultiplied RGBA pixels, each with its signed CoC; a
+// membership puts every pixel in one layer or shares it between two neighbouring rungs of
+// a CoC ladder; composite_layers blurs each layer with the aperture at its CoC (in a
+// reduced buffer where the CoC allows) and composites the layers front over back. A deep
+// frame instead brings each layer's pixels ready made (layer_rgba): a deep pixel holds
+// samples in several layers, and what lies behind a nearer layer is known, not guessed.
+#pragma once
+
+#include <bokeh/defocus.h>
+
+#include "base/plane.h"
+#include "blur/convolve.h"
+#include "optics/psf_runs.h"
+
+#include <bokeh/parallel.h>
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace bokeh::detail {
+
+// A sprite's PSFs: the two CoC bins around its CoC times the (up to) four field bins
+// around its field position.
+constexpr int kSpritePsfs = 8;
+
+// A highlight scattered with the lens's PSF (core/defocus/defocus_sprites.cpp): the share of a
+// pixel's premultiplied colour taken out of the layers, drawn as the blend of the PSFs of
+// the two CoC bins around its CoC (weights linear in log CoC) and the field bins around its
+// field position (bilinear).
+struct Sprite {
+    int x = 0, y = 0;             // the pixel, full-resolution coordinates
+    size_t at = 0;                // its index in the data window (flat frames)
+    int layer = -1;               // deep frames: the layer it is drawn in (flat: by membership)
+    bool counted = true;          // deep frames: false for the second layer's part of a piece
+                                  // split between two (the report counts the piece once)
+    float coc_px = 0.0f;
+    float rgb[3] = { 0, 0, 0 };   // premultiplied colour taken from the pixel
+    std::shared_ptr<const Psf> psf[kSpritePsfs];  // null past the ones in use
+    std::shared_ptr<const PsfRuns> runs[kSpritePsfs];  // each psf as drawn (psf_runs.h)
+    int psf_id[kSpritePsfs] = { -1, -1, -1, -1, -1, -1, -1, -1 };  // order of first use (fixed, for merging)
+    float weight[kSpritePsfs] = {};
+};
+
+struct SpriteSet {
+    std::vector<Sprite> sprites;
+    int64_t candidates = 0;
+    float extent_px   = 0.0f;  // the largest half-size of a sprite's PSFs, frame px
+    size_t psfs       = 0;
+    int64_t drawn     = 0;     // sprites drawn, after merging those of a block (one shared
+                               // between two layers counted once)
+    double seconds    = 0.0;   // selection, PSFs and (added as they are drawn) scatter
+    LensCharacter lens;        // the defocus's lens (defocus_lens), pitch of the output's pixels
+};
+
+
+// Iris mode (docs/methods/iris.md) in the layers: colour is carried as
+// A (exp(k (colour / A - shift)) - 1) (premultiplied exp-space colour), so each layer
+// averages exp(k x) weighted by coverage; every layer comes back by
+// shift + log(1 + mean) / k before it is composited ("over" is linear). The shift (the
+// channel's minimum for k > 0, maximum for k < 0) keeps the exponents in
+// [0, kIrisMaxExponent], and the 1 taken away keeps a small k's digits, as blur's Iris does.
+struct IrisSpace {
+    float k = 0.0f;
+    std::array<float, 3> shift{};
+};
+
+struct Frame {
+    WorkImage img;           // premultiplied RGBA over the data window (iris: exp space)
+    std::vector<float> linear_rgba;  // iris mode: img.rgba before the exp; else empty
+    IrisSpace iris;
+    std::vector<float> coc;  // signed CoC per pixel of the data window
+    OIIO::ROI data, out;     // the data window; the output region
+    CocOptions lens;         // the CoC options as resolved (focus by pixel made a distance)
+    Border border = Border::Clamp;
+    // A deep frame: per layer, its premultiplied RGBA per data-window pixel (the pixel's
+    // samples in that layer composited front to back); img, coc and the membership's
+    // per-pixel shares are then unused.
+    std::vector<std::vector<float>> layer_rgba;
+    // A deep frame: per layer, the part of each pixel its own split samples leave visible
+    // (1 - (1 - u) a for a sample shared u / 1 - u with the nearer layer); the layer is
+    // divided by its blur, as a flat frame's layers are by their visibility.
+    std::vector<std::vector<float>> layer_vis;
+    // Lens character: the highlights taken out of img (null: off).
+    std::shared_ptr<SpriteSet> sprites;
+    // Pseudo-high resolution: the result plane is over `out` scaled by this (1 or 2).
+    int up = 1;
+
+    bool deep() const { return !layer_rgba.empty(); }
+
+    // Index of the data-window pixel that stands for (x, y) by the border rule; -1 when
+    // it is outside and empty.
+    int64_t source(int x, int y) const
+    {
+        const int sx = border_index(x, data.xbegin, data.xend, border);
+        const int sy = border_index(y, data.ybegin, data.yend, border);
+        if (sx == kOutside || sy == kOutside)
+            return -1;
+        return int64_t(size_t(sy - data.ybegin) * size_t(data.width()) + size_t(sx - data.xbegin));
+    }
+    // The source's premultiplied RGBA in linear light (not in iris space).
+    const std::vector<float>& linear() const { return linear_rgba.empty() ? img.rgba : linear_rgba; }
+};
+
+// Each pixel's place among the layers: its share 1 - upper in layer `lower` and `upper` in
+// layer lower + 1.
+struct Membership {
+    std::vector<float> coc_px;     // the layers' CoCs, ascending (front to back)
+    std::vector<int> reduction;    // each layer's buffer reduction
+    std::vector<uint16_t> lower;   // per data-window pixel (flat frames)
+    std::vector<float> upper;
+};
+
+/// `r` with its bounds times `up` (pseudo-high resolution's output region).
+inline OIIO::ROI scaled_roi(OIIO::ROI r, int up)
+{
+    r.xbegin *= up, r.xend *= up, r.ybegin *= up, r.yend *= up;
+    return r;
+}
+
+/// The display window of `spec` set to `like`'s times `up`.
+inline void scale_display_window(OIIO::ImageSpec& spec, const OIIO::ImageSpec& like, int up)
+{
+    spec.full_x      = like.full_x * up;
+    spec.full_y      = like.full_y * up;
+    spec.full_width  = like.full_width * up;
+    spec.full_height = like.full_height * up;
+}
+
+/// Check the options that do not depend on the image. False + `err` naming the option.
+bool check_defocus_options(const DefocusOptions& o, std::string& err);
+
+/// A flat image made ready for a method (core/defocus/defocus_prepare.cpp): the options checked,
+/// the pixels premultiplied and scrubbed (counted in `rep`), each pixel's signed CoC, the
+/// depth dilation, bloom, the sprites taken out, iris space, the output region; the
+/// report's CoC range. False + `err`.
+bool prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport& rep,
+                   int nthreads, std::string& err);
+
+/// Iris-space colour (4 or more channels, premultiplied) back to linear, in place (no-op
+/// when iris mode is off).
+void from_iris_space(Plane& p, const IrisSpace& iris);
+
+/// The Layers method's plan over the frame's CoC range [lo, hi]: rungs, each pixel's
+/// shares, each layer's reduction.
+Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
+
+/// The Reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC,
+/// all at full resolution.
+Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step);
+
+/// The Reference method (core/defocus/defocus_reference.cpp): one layer a distinct CoC over the
+/// report's CoC range, composited into `out`; the layers into `rep`. False + `err` when
+/// the range holds more than 65535 steps.
+bool reference_layers(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads,
+                      std::string& err);
+
+/// What the layers leave transparent where the source is opaque (background a flat image
+/// never held, behind a blurred foreground's fringe) filled with the source pixel itself,
+/// up to the coverage it had: keeps an opaque image opaque. Only for pixels with a CoC
+/// nearer than `farthest` (something can lie behind them).
+void fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads);
+
+/// The rungs of the layered method for CoCs `cocs` spanning [lo, hi]: one per distinct
+/// CoC (0.25 px bins) for scenes of at most 64 (when `exact_allowed`), else the budget's
+/// geometric ladder; a rung at 0 always.
+std::vector<float> layer_rungs(const std::vector<float>& cocs, const DefocusOptions& o, float lo,
+                               float hi, bool exact_allowed = true);
+
+/// Where CoC `c` falls among ascending `rungs`: share 1 - upper in rung `lower`, `upper` in
+/// the next, keeping the second moment (a disk's spread is proportional to its diameter).
+void share_between(float c, const std::vector<float>& rungs, uint16_t& lower, float& upper);
+
+/// Each rung's buffer reduction for the options' budget.
+std::vector<int> layer_reductions(const std::vector<float>& rungs, const DefocusOptions& o);
+
+/// The output region: the data window grown by the largest CoC radius `extreme_px` (and
+/// the spill of a reduced buffer), within the display window joined to the data window.
+OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& data, float extreme_px,
+                                const DefocusOptions& o);
+
+/// Blur every layer of `m` with the aperture at its CoC (with lens character, the lens's
+/// PSF at focus: lens_layer_kernels) and composite them, front over back, into `out`
+/// (RGBA over f.out). With `per_layer`, each blurred layer is written there instead (one
+/// RGBA plane over f.out per layer) and `out` is left alone. Progress (o.progress) goes
+/// from `progress_from` (what the caller's work before took) to 1. False + `err`.
+bool composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o, int nthreads,
+                      std::string& err, std::vector<Plane>* per_layer = nullptr, float progress_from = 0.0f);
+
+/// The display window's centre and half-diagonal, for field positions; a lens whose PSF
+/// does not change with the field (no cat's eye, field curvature, astigmatism or offset
+/// rings) gets every request at the centre, so the cache builds one PSF a CoC bin.
+struct FieldFrame {
+    double cx = 0.0, cy = 0.0, half_diagonal = 1.0;
+    bool used = true;
+    FieldFrame(const OIIO::ImageSpec& spec, const LensCharacter& lens);
+    /// The cache's field bins around pixel (x, y) (their centres, 1/8 of the half-diagonal
+    /// apart) and their bilinear weights: `n` of them (1 when the field is not used).
+    void bins_around(int x, int y, double fx[4], double fy[4], double w[4], int& n) const;
+};
+
+/// The lens of a defocus: o.lens with the defocus's own aperture, aspect and camera.
+bool defocus_lens(const DefocusOptions& o, const OIIO::ImageSpec& spec, LensCharacter& lens,
+                  std::string& err);
+
+/// Check the sprite options. False + `err` naming the option.
+bool check_sprite_options(const DefocusOptions& o, std::string& err);
+
+/// The sprite share of a pixel of premultiplied colour `rgb` (smoothstep in log luminance
+/// from threshold / 2 to threshold * 2), and its luminance.
+float sprite_share(const float* rgb, float threshold, float& luminance);
+
+/// Lens character on a flat frame: select the highlights of f.img (f.coc known), take
+/// their share out of f.img and fetch their PSFs into f.sprites. False + `err`.
+bool select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec, int nthreads,
+                    std::string& err);
+
+/// Fetch both PSFs of every sprite from `cache` and set the set's extent. False + `err`.
+/// `up` is the output's resolution over the frame's (2: PSFs at twice the CoC, box-folded).
+bool fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame& field, int up, int nthreads,
+                       std::string& err);
+
+/// Lens character in the in-focus layer (core/defocus/defocus_sprites.cpp): for each layer of
+/// `m` within kLensLayerMaxCoc_px of focus (the rung at CoC 0), the lens's PSF at its CoC on axis, at its
+/// buffer's reduction, as four kernels: R, G, B, and their mean (for coverage and
+/// visibility); empty for the layers that keep the aperture. False + `err`.
+bool lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, const Frame& f, const Membership& m,
+                        int nthreads, std::string& err);
+
+/// What a layer's sprites are multiplied by where they land: 1 over the layer's blurred
+/// visibility (composite_layers), as the layer's own colour is divided, so a sprite is the
+/// highlight's light in its layer exactly as the layer treats it. Kept only for the
+/// layer's tiles where a nearer layer hides some of it (elsewhere 1): the tile's reduced
+/// visibility, read at a sprite's pixels only as they are drawn (a layer's sprites cover a
+/// small part of its tiles).
+struct SpriteGain {
+    bool used = false;
+    int gx = 0, gy = 0, tile_px = 1, cols = 0, s = 1;  // the layer's tile grid and reduction
+    std::vector<OIIO::ROI> draw;  // per tile: the frame pixels the layer reaches (else 1)
+    std::vector<OIIO::ROI> low;   // per tile: the reduced pixels `visibility` covers
+    std::vector<Plane> visibility;  // per tile: the blurred visibility, 1 channel; empty: 1
+    /// The tile holding frame pixel (x, y), or -1 past the grid.
+    int tile_of(int x, int y) const
+    {
+        const int tx = floor_div(x - gx, tile_px), ty = floor_div(y - gy, tile_px);
+        return tx < 0 || ty < 0 || tx >= cols || ty * cols + tx >= int(draw.size()) ? -1 : ty * cols + tx;
+    }
+    /// The gain at frame pixel (x, y): 1 / visibility, read as `sample` reads colour
+    /// (0 where it is under 1e-6), 1 where the layer is not hidden.
+    float at(int x, int y) const;
+};
+
+/// Whether layer k holds a share of any sprite.
+bool layer_has_sprites(const Frame& f, const Membership& m, int k);
+
+/// Add the sprites of layer k (share by `m` for flat frames, their own layer for deep
+/// ones) into `target` (RGBA over f.out; colour only: a sprite is the light of a pixel
+/// whose coverage stays in the layer), times `gain` where given. `counted`: add them to
+/// the set's drawn count (false for the second and later sub-aperture views, which draw
+/// the same sprites again).
+void draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int k, int nthreads,
+                        const SpriteGain* gain = nullptr, bool counted = true);
+
+/// The report's sprite figures from `set` (null: lens character off), and its summary
+/// part (", N sprites, CoC a .. b px, t s"; empty when off).
+void report_sprites(DefocusReport& rep, const SpriteSet* set);
+std::string sprite_summary(const DefocusReport& rep);
+
+/// The brute-force reference (defocus_scatter_reference) over a prepared flat frame: grows
+/// f.out by the PSFs' reach and fills `out` (RGBA over f.out). False + `err`.
+bool scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec,
+                       int nthreads, std::string& err);
+
+/// The aperture at diameter |coc_px| / s (and the aspect), as exact weights; rotated half
+/// a turn in front of focus (core/defocus/defocus_engine.cpp).
+KernelWeights aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads);
+
+/// One sub-aperture of DefocusOptions::aperture_views: cell (i, j) of an n x n grid over
+/// the pupil's bounding square, and its share of the aperture's light (the views' shares
+/// sum to 1). n = 1: the whole aperture.
+struct ApertureView {
+    int n = 1, i = 0, j = 0;
+    double share = 1.0;
+};
+
+/// The views the options ask for, those that hold some of the aperture
+/// (core/defocus/defocus_views.cpp).
+std::vector<ApertureView> aperture_views(const DefocusOptions& o, int nthreads);
+
+/// `full`, the aperture at signed CoC `coc_px` over reduction s (aperture_weights),
+/// restricted to view `v` and scaled to sum 1; `full` itself for the whole aperture, an
+/// in-focus layer, or a kernel too small to hold any of the view.
+KernelWeights view_kernel(const KernelWeights& full, const ApertureView& v, float coc_px, float aspect, int s);
+
+/// Colour and coverage (channels 0-3) over the visibility in channel 4, in place; 0 where
+/// the visibility is 0.
+void divide_by_visibility(Plane& p);
+
+// The mean over s x s full-resolution pixels of `fetch(x, y, v)` (which adds nc values
+// into v), for the reduced pixels of `low`: reduced pixel (i, j) covers full resolution
+// [gx + i s, gx + (i + 1) s) x [gy + j s, ...).
+template<class Fetch>
+inline Plane reduce_region(const OIIO::ROI& low, int gx, int gy, int s, int nc, int nthreads, Fetch fetch)
+{
+    Plane p(low.width(), low.height(), nc);
+    const float inv = 1.0f / float(s * s);
+    parallel_for_chunks(0, p.h, 4, nthreads, [&](int64_t j0, int64_t j1) {
+        std::vector<float> v(static_cast<size_t>(nc));
+        for (int j = int(j0); j < int(j1); ++j) {
+            float* row = p.row(j);
+            for (int i = 0; i < p.w; ++i) {
+                std::fill(v.begin(), v.end(), 0.0f);
+                const int x0 = gx + (low.xbegin + i) * s, y0 = gy + (low.ybegin + j) * s;
+                for (int y = y0; y < y0 + s; ++y)
+                    for (int x = x0; x < x0 + s; ++x)
+                        fetch(x, y, v.data());
+                for (int c = 0; c < nc; ++c)
+                    row[size_t(i) * size_t(nc) + size_t(c)] = s == 1 ? v[size_t(c)] : v[size_t(c)] * inv;
+            }
+        }
+    });
+    return p;
+}
+
+// Bilinear read of plane `p` at (u, v) in its pixels (pixel centres at integers, clamped
+// to the plane); channels first .. first + count - 1 into `out`. Exact (a copy) on a pixel
+// centre.
+inline void bilinear(const Plane& p, float u, float v, float* out, int first = 0, int count = 4)
+{
+    const float fu = std::floor(u), fv = std::floor(v);
+    const int i0 = std::clamp(int(fu), 0, p.w - 1), i1 = std::clamp(int(fu) + 1, 0, p.w - 1);
+    const int j0 = std::clamp(int(fv), 0, p.h - 1), j1 = std::clamp(int(fv) + 1, 0, p.h - 1);
+    const float tx = u - fu, ty = v - fv;
+    const size_t nc = size_t(p.nc);
+    const float *a = p.row(j0) + size_t(i0) * nc + first, *b = p.row(j0) + size_t(i1) * nc + first;
+    const float *c = p.row(j1) + size_t(i0) * nc + first, *d = p.row(j1) + size_t(i1) * nc + first;
+    if (tx == 0.0f && ty == 0.0f) {
+        std::copy_n(a, count, out);
+        return;
+    }
+    for (int k = 0; k < count; ++k) {
+        const float top = a[k] + (b[k] - a[k]) * tx, bottom = c[k] + (d[k] - c[k]) * tx;
+        out[k]          = top + (bottom - top) * ty;
+    }
+}
+
+// Bilinear read of plane `p` (reduced pixels `low`, grid as in reduce_region) at the
+// centre of full-resolution pixel (x, y); 4 channels into `out`. Exact at s = 1.
+inline void sample(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y,
+                   float out[4])
+{
+    bilinear(p, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low.ybegin), out);
+}
+
+// The same at the centre of sub-pixel (sx, sy) of `up` x `up` in full-resolution pixel
+// (x, y): the enlargement of pseudo-high resolution.
+inline void sample_sub(const Plane& p, const OIIO::ROI& low, int gx, int gy, int s, int x, int y, int up,
+                       int sx, int sy, float out[4])
+{
+    bilinear(p, (float(x - gx) + (float(sx) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.xbegin),
+             (float(y - gy) + (float(sy) + 0.5f) / float(up)) / float(s) - 0.5f - float(low.ybegin), out);
+}
+
+/// The gather of hikita12312's "Implementing depth of field" (core/defocus/defocus_gather.cpp):
+/// blurred levels blended per pixel by its CoC, the front-edge blur; into `out` (RGBA over
+/// f.out). lo, hi: the frame's CoC range.
+void gather(Plane& out, const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
+
+/// The defocus of a deep image (core/defocus/defocus_deep.cpp); bokeh::defocus calls it.
+bool defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& o,
+                  DefocusReport* report, int nthreads);
+
+}  // namespace bokeh::detail

@@ -1,0 +1,237 @@
+// defocus_plan.cpp — which layers a layered defocus draws, and at which reductions: the
+// planner of the Layers method and the Reference's one layer per CoC.
+//
+// * Reference: every distinct CoC (quantised to reference_step_px) is its own layer, at
+//   full resolution, with the exact anti-aliased kernel. Exact for the model; slow.
+// * Layers: a scene of at most 64 distinct CoCs (0.25 px bins) gets one rung per CoC,
+//   exact but for the reductions; others get a geometric ladder (0, +-1, +-r, +-r^2, ...),
+//   a pixel between two rungs shared between them with weights that keep its kernel's
+//   second moment (so the mixed kernel has the spread of the true one). A layer whose CoC
+//   allows it is built in a buffer reduced by 2..16 (large bokeh lose little at low
+//   resolution). The accuracy budget sets r and the smallest reduced kernel q
+//   (settings_for_budget, from the defocus chart in docs/benchmarks.md), kernels of at
+//   most 2 q px unless at full resolution.
+//
+// Known limits: the budget's settings are steps measured on the synthetic scenes, not a
+// search for the cheapest plan that meets it; the ladder's rungs move with the CoC range,
+// so a focus pull can gain or lose a rung between frames.
+
+#include <bokeh/defocus.h>
+#include <bokeh/parallel.h>
+
+#include "defocus/defocus_layers.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace bokeh {
+
+using namespace detail;
+
+namespace {
+
+// The layered method's CoC ladder over [lo, hi]: 0, then +-1, +-r, +-r^2 ... on each side
+// up to the extreme, the last rung moved onto the extreme so it gets its exact kernel.
+std::vector<float> coc_ladder(float lo, float hi, double ratio)
+{
+    std::vector<float> rungs = { 0.0f };
+    for (int side = -1; side <= 1; side += 2) {
+        const float extreme = side < 0 ? -lo : hi;
+        if (extreme <= 0.0f)
+            continue;
+        for (double r = 1.0;; r *= ratio) {
+            if (r >= extreme * 0.999) {
+                rungs.push_back(float(side) * extreme);
+                break;
+            }
+            rungs.push_back(float(side * r));
+        }
+    }
+    std::sort(rungs.begin(), rungs.end());
+    return rungs;
+}
+
+// Shares of every pixel in the ladder `rungs` (share_between).
+Membership share_between_rungs(const Frame& f, std::vector<float> rungs, int nthreads)
+{
+    Membership m;
+    m.coc_px = std::move(rungs);
+    m.lower.resize(f.coc.size());
+    m.upper.resize(f.coc.size());
+    parallel_for_chunks(0, int64_t(f.coc.size()), 4096, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i)
+            share_between(f.coc[size_t(i)], m.coc_px, m.lower[size_t(i)], m.upper[size_t(i)]);
+    });
+    return m;
+}
+
+constexpr float kRungStep_px   = 0.25f;  // CoCs closer than this count as one
+constexpr size_t kMaxExactRungs = 64;
+
+// The frame's CoCs in bins `step` wide: each occupied bin's mean CoC (ascending), and
+// every pixel's bin among them. A bin holding one CoC value has it exactly.
+struct CocBins {
+    std::vector<float> mean_px;
+    std::vector<uint32_t> of_pixel;
+};
+CocBins coc_bins(const std::vector<float>& cocs, float lo, float hi, float step)
+{
+    const int64_t first = int64_t(std::floor(lo / step)), last = int64_t(std::floor(hi / step));
+    const size_t n = size_t(last - first + 1);
+    std::vector<double> sum(n, 0.0);
+    std::vector<int64_t> count(n, 0);
+    auto bin = [&](float c) { return size_t(std::clamp(int64_t(std::floor(c / step)) - first, int64_t(0), int64_t(n) - 1)); };
+    for (float c : cocs) {
+        const size_t b = bin(c);
+        sum[b] += c;
+        ++count[b];
+    }
+    CocBins r;
+    std::vector<uint32_t> index(n, 0);
+    for (size_t b = 0; b < n; ++b)
+        if (count[b]) {
+            index[b] = uint32_t(r.mean_px.size());
+            r.mean_px.push_back(float(sum[b] / double(count[b])));
+        }
+    r.of_pixel.resize(cocs.size());
+    for (size_t i = 0; i < cocs.size(); ++i)
+        r.of_pixel[i] = index[bin(cocs[i])];
+    return r;
+}
+
+// Layer settings an accuracy budget asks for: the ladder's ratio r and the smallest reduced
+// kernel diameter q. From the defocus chart (docs/benchmarks.md), the coarsest settings at
+// which every synthetic scene meets the budget: the ladder's spacing sets the error of
+// scenes of continuous depth (lights), q that of hard bokeh and silhouette edges in
+// reduced buffers (edges, giant: q = 16 gave 41.6 and 35.5 dB, q = 24 gives 92.8 and 42.0).
+struct LayerSettings {
+    double ratio;
+    float min_reduced_coc_px;
+};
+LayerSettings settings_for_budget(float budget_db)
+{
+    if (budget_db <= 30.0f) return { 2.0, 12.0f };
+    if (budget_db <= 40.0f) return { 1.5, 24.0f };
+    if (budget_db <= 50.0f) return { 1.125, 64.0f };
+    return { 1.0625, 96.0f };
+}
+
+// The reduction for a layer of CoC c: the largest power of two s <= max_reduction that
+// leaves a kernel of at least q reduced pixels.
+int reduction_for(float c, float q, int max_reduction)
+{
+    int s = 1;
+    while (s * 2 <= max_reduction && std::abs(c) / float(s * 2) >= q)
+        s *= 2;
+    return s;
+}
+
+// The smallest reduced kernel diameter: the user's, or the budget's.
+float min_reduced_coc_px(const DefocusOptions& o)
+{
+    return o.min_reduced_coc_px > 0.0f ? o.min_reduced_coc_px
+                                       : settings_for_budget(o.budget_db).min_reduced_coc_px;
+}
+
+}  // namespace
+
+// The reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC
+// (exact when a bin holds one value, as in scenes of few depths).
+Membership detail::one_layer_per_coc(const Frame& f, float lo, float hi, float step)
+{
+    CocBins bins = coc_bins(f.coc, lo, hi, step);
+    Membership m;
+    m.coc_px = std::move(bins.mean_px);
+    m.reduction.assign(m.coc_px.size(), 1);
+    m.lower.assign(bins.of_pixel.begin(), bins.of_pixel.end());
+    m.upper.assign(f.coc.size(), 0.0f);
+    return m;
+}
+
+Membership detail::layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads)
+{
+    Membership m = share_between_rungs(f, layer_rungs(f.coc, o, lo, hi), nthreads);
+    m.reduction  = layer_reductions(m.coc_px, o);
+    return m;
+}
+
+void detail::share_between(float c, const std::vector<float>& r, uint16_t& lower, float& upper)
+{
+    c        = std::clamp(c, r.front(), r.back());
+    size_t j = size_t(std::upper_bound(r.begin(), r.end(), c) - r.begin());
+    j        = j == 0 ? 0 : std::min(j - 1, r.size() - 1);
+    float u  = 0.0f;
+    if (j + 1 < r.size()) {
+        const double a2 = double(r[j]) * r[j], b2 = double(r[j + 1]) * r[j + 1];
+        u = float(std::clamp((double(c) * c - a2) / (b2 - a2), 0.0, 1.0));
+    }
+    lower = uint16_t(j);
+    upper = u;
+}
+
+std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const DefocusOptions& o, float lo, float hi,
+                                       bool exact_allowed)
+{
+    const LayerSettings set = settings_for_budget(o.budget_db);
+    double ratio            = set.ratio;
+    if (o.layers > 0) {
+        // The ratio that puts o.layers rungs (0 and both sides) over the range.
+        const double span = std::log(std::max(1.0f, -lo)) + std::log(std::max(1.0f, hi));
+        const int sides   = (lo < -1.0f ? 1 : 0) + (hi > 1.0f ? 1 : 0);
+        const int steps   = std::max(1, o.layers - 1 - sides);
+        ratio             = span > 0.0 ? std::exp(span / steps) : 2.0;
+        ratio             = std::max(ratio, 1.01);
+    }
+    // A scene of few depths (planes, a handful of lights) gets one rung per CoC it holds,
+    // so its layers are exact but for the reductions; others get the ladder.
+    std::vector<float> rungs;
+    if (o.layers == 0) {
+        if (exact_allowed && (hi - lo) / kRungStep_px < 1e6f) {
+            rungs = coc_bins(cocs, lo, hi, kRungStep_px).mean_px;
+            if (rungs.size() > kMaxExactRungs)
+                rungs.clear();
+        }
+        // A rung at 0, so no two neighbouring rungs lie on opposite sides of focus (the
+        // shares keep the second moment of one side's disks).
+        if (!rungs.empty() && !std::binary_search(rungs.begin(), rungs.end(), 0.0f))
+            rungs.insert(std::upper_bound(rungs.begin(), rungs.end(), 0.0f), 0.0f);
+    }
+    if (rungs.empty())
+        rungs = coc_ladder(lo, hi, ratio);
+    return rungs;
+}
+
+std::vector<int> detail::layer_reductions(const std::vector<float>& rungs, const DefocusOptions& o)
+{
+    std::vector<int> r;
+    const float q = min_reduced_coc_px(o);
+    for (float c : rungs)
+        r.push_back(reduction_for(c, q, o.max_reduction));
+    return r;
+}
+
+OIIO::ROI detail::defocus_output_region(const OIIO::ImageSpec& s, const OIIO::ROI& data, float extreme,
+                                const DefocusOptions& o)
+{
+    OIIO::ROI out = data;
+    if (o.grow) {
+        const OIIO::ROI display(s.full_x, s.full_x + s.full_width, s.full_y, s.full_y + s.full_height);
+        const OIIO::ROI limit = OIIO::roi_union(display, data);
+        // Half the largest kernel: how far bokeh spread past the data window; a layer in a
+        // buffer reduced by s reaches up to 1.5 s px farther (its box and the bilinear
+        // enlargement).
+        int spill = 0;
+        if (o.method == DefocusMethod::Auto || o.method == DefocusMethod::Layers) {
+            const int r = reduction_for(extreme, min_reduced_coc_px(o), o.max_reduction);
+            spill       = r > 1 ? (3 * r + 1) / 2 : 0;
+        }
+        const int gx = int(std::ceil(0.5f * extreme)) + spill;
+        const int gy = int(std::ceil(0.5f * extreme * o.aspect)) + spill;
+        out = OIIO::roi_intersection(grown(data, gx, gy), limit);
+    }
+    out.chbegin = 0;
+    out.chend   = 4;
+    return out;
+}
+
+}  // namespace bokeh
