@@ -42,11 +42,15 @@
 #include <tuple>
 #include <vector>
 
+#include <OpenImageIO/strutil.h>
+
 namespace bokeh {
 
 using namespace detail;
 
 namespace {
+
+using OIIO::Strutil::fmt::format;
 
 bool is_hexagon(const Kernel& k)
 {
@@ -126,27 +130,20 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
     return false;
 }
 
-}  // namespace
-
-bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
-          const BlurOptions& opts, OIIO::ROI roi, int nthreads)
+// The options blur() takes besides the kernel's own: false + `err`. Iris mode is
+// refused with the reduced buffer and with a filter of negative weights.
+bool check_blur_options(const Kernel& k, const BlurOptions& opts, BlurMethod method, int nthreads, std::string& err)
 {
-    std::string err;
-    BlurMethod method = BlurMethod::Exact;
-    if (!validate(k, err) || !resolve_method(k, opts, method, err)) {
-        dst.errorfmt("blur: {}", err);
-        return false;
-    }
     if (opts.bands < 0 || opts.bands > 64) {
-        dst.errorfmt("blur: bands {} is outside 0..64 (0: the method's choice)", opts.bands);
+        err = format("bands {} is outside 0..64 (0: the method's choice)", opts.bands);
         return false;
     }
     if (!std::isfinite(opts.iris) || std::abs(opts.iris) > 1000.0f) {
-        dst.errorfmt("blur: iris {} is outside -1000..1000", opts.iris);
+        err = format("iris {} is outside -1000..1000", opts.iris);
         return false;
     }
     if (!(opts.reduction == 0.0f || (opts.reduction >= 1.0f && opts.reduction <= 16.0f))) {
-        dst.errorfmt("blur: reduction {} is outside 1..16 (0: automatic)", opts.reduction);
+        err = format("reduction {} is outside 1..16 (0: automatic)", opts.reduction);
         return false;
     }
     if (method == BlurMethod::Reduced && opts.iris != 0.0f) {
@@ -154,8 +151,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         // enlargement. A block's mean of exp(k x) is its brightest pixel's, so every
         // highlight grows by up to a block: 20 dB against the exact iris blur (disk 51 px,
         // iris 0.3, the lights scene at 640 x 360), too far to offer.
-        dst.errorfmt("blur: method=reduced does not take iris (a block's mean of exp(k x) "
-                     "widens every highlight by up to a block); use an exact method");
+        err = "method=reduced does not take iris (a block's mean of exp(k x) widens every highlight by up to a "
+              "block); use an exact method";
         return false;
     }
     if (k.shape == KernelShape::Filter && opts.iris != 0.0f) {
@@ -163,46 +160,49 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         // to 0 or below, whose log is NaN.
         const KernelWeights w = kernel_weights(k, nthreads);
         if (std::any_of(w.w.begin(), w.w.end(), [](double v) { return v < 0.0; })) {
-            dst.errorfmt("blur: iris mode needs a kernel without negative weights ({} has some)", k.filter);
+            err = format("iris mode needs a kernel without negative weights ({} has some)", k.filter);
             return false;
         }
     }
-    if (!check_source(dst, src))
-        return false;
-    OIIO::ImageBuf holder;
-    const OIIO::ImageBuf& in = float_source(src, holder);
-    if (any_nonfinite(in, nthreads))
-        return blur_nonfinite(dst, in, { kernel_weights(k, nthreads) }, std::vector<int>(size_t(in.nchannels()), 0),
-                              opts.border, opts.iris != 0.0f,
-                              [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& replaced) {
-                                  return blur(out, replaced, k, opts, roi, nthreads);
-                              }, nthreads);
-    // Before the exact weights, which it does not need at full size.
-    if (method == BlurMethod::Reduced)
-        return blur_reduced(dst, in, k, opts, roi, nthreads);
+    return true;
+}
 
-    // method=fast below the reduction weighs its approximation (the parallelograms for a
-    // hexagon, the bands for other shapes) against the exact row spans by the cost models,
-    // and takes the exact blur where it costs less: small kernels (15 px: a disk's spans
-    // 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
-    // flat-topped and 54 upright; bokeh-bench). With the spans model and fast_band_count's
-    // band counts the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
-    // ~23 for an octagon, and with parallelograms_cost_ns (fitted on this machine) at ~9 px
-    // for the flat-topped hexagon and ~10 for the upright one, ~7 for the sheared sweep.
-    // The parallelograms are taken only from the size where they keep to the 40 dB budget
-    // (parallelograms_budget_px, on the narrow side: 15 px, stretched 21, sheared 27): the
-    // cost alone would take the sweep from 9 px at 36.5 dB, and the wide side would take a
-    // 27 x 9 hexagon at 36.9 dB.
-    // (Only up to 64 px across: the spans' cost grows with the size and is past every
-    // approximation's by then, and a large polygon's exact weights cost tens of ms.)
-    // Its bands, unless the user named a count: the fewest within its accuracy bound
-    // (fast_band_count; 8 bands measured 41-48 ms at 15-37 px, 4 bands 33-35).
-    // The budget holds at every size: a stretched hexagon past 64 px (81 x 15) too.
+// What a blur computes with: the method it settled on, the weights (the effective ones for
+// the approximations that have them), a separable kernel's 1-D factors, the three boxes,
+// the row spans, and how far the method reads around an output pixel.
+struct BlurPlan {
+    BlurMethod method = BlurMethod::Exact;
+    KernelWeights weights;
+    std::optional<std::pair<std::vector<double>, std::vector<double>>> factors;
+    std::vector<double> box3x, box3y;
+    std::vector<Span> spans;
+    int rx = 0, ry = 0;
+};
+
+// method=fast below the reduction weighs its approximation (the parallelograms for a
+// hexagon, the bands for other shapes) against the exact row spans by the cost models,
+// and takes the exact blur where it costs less: small kernels (15 px: a disk's spans
+// 27 ms against 8 bands' 41, a hexagon's 26-29 against the parallelograms' 33
+// flat-topped and 54 upright; bokeh-bench). With the spans model and fast_band_count's
+// band counts the crossings fall at ~21 px for a disk (4 bands), ~31 for a pentagon,
+// ~23 for an octagon, and with parallelograms_cost_ns (fitted on this machine) at ~9 px
+// for the flat-topped hexagon and ~10 for the upright one, ~7 for the sheared sweep.
+// The parallelograms are taken only from the size where they keep to the 40 dB budget
+// (parallelograms_budget_px, on the narrow side: 15 px, stretched 21, sheared 27): the
+// cost alone would take the sweep from 9 px at 36.5 dB, and the wide side would take a
+// 27 x 9 hexagon at 36.9 dB.
+// (Only up to 64 px across: the spans' cost grows with the size and is past every
+// approximation's by then, and a large polygon's exact weights cost tens of ms.)
+// Its bands, unless the user named a count: the fewest within its accuracy bound
+// (fast_band_count; 8 bands measured 41-48 ms at 15-37 px, 4 bands 33-35).
+// The budget holds at every size: a stretched hexagon past 64 px (81 x 15) too.
+void weigh_fast_against_exact(BlurPlan& plan, std::optional<KernelWeights>& exact_weights, int& bands,
+                               const Kernel& k, const BlurOptions& opts, const OIIO::ImageBuf& in, int nthreads)
+{
+    BlurMethod& method = plan.method;
     if (opts.method == BlurMethod::Fast && method == BlurMethod::Parallelograms
         && std::min(k.width_px, k.height_px) < parallelograms_budget_px(k))
         method = BlurMethod::Exact;
-    std::optional<KernelWeights> exact_weights;
-    int bands = opts.bands > 0 ? opts.bands : 8;
     if (opts.method == BlurMethod::Fast && std::max(k.width_px, k.height_px) <= 64.0f
         && (method == BlurMethod::Parallelograms || method == BlurMethod::Bands)) {
         exact_weights = kernel_weights(k, nthreads);
@@ -217,8 +217,18 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         if (spans_cost_ns(w, h, s) < approx_ns)
             method = BlurMethod::Exact;
     }
-    // The weights the method computes with (the effective ones for the approximations
-    // that have them) and how far the method reads around an output pixel.
+}
+
+// The plan for blurring `in` with `k` by `method` (resolve_method's), and the region
+// computed (`roi`, set when undefined). False + `err`.
+bool plan_blur(BlurPlan& plan, OIIO::ROI& roi, const Kernel& k, const BlurOptions& opts, BlurMethod method,
+               const OIIO::ImageBuf& in, int nthreads, std::string& err)
+{
+    plan.method = method;
+    std::optional<KernelWeights> exact_weights;
+    int bands = opts.bands > 0 ? opts.bands : 8;
+    weigh_fast_against_exact(plan, exact_weights, bands, k, opts, in, nthreads);
+    method = plan.method;
     // The parallelograms read no weights, only whether the kernel is a point (the
     // identity); the exact weights of a large polygon (supersampled) cost tens of ms.
     const bool no_weights = method == BlurMethod::Parallelograms && !exact_weights
@@ -227,23 +237,26 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     // factors, made once here, on every path but the brute force and the FFT, so their N^2
     // weights are made only for those (below, once the FFT is chosen): a Gaussian of sigma
     // 1024 made 8193^2 doubles, 1.2 GB, to read its reach.
-    const auto factors = is_separable(k) && method != BlurMethod::Reference && method != BlurMethod::Fft
-                             ? std::optional{ separable_weights(k) }
-                             : std::nullopt;
-    KernelWeights weights = no_weights ? KernelWeights{ 1, 1, {} }
-                            : factors  ? KernelWeights{ int(factors->first.size() / 2), int(factors->second.size() / 2), {} }
-                                  : method == BlurMethod::Bands && exact_weights
-                                      ? banded_from(*exact_weights, bands)
-                                  : method == BlurMethod::Bands        ? banded_weights(k, bands, nthreads)
-                                  : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
-                                  : exact_weights                      ? *exact_weights
-                                                                       : kernel_weights(k, nthreads);
-    int rx = weights.rx, ry = weights.ry;
-    std::vector<double> box3x, box3y;
+    plan.factors = is_separable(k) && method != BlurMethod::Reference && method != BlurMethod::Fft
+                       ? std::optional{ separable_weights(k) }
+                       : std::nullopt;
+    const auto& factors = plan.factors;
+    plan.weights = no_weights ? KernelWeights{ 1, 1, {} }
+                   : factors  ? KernelWeights{ int(factors->first.size() / 2), int(factors->second.size() / 2), {} }
+                         : method == BlurMethod::Bands && exact_weights
+                             ? banded_from(*exact_weights, bands)
+                         : method == BlurMethod::Bands        ? banded_weights(k, bands, nthreads)
+                         : method == BlurMethod::BilinearTaps ? bilinear_tap_weights(k)
+                         : exact_weights                      ? *exact_weights
+                                                              : kernel_weights(k, nthreads);
+    KernelWeights& weights = plan.weights;
+    int& rx = plan.rx;
+    int& ry = plan.ry;
+    rx = weights.rx, ry = weights.ry;
     if (method == BlurMethod::ThreeBoxes) {
-        std::tie(box3x, box3y) = gaussian_boxes(k);
-        rx    = 3 * int(box3x.size() / 2);
-        ry    = 3 * int(box3y.size() / 2);
+        std::tie(plan.box3x, plan.box3y) = gaussian_boxes(k);
+        rx    = 3 * int(plan.box3x.size() / 2);
+        ry    = 3 * int(plan.box3y.size() / 2);
     } else if (method == BlurMethod::Parallelograms && !weights.is_identity()) {
         rx = hexagon_reach(k, true);
         ry = hexagon_reach(k, false);
@@ -268,12 +281,10 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
     const bool by_spans = method == BlurMethod::Spans || method == BlurMethod::BilinearTaps
                           || (shape && method == BlurMethod::Exact);
-    const std::vector<Span> spans = by_spans && !weights.is_identity()
-                                        ? kernel_spans(reflected(weights))
-                                        : std::vector<Span>{};
+    plan.spans = by_spans && !weights.is_identity() ? kernel_spans(reflected(weights)) : std::vector<Span>{};
     if (shape && method == BlurMethod::Exact && !weights.is_identity())
-        method = fft_cheaper_than_spans(roi.width(), roi.height(), nc, rx, ry, spans) ? BlurMethod::Fft
-                                                                                       : BlurMethod::Spans;
+        method = fft_cheaper_than_spans(roi.width(), roi.height(), nc, rx, ry, plan.spans) ? BlurMethod::Fft
+                                                                                            : BlurMethod::Spans;
     // OIIO's separable filters likewise (rows and columns, any signs); the others by FFT.
     const bool separable = k.shape == KernelShape::Gaussian || (k.shape == KernelShape::Filter && is_separable(k));
     if (separable && method == BlurMethod::Exact && !weights.is_identity())
@@ -284,34 +295,55 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         method = BlurMethod::Fft;
     if (method == BlurMethod::Fft && weights.w.empty() && !weights.is_identity())
         weights = kernel_weights(k, nthreads);
+    plan.method = method;
     if (opts.method == BlurMethod::Fft && !std::isfinite(fft_ns())) {  // chosen, it is finite
-        dst.errorfmt("blur: method=fft takes kernels under 8192 px across; this one reaches {}x{}",
-                     2 * rx + 1, 2 * ry + 1);
+        err = format("method=fft takes kernels under 8192 px across; this one reaches {}x{}", 2 * rx + 1, 2 * ry + 1);
         return false;
     }
-    const std::vector<int> one_kernel(size_t(nc), 0);
-    // The exact box and shapes go straight from the source to `dst` (no padded plane);
-    // iris mode transforms a padded plane, so it keeps the plane path.
-    if (method == BlurMethod::Exact && opts.iris == 0.0f && !weights.is_identity()) {
-        if (k.shape == KernelShape::Box)
-            return box_direct(dst, in, roi, BoxPass(factors->first), BoxPass(factors->second), opts.border,
-                              nthreads);
-    }
-    if ((method == BlurMethod::Spans || method == BlurMethod::BilinearTaps) && opts.iris == 0.0f
-        && !weights.is_identity())
-        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry, spans, opts.border, nthreads);
-    if (method == BlurMethod::Separable && opts.iris == 0.0f && !weights.is_identity())
-        return separable_direct(dst, in, roi, factors->first, factors->second, opts.border, nthreads);
-    if (method == BlurMethod::Fft && opts.iris == 0.0f && !weights.is_identity())
-        return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads, opts.progress);
-    if (method == BlurMethod::ThreeBoxes && opts.iris == 0.0f && !weights.is_identity()) {
-        return three_boxes_direct(dst, in, roi, BoxPass(box3x), BoxPass(box3y), opts.border, nthreads);
-    }
-    if (method == BlurMethod::Bands && opts.iris == 0.0f && !weights.is_identity())
-        return convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
-    if (method == BlurMethod::Parallelograms && opts.iris == 0.0f && !weights.is_identity()
-        && hexagon_sweeps(k))
-        return hexagon_direct(dst, in, roi, k, rx, ry, opts.border, nthreads);
+    return true;
+}
+
+// The methods that go straight from the source to `dst` (no padded plane), when the plan
+// is one of them: true with their result in `done`. Iris mode transforms a padded plane,
+// so it keeps the plane path.
+bool blur_direct(bool& done, OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi, const BlurPlan& plan,
+                 const Kernel& k, const BlurOptions& opts, int nthreads)
+{
+    const BlurMethod method = plan.method;
+    const KernelWeights& weights = plan.weights;
+    const auto& factors = plan.factors;
+    if (opts.iris != 0.0f || weights.is_identity())
+        return false;
+    const std::vector<int> one_kernel(size_t(in.nchannels()), 0);
+    if (method == BlurMethod::Exact && k.shape == KernelShape::Box)
+        done = box_direct(dst, in, roi, BoxPass(factors->first), BoxPass(factors->second), opts.border, nthreads);
+    else if (method == BlurMethod::Spans || method == BlurMethod::BilinearTaps)
+        done = convolve_spans_direct(dst, in, roi, weights.rx, weights.ry, plan.spans, opts.border, nthreads);
+    else if (method == BlurMethod::Separable)
+        done = separable_direct(dst, in, roi, factors->first, factors->second, opts.border, nthreads);
+    else if (method == BlurMethod::Fft)
+        done = convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads, opts.progress);
+    else if (method == BlurMethod::ThreeBoxes)
+        done = three_boxes_direct(dst, in, roi, BoxPass(plan.box3x), BoxPass(plan.box3y), opts.border, nthreads);
+    else if (method == BlurMethod::Bands)
+        done = convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
+    else if (method == BlurMethod::Parallelograms && hexagon_sweeps(k))
+        done = hexagon_direct(dst, in, roi, k, plan.rx, plan.ry, opts.border, nthreads);
+    else
+        return false;
+    return true;
+}
+
+// The plan run on a padded plane of the source (iris mode, the brute force, the
+// parallelograms' passes, the plane paths of the other methods), finished into `dst`.
+bool blur_on_plane(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi, const BlurPlan& plan,
+                   const Kernel& k, const BlurOptions& opts, int nthreads)
+{
+    const BlurMethod method = plan.method;
+    const KernelWeights& weights = plan.weights;
+    const auto& factors = plan.factors;
+    const int rx = plan.rx, ry = plan.ry;
+    const std::vector<int> one_kernel(size_t(in.nchannels()), 0);
     // The parallelograms of an upright hexagon run on the transposed plane (blur_hexagon.cpp);
     // it is padded and finished transposed rather than transposed twice more.
     const bool transpose = method == BlurMethod::Parallelograms && !weights.is_identity()
@@ -326,6 +358,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         iris.k     = opts.iris;
         iris.alpha = in.spec().alpha_channel;
         iris.z     = in.spec().z_channel;
+        std::string err;
         if (!iris.forward(p, err, nthreads)) {
             dst.errorfmt("blur: {}", err);
             return false;
@@ -338,7 +371,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     case BlurMethod::ThreeBoxes:
         out = std::move(p);
         for (int pass = 0; pass < 3; ++pass)
-            out = box_blur(out, box3x, box3y, nthreads);
+            out = box_blur(out, plan.box3x, plan.box3y, nthreads);
         break;
     case BlurMethod::Parallelograms:
         out = hexagon_parallelograms(std::move(p), k, (transpose ? ry : rx) + extra, (transpose ? rx : ry) + extra,
@@ -357,6 +390,42 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (opts.iris != 0.0f)
         iris.inverse(out, nthreads);
     return finish(dst, in, roi, out, ox, oy, transpose, nthreads);
+}
+
+}  // namespace
+
+bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
+          const BlurOptions& opts, OIIO::ROI roi, int nthreads)
+{
+    std::string err;
+    BlurMethod method = BlurMethod::Exact;
+    if (!validate(k, err) || !resolve_method(k, opts, method, err)
+        || !check_blur_options(k, opts, method, nthreads, err)) {
+        dst.errorfmt("blur: {}", err);
+        return false;
+    }
+    if (!check_source(dst, src))
+        return false;
+    OIIO::ImageBuf holder;
+    const OIIO::ImageBuf& in = float_source(src, holder);
+    if (any_nonfinite(in, nthreads))
+        return blur_nonfinite(dst, in, { kernel_weights(k, nthreads) }, std::vector<int>(size_t(in.nchannels()), 0),
+                              opts.border, opts.iris != 0.0f,
+                              [&](OIIO::ImageBuf& out, const OIIO::ImageBuf& replaced) {
+                                  return blur(out, replaced, k, opts, roi, nthreads);
+                              }, nthreads);
+    // Before the exact weights, which it does not need at full size.
+    if (method == BlurMethod::Reduced)
+        return blur_reduced(dst, in, k, opts, roi, nthreads);
+    BlurPlan plan;
+    if (!plan_blur(plan, roi, k, opts, method, in, nthreads, err)) {
+        dst.errorfmt("blur: {}", err);
+        return false;
+    }
+    bool done = false;
+    if (blur_direct(done, dst, in, roi, plan, k, opts, nthreads))
+        return done;
+    return blur_on_plane(dst, in, roi, plan, k, opts, nthreads);
 }
 
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts,
