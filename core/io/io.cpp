@@ -530,6 +530,36 @@ void describe_output(OIIO::ImageSpec& spec, const WriteOptions& opts)
         spec.attribute(p.name().string(), p.type(), p.data());
 }
 
+// Each part's spec: its channels, names, alpha and depth, and pixel types (one format,
+// or per channel where they differ); a single part keeps `spec`'s names.
+static std::vector<OIIO::ImageSpec> part_specs(const OIIO::ImageSpec& spec, const std::vector<LayerPart>& parts,
+                                               const std::vector<OIIO::TypeDesc>& formats)
+{
+    std::vector<OIIO::ImageSpec> specs;
+    for (const LayerPart& part : parts) {
+        OIIO::ImageSpec ps = spec;
+        if (parts.size() > 1) {
+            ps.nchannels = int(part.channels.size());
+            ps.channelnames.clear();
+            for (int c : part.channels)
+                ps.channelnames.push_back(spec.channel_name(c));
+            ps.alpha_channel = ps.channelindex("A");
+            ps.z_channel     = ps.channelindex("Z");
+            ps.attribute("oiio:subimagename", part.name);
+        }
+        std::vector<OIIO::TypeDesc> pf;
+        for (int c : part.channels)
+            pf.push_back(formats[size_t(c)]);
+        ps.format = pf[0];
+        ps.channelformats.clear();
+        for (const OIIO::TypeDesc& t : pf)
+            if (t != pf[0])
+                ps.channelformats = pf;
+        specs.push_back(std::move(ps));
+    }
+    return specs;
+}
+
 bool write_image(const OIIO::ImageBuf& img, const std::string& path, const WriteOptions& opts,
                  std::string& err)
 {
@@ -613,28 +643,7 @@ bool write_image(const OIIO::ImageBuf& img, const std::string& path, const Write
         for (int c = 0; c < spec.nchannels; ++c)
             parts[0].channels.push_back(c);
     }
-    std::vector<OIIO::ImageSpec> specs;
-    for (const LayerPart& part : parts) {
-        OIIO::ImageSpec ps = spec;
-        if (parts.size() > 1) {
-            ps.nchannels = int(part.channels.size());
-            ps.channelnames.clear();
-            for (int c : part.channels)
-                ps.channelnames.push_back(spec.channel_name(c));
-            ps.alpha_channel = ps.channelindex("A");
-            ps.z_channel     = ps.channelindex("Z");
-            ps.attribute("oiio:subimagename", part.name);
-        }
-        std::vector<OIIO::TypeDesc> pf;
-        for (int c : part.channels)
-            pf.push_back(formats[size_t(c)]);
-        ps.format = pf[0];
-        ps.channelformats.clear();
-        for (const OIIO::TypeDesc& t : pf)
-            if (t != pf[0])
-                ps.channelformats = pf;
-        specs.push_back(std::move(ps));
-    }
+    const std::vector<OIIO::ImageSpec> specs = part_specs(spec, parts, formats);
 
     remove_stale_partials(path);
     const std::string tmp = partial_write_name(path);

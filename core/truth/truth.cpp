@@ -571,6 +571,56 @@ std::array<double, 2> ApertureSampler::operator()(double u1, double u2) const
 
 // --- the render ----------------------------------------------------------------------
 
+namespace {
+
+// A deep image with depth, colour and alpha, and rays the sampler can draw. False + `err`.
+bool check_truth_input(const OIIO::ImageBuf& src, const TruthOptions& opt, std::string& err)
+{
+    if (!src.initialized()) {
+        err = "no image";
+        return false;
+    }
+    if (!src.deep()) {
+        err = "needs a deep image, this one is flat (--deepen makes one)";
+        return false;
+    }
+    if (!detail::check_truth_rays(opt.aperture, opt.aspect, opt.spp, err))
+        return false;
+    const OIIO::ImageSpec& spec = src.spec();
+    if (channel_named(spec, { "Z" }) < 0) {
+        err = format("the deep image has no Z channel (has {})", OIIO::Strutil::join(spec.channelnames, ","));
+        return false;
+    }
+    if (channel_named(spec, { "R" }) < 0 || channel_named(spec, { "G" }) < 0 || channel_named(spec, { "B" }) < 0) {
+        err = format("the deep image has no R, G, B channels (has {})", OIIO::Strutil::join(spec.channelnames, ","));
+        return false;
+    }
+    if (channel_named(spec, { "A", "AR", "AG", "AB" }) < 0) {
+        err = "the deep image has no alpha channel (A, or AR, AG, AB)";
+        return false;
+    }
+    return true;
+}
+
+// The data window, grown (when asked) by the largest CoC radius `extreme` within the
+// display window joined to the data window.
+OIIO::ROI truth_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& data, float extreme,
+                              const TruthOptions& opt)
+{
+    if (!opt.grow)
+        return data;
+    const OIIO::ROI display(spec.full_x, spec.full_x + spec.full_width, spec.full_y, spec.full_y + spec.full_height);
+    const int gx = int(std::ceil(0.5f * extreme)), gy = int(std::ceil(0.5f * extreme * opt.aspect));
+    OIIO::ROI g  = data;
+    g.xbegin -= gx;
+    g.xend += gx;
+    g.ybegin -= gy;
+    g.yend += gy;
+    return OIIO::roi_intersection(g, OIIO::roi_union(display, data));
+}
+
+}  // namespace
+
 bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOptions& opt, TruthReport* report,
                    int nthreads)
 {
@@ -580,20 +630,9 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
         dst.errorfmt("truth: {}", why);
         return false;
     };
-    if (!src.initialized())
-        return fail("no image");
-    if (!src.deep())
-        return fail("needs a deep image, this one is flat (--deepen makes one)");
-    if (!detail::check_truth_rays(opt.aperture, opt.aspect, opt.spp, err))
+    if (!check_truth_input(src, opt, err))
         return fail(err);
     const OIIO::ImageSpec& spec = src.spec();
-    if (channel_named(spec, { "Z" }) < 0)
-        return fail(format("the deep image has no Z channel (has {})", OIIO::Strutil::join(spec.channelnames, ",")));
-    if (channel_named(spec, { "R" }) < 0 || channel_named(spec, { "G" }) < 0 || channel_named(spec, { "B" }) < 0)
-        return fail(format("the deep image has no R, G, B channels (has {})",
-                           OIIO::Strutil::join(spec.channelnames, ",")));
-    if (channel_named(spec, { "A", "AR", "AG", "AB" }) < 0)
-        return fail("the deep image has no alpha channel (A, or AR, AG, AB)");
 
     TruthReport rep;
     DeepOptions dopt;
@@ -629,18 +668,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     rep.max_coc_px = sc.coc_hi;
 
     const float extreme = std::max(std::abs(sc.coc_lo), std::abs(sc.coc_hi));
-    OIIO::ROI out       = sc.data;
-    if (opt.grow) {
-        const OIIO::ROI display(spec.full_x, spec.full_x + spec.full_width, spec.full_y,
-                                spec.full_y + spec.full_height);
-        const int gx = int(std::ceil(0.5f * extreme)), gy = int(std::ceil(0.5f * extreme * opt.aspect));
-        OIIO::ROI g  = sc.data;
-        g.xbegin -= gx;
-        g.xend += gx;
-        g.ybegin -= gy;
-        g.yend += gy;
-        out = OIIO::roi_intersection(g, OIIO::roi_union(display, sc.data));
-    }
+    OIIO::ROI out       = truth_output_region(spec, sc.data, extreme, opt);
     const int nc = opt.unknown ? 5 : 4;
     out.chbegin  = 0;
     out.chend    = nc;
