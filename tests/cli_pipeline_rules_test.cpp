@@ -9,7 +9,9 @@
 #include <array>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <regex>
+#include <sstream>
 
 #include <OpenColorIO/OpenColorIO.h>
 #include <OpenImageIO/filesystem.h>
@@ -484,4 +486,51 @@ TEST(FarmScripts, BenchAnswersHelp)
     RunResult r = run_shell(bench + " --help");
     EXPECT_EQ(r.status, 0) << r.err;
     EXPECT_NE(r.out.find("usage: bokeh-bench"), std::string::npos) << r.out;
+}
+
+// Every command that takes an aperture or a camera spells them alike: the same names, value
+// types, ranges and defaults in --defocus, --bokeh, --blur and --scene's truth (one table,
+// plugins/shared/aperture_options.h). Read off each command's help, as a user sees them.
+TEST(OptionTables, ApertureAndCameraOptionsAreTheSameInEveryCommand)
+{
+    // ":name=default  (type in [lo, hi]) help" -> "default  (type in [lo, hi])"
+    auto options_of = [](const std::string& command) {
+        const RunResult r = bokehtool("--help " + command);
+        EXPECT_EQ(r.status, 0) << r.err;
+        std::map<std::string, std::string> m;
+        const std::regex line(R"(^\s+:([a-z]+)=(\S*)\s+\(([^)]*)\))");
+        std::istringstream in(r.out);
+        for (std::string l; std::getline(in, l);) {
+            std::smatch s;
+            if (std::regex_search(l, s, line))
+                m[s[1]] = s[2].str() + "  (" + s[3].str() + ")";
+        }
+        return m;
+    };
+    const std::vector<std::string> commands = { "--defocus", "--bokeh", "--blur", "--scene" };
+    std::map<std::string, std::map<std::string, std::string>> table;
+    for (const std::string& c : commands)
+        table[c] = options_of(c);
+    const std::vector<std::string> shared = { "blades", "rotation", "curvature", "hole", "aspect",
+                                              "fstop",  "focal",    "sensor" };
+    int compared = 0;
+    for (const std::string& name : shared) {
+        std::string first_command, first;
+        for (const std::string& c : commands) {
+            const auto it = table[c].find(name);
+            if (it == table[c].end())
+                continue;
+            if (first_command.empty()) {
+                first_command = c;
+                first         = it->second;
+                continue;
+            }
+            ++compared;
+            EXPECT_EQ(it->second, first) << name << ": " << c << " against " << first_command;
+        }
+    }
+    // The aperture's shape in all four, the squeeze and the camera in the three lens commands.
+    EXPECT_EQ(compared, 4 * 3 + 4 * 2);
+    EXPECT_EQ(table["--defocus"]["fstop"], "2.8  (number in [0.5, 128])");
+    EXPECT_EQ(table["--bokeh"]["focal"], "50  (number in [1, 5000])");
 }

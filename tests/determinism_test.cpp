@@ -237,7 +237,7 @@ TEST_F(Determinism, LensPsf)
         "bokeh",
         { { "", format("--bokeh:{} 255", every), "psf_every_255" },
           { "", format("--bokeh:{} -45", every), "psf_every_front" },
-          { "", "--bokeh:lens=uncorrected:fstop=1.4:diffraction=seed:onion=0.15:catseye=0.5:field=0.3,-0.5 80",
+          { "", "--bokeh:lens=uncorrected:fstop=1.4:diffraction=pseudo:onion=0.15:catseye=0.5:field=0.3,-0.5 80",
             "psf_seed" },
           { "", "--bokeh:lens=achromat:correction=1.6:diffraction=exact:onionwaves=0.05:onionsharpness=3 100",
             "psf_bubble" },

@@ -472,7 +472,7 @@ TEST(LensPsf, EdgeLawFringeAtTheRim)
 
     // Kawase's pseudo-diffraction map in its place: unit energy, and a first fringe
     // within the talk's own stated 30 % of the exact law's position.
-    lens.diffraction   = bokeh::DiffractionModel::SeedMap;
+    lens.diffraction   = bokeh::DiffractionModel::PseudoMap;
     const bokeh::Psf q = psf_of(lens, coc);
     EXPECT_NEAR(channel_sum(q, 1), 1.0, 1e-5);
     const std::vector<double> qprof = radial_profile(q, 1);
@@ -482,7 +482,7 @@ TEST(LensPsf, EdgeLawFringeAtTheRim)
         if (qprof[r] > qprof[qbest])
             qbest = r;
     const double qd = coc / 2.0 - double(qbest);
-    std::cout << "seed map: first fringe at d = " << qd << " px, height " << qprof[qbest] / qplateau << " I_geo\n";
+    std::cout << "pseudo map: first fringe at d = " << qd << " px, height " << qprof[qbest] / qplateau << " I_geo\n";
     EXPECT_NEAR(qd, 0.861 * scale, 0.3 * 0.861 * scale + 1.0);
     EXPECT_GT(qprof[qbest] / qplateau, 1.05);
 }

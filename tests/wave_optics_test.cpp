@@ -620,7 +620,7 @@ double fringe_s(double rho, double w) { return (1 - rho) * std::sqrt(2 * w); }
 // wavelength (the lookup anchored there), reading the pattern's edge value.
 TEST(WaveOptics, SeedMapEnergyAndEdgeAnchor)
 {
-    const SeedDiffractionMap map;
+    const PseudoDiffractionMap map;
     for (double w : {2.0, 10.0, 100.0, 1000.0, 1e5}) {
         const double x = map.width_ratio(w);
         for (double ratio : {400.0 / 710.0, 550.0 / 710.0, 1.0}) {
@@ -648,16 +648,16 @@ TEST(WaveOptics, SeedMapEnergyAndEdgeAnchor)
 // lists them.
 TEST(WaveOptics, SeedMapFringePositionsAgainstExact)
 {
-    const SeedDiffractionMap map;
+    const PseudoDiffractionMap map;
     for (double w : {100.0, 1000.0}) {
-        const auto profile = seed_map_radial_profile(map, w);
+        const auto profile = pseudo_map_radial_profile(map, w);
         ASSERT_TRUE(profile);
         const auto in_s = [&](double s) { return (*profile)(1 - s / std::sqrt(2 * w)) * kPi; };
         const std::vector<Extremum> ex = extrema(in_s, 0.05, 2.8, 1e-3);
         ASSERT_GE(ex.size(), 6u) << w;
         for (size_t i = 0; i < 6; ++i) {
             const double err = ex[i].x / kEdgeTable[i].position - 1;
-            std::printf("seed map W20 %g: %s %zu at s %.4f (exact %.3f: %+.1f %%), height %.3f "
+            std::printf("pseudo map W20 %g: %s %zu at s %.4f (exact %.3f: %+.1f %%), height %.3f "
                         "(exact %.3f)\n",
                         w, ex[i].is_max ? "max" : "min", i / 2 + 1, ex[i].x, kEdgeTable[i].position,
                         100 * err, ex[i].value, kEdgeTable[i].height);
@@ -673,7 +673,7 @@ TEST(WaveOptics, SeedMapFringePositionsAgainstExact)
 // at 10 px per fringe.
 TEST(WaveOptics, SeedMapNyquistFade)
 {
-    const SeedDiffractionMap map;
+    const PseudoDiffractionMap map;
     const double w = 100, x = map.width_ratio(w);
     const auto swing = [&](double pixel_rho) {
         double lo = 1e9, hi = -1e9;
@@ -685,7 +685,7 @@ TEST(WaveOptics, SeedMapNyquistFade)
         return hi - lo;
     };
     const double resolved = swing(2 * x / 10), aliased = swing(2 * x / 1.5);
-    std::printf("seed map fringe swing: %.4f at 10 px per fringe, %.4f at 1.5 px\n", resolved, aliased);
+    std::printf("pseudo map fringe swing: %.4f at 10 px per fringe, %.4f at 1.5 px\n", resolved, aliased);
     EXPECT_GT(resolved, 0.2);
     EXPECT_LT(aliased, 0.1 * resolved);
 }
@@ -695,7 +695,7 @@ TEST(WaveOptics, SeedMapNyquistFade)
 // the clamped interior's tint is pulled toward white by (1 - 1/X)^2.
 TEST(WaveOptics, SeedMapSpectralWhite)
 {
-    const SeedDiffractionMap map;
+    const PseudoDiffractionMap map;
     std::vector<SpectralSample> flat, tinted;
     for (double nm = 400; nm <= 710; nm += 10) {
         flat.push_back({nm, {1.0, 1.0, 1.0}});
@@ -705,8 +705,8 @@ TEST(WaveOptics, SeedMapSpectralWhite)
     const double pitch = 0.006, fnum = 2.0;
     for (double coc_px : {40.0, 400.0}) {
         RgbRadialProfile a, b;
-        ASSERT_TRUE(seed_map_spectral_profile(a, map, coc_px, fnum, pitch, flat));
-        ASSERT_TRUE(seed_map_spectral_profile(b, map, coc_px, fnum, pitch, tinted));
+        ASSERT_TRUE(pseudo_map_spectral_profile(a, map, coc_px, fnum, pitch, flat));
+        ASSERT_TRUE(pseudo_map_spectral_profile(b, map, coc_px, fnum, pitch, tinted));
         for (const auto& v : a.values) {
             EXPECT_EQ(v[0], v[1]);
             EXPECT_EQ(v[1], v[2]);
@@ -725,11 +725,11 @@ TEST(WaveOptics, SeedMapSpectralWhite)
             EXPECT_NEAR(in[size_t(c)] * kPi, 1.0, 0.01) << coc_px << " channel " << c;
     }
     RgbRadialProfile bad;
-    EXPECT_FALSE(seed_map_spectral_profile(bad, map, 0.0, 2.0, pitch, flat));
-    EXPECT_FALSE(seed_map_spectral_profile(bad, map, 40.0, -2.0, pitch, flat));
-    EXPECT_FALSE(seed_map_spectral_profile(bad, map, 40.0, 2.0, pitch, {}));
+    EXPECT_FALSE(pseudo_map_spectral_profile(bad, map, 0.0, 2.0, pitch, flat));
+    EXPECT_FALSE(pseudo_map_spectral_profile(bad, map, 40.0, -2.0, pitch, flat));
+    EXPECT_FALSE(pseudo_map_spectral_profile(bad, map, 40.0, 2.0, pitch, {}));
     EXPECT_TRUE(bad.values.empty());
-    EXPECT_FALSE(seed_map_radial_profile(map, 0.0));
+    EXPECT_FALSE(pseudo_map_radial_profile(map, 0.0));
 }
 
 // The common factory: the four methods from the project's units, interchangeable (unit
@@ -739,11 +739,11 @@ TEST(WaveOptics, SeedMapSpectralWhite)
 // W20 = 12 / (8 x 2 x 0.0005) = 1500 waves; bad values give null.
 TEST(WaveOptics, DiffractionRadialProfileFactory)
 {
-    const SeedDiffractionMap map;
+    const PseudoDiffractionMap map;
     EXPECT_NEAR(defocus_waves_px(2000, 2.0, 500.0, 0.006), 1500.0, 1e-9);
     EXPECT_NEAR(radius_v_px(1000, 2.0, 500.0, 0.006), defocus_u(1500.0), 1e-9);  // the rim is at u
     for (DiffractionMethod m : {DiffractionMethod::None, DiffractionMethod::EdgeLaw,
-                                DiffractionMethod::SeedMap, DiffractionMethod::Exact}) {
+                                DiffractionMethod::PseudoMap, DiffractionMethod::Exact}) {
         const auto p = diffraction_radial_profile(m, 40.0, 2.0, 550.0, 0.006, &map);
         ASSERT_TRUE(p) << int(m);
         const auto energy = [&](double a, double b) {
@@ -754,7 +754,7 @@ TEST(WaveOptics, DiffractionRadialProfileFactory)
         EXPECT_NEAR(e, 1.0, m == DiffractionMethod::Exact ? 1e-2 : 5e-3) << p->name();
         EXPECT_NEAR(mean * kPi, 1.0, 0.03) << p->name();
     }
-    EXPECT_FALSE(diffraction_radial_profile(DiffractionMethod::SeedMap, 40.0, 2.0, 550.0, 0.006));
+    EXPECT_FALSE(diffraction_radial_profile(DiffractionMethod::PseudoMap, 40.0, 2.0, 550.0, 0.006));
     EXPECT_FALSE(diffraction_radial_profile(DiffractionMethod::EdgeLaw, 0.0, 2.0, 550.0, 0.006));
     EXPECT_FALSE(diffraction_radial_profile(DiffractionMethod::EdgeLaw, 40.0, -2.0, 550.0, 0.006));
     EXPECT_FALSE(diffraction_radial_profile(DiffractionMethod::EdgeLaw, 40.0, 2.0, 550.0, 0.0));

@@ -124,7 +124,7 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         return named(k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased
                          && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f)
                          && k.hole == 0.0f,
-                     "method=taps is the seed's 9x9 or 17x17 anti-aliased disk only");
+                     "method=taps is Kawase's 9x9 or 17x17 anti-aliased disk only");
     }
     err = "unknown method";
     return false;

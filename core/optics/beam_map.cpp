@@ -25,6 +25,7 @@
 // (row, V) from the area-weighted pupil, each column normalised by its own spread and
 // peak, summed over the spectrum to RGB.
 
+#include <bokeh/lens.h>
 #include <bokeh/optics.h>
 #include <bokeh/parallel.h>
 
@@ -118,8 +119,8 @@ bool validate_lens(const LensCharacter& l, std::string& err)
         double value, lo, hi;
     };
     const Range ranges[] = {
-        { "fstop", l.fstop, 0.5, 128.0 },
-        { "focal", l.focal_mm, 1.0, 5000.0 },
+        { "fstop", l.fstop, kMinFstop, kMaxFstop },
+        { "focal", l.focal_mm, kMinFocalMm, kMaxFocalMm },
         { "pixel pitch (mm)", l.pixel_pitch_mm, 1e-4, 1.0 },
         { "aspect", l.aspect, 0.05, 20.0 },
         { "monochromatic", l.monochromatic, -20.0, 20.0 },

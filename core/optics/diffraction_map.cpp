@@ -6,7 +6,7 @@
 // pattern stored as a 2-D map, U = log of the fringe width relative to the CoC, V =
 // radius; a made-up trigonometric pattern (the talk's own words: crude, inaccurate near
 // focus and at the centre) calibrated by w2 ~ 0.75 sqrt(Fe c lambda) for the second fringe.
-// The talk does not publish its function. Ours (seed_fringe_pattern) is the simplest
+// The talk does not publish its function. Ours (pseudo_fringe_pattern) is the simplest
 // periodic one that follows its description: an outermost fringe made separately (the
 // talk: "the outermost fringe is hard to generalise, so it is made separately and joined")
 // and a cosine of constant spacing w2 inside, decaying as 1 / (1 + fringes) and tapered off
@@ -57,7 +57,7 @@ double nyquist_weight(double period_samples) { return smoothstep01(0.5 * (period
 
 }  // namespace
 
-double seed_fringe_pattern(const SeedMapOptions& o, double s)
+double pseudo_fringe_pattern(const PseudoMapOptions& o, double s)
 {
     const double e = o.edge_value, A = o.first_amplitude, s1 = o.first_max_widths;
     if (s < 0)
@@ -73,9 +73,9 @@ double seed_fringe_pattern(const SeedMapOptions& o, double s)
     return 1 + taper * A * std::cos(2 * kPi * (s - s1)) / (1 + (s - s1));
 }
 
-SeedDiffractionMap::SeedDiffractionMap(const SeedMapOptions& options) : options_(options)
+PseudoDiffractionMap::PseudoDiffractionMap(const PseudoMapOptions& options) : options_(options)
 {
-    SeedMapOptions& o = options_;
+    PseudoMapOptions& o = options_;
     o.columns         = std::max(2, o.columns);
     o.rows            = std::max(8, o.rows);
     const int nu = o.columns, nv = o.rows;
@@ -92,10 +92,10 @@ SeedDiffractionMap::SeedDiffractionMap(const SeedMapOptions& options) : options_
         for (int i = 0; i < nv; ++i) {
             const double rho = rho_in + (i + 0.5) * drho;
             const double s   = (1 - rho) / f;
-            const double g   = seed_fringe_pattern(o, s);
+            const double g   = pseudo_fringe_pattern(o, s);
             double m         = 0;  // the local mean: the pattern averaged over one fringe width
             for (int k = 0; k < 16; ++k)
-                m += seed_fringe_pattern(o, s - 0.5 + (k + 0.5) / 16);
+                m += pseudo_fringe_pattern(o, s - 0.5 + (k + 0.5) / 16);
             m /= 16;
             val[size_t(i)] = m + w_tex * (g - m);
             avg[size_t(i)] = m;
@@ -112,22 +112,22 @@ SeedDiffractionMap::SeedDiffractionMap(const SeedMapOptions& options) : options_
     }
 }
 
-double SeedDiffractionMap::extent(double x) const { return 1 + 2 * x * options_.outside_widths; }
+double PseudoDiffractionMap::extent(double x) const { return 1 + 2 * x * options_.outside_widths; }
 
-double SeedDiffractionMap::clamp_radius(double x) const
+double PseudoDiffractionMap::clamp_radius(double x) const
 {
     return std::max(0.0, 1 - 2 * x * options_.band_widths);
 }
 
-double SeedDiffractionMap::width_ratio(double defocus_waves) const
+double PseudoDiffractionMap::width_ratio(double defocus_waves) const
 {
     return options_.width_scale / std::sqrt(8 * defocus_waves);
 }
 
-double SeedDiffractionMap::lookup(double rho, double x_ref, double wavelength_ratio,
+double PseudoDiffractionMap::lookup(double rho, double x_ref, double wavelength_ratio,
                                   double pixel_rho) const
 {
-    const SeedMapOptions& o = options_;
+    const PseudoMapOptions& o = options_;
     // The talk's horizontal lookup: fringe widths scale as sqrt(lambda).
     const double x = x_ref * std::sqrt(wavelength_ratio);
     rho            = std::abs(rho);
@@ -161,22 +161,22 @@ namespace {
 
 class SeedMapProfile final : public RadialProfile {
 public:
-    SeedMapProfile(const SeedDiffractionMap& map, double w, double pixel_rho)
+    SeedMapProfile(const PseudoDiffractionMap& map, double w, double pixel_rho)
         : map_(map), x_(map.width_ratio(w)), pixel_rho_(pixel_rho)
     {
     }
     double operator()(double rho) const override { return map_.lookup(rho, x_, 1.0, pixel_rho_); }
     double extent() const override { return map_.extent(x_); }
-    const char* name() const override { return "seed map"; }
+    const char* name() const override { return "pseudo-diffraction map"; }
 
 private:
-    const SeedDiffractionMap& map_;
+    const PseudoDiffractionMap& map_;
     double x_, pixel_rho_;
 };
 
 }  // namespace
 
-std::unique_ptr<RadialProfile> seed_map_radial_profile(const SeedDiffractionMap& map,
+std::unique_ptr<RadialProfile> pseudo_map_radial_profile(const PseudoDiffractionMap& map,
                                                        double defocus_waves, double pixel_rho)
 {
     if (!(defocus_waves > 0) || !std::isfinite(defocus_waves) || !(pixel_rho >= 0)
@@ -199,7 +199,7 @@ public:
 std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod method, double coc_px,
                                                           double fnumber, double wavelength_nm,
                                                           double pixel_pitch_mm,
-                                                          const SeedDiffractionMap* map)
+                                                          const PseudoDiffractionMap* map)
 {
     const double w = defocus_waves_px(coc_px, fnumber, wavelength_nm, pixel_pitch_mm);
     if (!(w > 0) || !std::isfinite(w) || !(wavelength_nm > 0))
@@ -207,8 +207,8 @@ std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod meth
     switch (method) {
     case DiffractionMethod::None: return std::make_unique<FlatProfile>();
     case DiffractionMethod::EdgeLaw: return edge_law_radial_profile(w);
-    case DiffractionMethod::SeedMap:
-        return map ? seed_map_radial_profile(*map, w, 2.0 / std::abs(coc_px)) : nullptr;
+    case DiffractionMethod::PseudoMap:
+        return map ? pseudo_map_radial_profile(*map, w, 2.0 / std::abs(coc_px)) : nullptr;
     case DiffractionMethod::Exact: {
         RadialWavefront wf;
         wf.defocus_waves = w;
@@ -218,7 +218,7 @@ std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod meth
     return nullptr;
 }
 
-bool seed_map_spectral_profile(RgbRadialProfile& out, const SeedDiffractionMap& map, double coc_px,
+bool pseudo_map_spectral_profile(RgbRadialProfile& out, const PseudoDiffractionMap& map, double coc_px,
                                double fnumber, double pixel_pitch_mm,
                                const std::vector<SpectralSample>& spectrum, int samples)
 {
@@ -227,7 +227,7 @@ bool seed_map_spectral_profile(RgbRadialProfile& out, const SeedDiffractionMap& 
     if (!(c_mm > 0) || !std::isfinite(c_mm) || !(fnumber > 0) || !std::isfinite(fnumber)
         || spectrum.empty() || samples < 16)
         return false;
-    const SeedMapOptions& o = map.options();
+    const PseudoMapOptions& o = map.options();
     const double lref_mm    = o.reference_nm * 1e-6;
     const double x_ref      = o.width_scale * std::sqrt(lref_mm * fnumber / c_mm);
     const double pixel_rho  = 2.0 / std::abs(coc_px);

@@ -124,12 +124,13 @@ bool resolve_coc_options(CocOptions& o, const OIIO::ImageBuf& src, std::string& 
         return true;
     }
     const Lens& l = o.lens;
-    if (!(l.focal_mm > 0.0 && l.focal_mm < 1e5) || !(l.fstop >= 0.5 && l.fstop < 1e4)
-        || !(l.sensor_width_mm > 0.0 && l.sensor_width_mm < 1e4)
+    if (!(l.focal_mm >= kMinFocalMm && l.focal_mm <= kMaxFocalMm) || !(l.fstop >= kMinFstop && l.fstop <= kMaxFstop)
+        || !(l.sensor_width_mm > 0.0 && l.sensor_width_mm < kMaxSensorWidthMm)
         || !(l.depth_unit_mm > 0.0 && std::isfinite(l.depth_unit_mm))) {
-        err = format("lens focal {} mm, f/{}, sensor {} mm, unit {} mm: each must be positive "
-                     "and sensible (f-stop >= 0.5)",
-                     l.focal_mm, l.fstop, l.sensor_width_mm, l.depth_unit_mm);
+        err = format("lens focal {} mm, f/{}, sensor {} mm, unit {} mm: focal {:g}..{:g} mm, f/{:g}..{:g}, a "
+                     "positive sensor width and depth unit",
+                     l.focal_mm, l.fstop, l.sensor_width_mm, l.depth_unit_mm, kMinFocalMm, kMaxFocalMm, kMinFstop,
+                     kMaxFstop);
         return false;
     }
     if (!(o.infocus_range >= 0.0) || !std::isfinite(o.infocus_range)) {

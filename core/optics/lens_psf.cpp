@@ -22,7 +22,7 @@
 //     is at |r(hi)|; the intensity near it is the plateau density times the Fresnel edge
 //     law F(v) (core/optics/wave_optics.cpp), v = sqrt(2) d / sqrt(l N c_eff), d the distance
 //     across the edge in image px and c_eff = 2 |dr/ds| at the rim (docs/methods/optics.md, "Diffraction at the rim").
-//     DiffractionModel::SeedMap puts the talk's pseudo-diffraction map in place of F: pi
+//     DiffractionModel::PseudoMap puts the talk's pseudo-diffraction map in place of F: pi
 //     times its lookup at rho = 1 - d / (c_eff / 2), at the wavelength's own fringe width.
 //     Where the rim is not the outermost ray (a caustic), the law does not hold and the
 //     rim stays geometric. The fringe factor is F's mean over a pixel-wide box (from F's

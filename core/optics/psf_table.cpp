@@ -240,11 +240,11 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
             if (-t.d_out + i * RgbTable::kFringeStep > 0.0)
                 for (int c = 0; c < 3; ++c)
                     t.fringe[(size_t(j) * t.nd + i) * 3 + c] = 1.0f;
-    // DiffractionModel::SeedMap: the seed's pseudo-diffraction map (core/optics/diffraction_map.cpp),
+    // DiffractionModel::PseudoMap: the talk's pseudo-diffraction map (core/optics/diffraction_map.cpp),
     // relative to its flat level 1 / pi, in place of the edge law.
-    const bool seed = lens.diffraction == DiffractionModel::SeedMap;
-    static const SeedDiffractionMap seed_map;
-    const SeedDiffractionMap* map = seed ? &seed_map : nullptr;
+    const bool pseudo = lens.diffraction == DiffractionModel::PseudoMap;
+    static const PseudoDiffractionMap pseudo_map;
+    const PseudoDiffractionMap* map = pseudo ? &pseudo_map : nullptr;
     const EdgeLawTable& law = edge_law_table();
     // The talk's pseudo-diffraction map: per distance step, then a pixel-wide box.
     constexpr int kSubsamples = 8;
@@ -289,8 +289,8 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
             const double scale = fringe_scale_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm);
             // The talk's pseudo-diffraction map at this wavelength's own fringe-width ratio: its horizontal
             // lookup at (l / l_ref)^0.5 is the width ratio's own sqrt(l) scaling.
-            const double seed_width
-                = seed ? map->width_ratio(defocus_waves_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm))
+            const double pseudo_width
+                = pseudo ? map->width_ratio(defocus_waves_px(c_eff, lens.fstop, smp.wavelength_nm, lens.pixel_pitch_mm))
                        : 0.0;
             double pw[3];
             for (int c = 0; c < 3; ++c) {
@@ -304,10 +304,10 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
             for (int i = 0; i < t.nd; ++i) {
                 const double d_l = -t.d_out + i * RgbTable::kFringeStep + r - std::abs(r_mid);
                 double f         = 0.0;
-                if (seed) {
+                if (pseudo) {
                     for (int k = 0; k < kSubsamples; ++k) {
                         const double d_k = d_l + ((k + 0.5) / kSubsamples - 0.5) / g.kappa;
-                        f += kPi * map->lookup(1.0 - d_k * g.kappa / (0.5 * c_eff), seed_width);
+                        f += kPi * map->lookup(1.0 - d_k * g.kappa / (0.5 * c_eff), pseudo_width);
                     }
                     f /= kSubsamples;
                 } else {

@@ -87,7 +87,7 @@ double reduction_factor(const Kernel& k);
 /// area and centre. Same energy as the exact kernel.
 KernelWeights banded_weights(const Kernel& k, int bands, int nthreads = 0);
 
-/// The effective kernel of BlurMethod::BilinearTaps: what the seed's bilinear fetches
+/// The effective kernel of BlurMethod::BilinearTaps: what Kawase's bilinear fetches
 /// (one per 2 x 2 group of pixels, at the group's centroid, weighted by its area) add up
 /// to. `fetches` receives the number that carry weight (25 for 9 x 9; 77 of the
 /// 81 for 17 x 17, whose corner groups miss the disk).

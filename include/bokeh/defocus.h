@@ -1,4 +1,4 @@
-// defocus.h — depth defocus of a flat RGBA + Z image: the seed's layered gather, a
+// defocus.h — depth defocus of a flat RGBA + Z image: the layered gather of hikita12312's blog post, a
 // layered scatter with occlusion, and the exact reference they are measured against.
 //
 // Every method turns the signed CoC map (lens.h) into a depth-of-field image whose out-of-
@@ -24,7 +24,7 @@ namespace bokeh {
 enum class DefocusMethod {
     Auto,       ///< Layers with the settings the accuracy budget needs
     Layers,     ///< layered scatter with occlusion, large CoCs in reduced buffers
-    Gather,     ///< the seed 001 method as published (blurred levels, masks, edge blur)
+    Gather,     ///< hikita12312's method as published (blurred levels, masks, edge blur)
     Reference,  ///< one full-resolution layer per distinct CoC value, exact kernels
 };
 

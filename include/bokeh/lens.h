@@ -26,6 +26,15 @@ enum class DepthMode {
 
 /// A physical thin lens. Lengths of the lens in millimetres; distances in the depth
 /// channel's unit, `depth_unit_mm` millimetres each (1000 for metres).
+/// The ranges a camera's numbers are held to: one table for the thin lens, the lens
+/// character and every command that takes a camera (f-number; focal length and film-back
+/// width in mm). f/128 is past the smallest stop of any photographic lens; 1 and 5000 mm
+/// past the shortest fisheye and the longest lens made for a camera. Outside them a CoC or
+/// a PSF would be sensible arithmetic but no camera a user could be matching.
+inline constexpr double kMinFstop = 0.5, kMaxFstop = 128.0;
+inline constexpr double kMinFocalMm = 1.0, kMaxFocalMm = 5000.0;
+inline constexpr double kMaxSensorWidthMm = 1e4;
+
 struct Lens {
     double focal_mm        = 50.0;
     double fstop           = 2.8;

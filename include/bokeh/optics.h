@@ -52,7 +52,7 @@ enum class LensPreset {
 enum class DiffractionModel {
     Off,       ///< geometric rim
     EdgeLaw,   ///< the exact Fresnel straight-edge law at the rim
-    SeedMap,   ///< Kawase's pseudo-diffraction map ("Bokeh Deep Dive"; its fringes sit
+    PseudoMap,   ///< Kawase's pseudo-diffraction map ("Bokeh Deep Dive"; its fringes sit
                ///< 4-16 % off the exact ones, docs/methods/diffraction.md)
 };
 

@@ -201,7 +201,7 @@ Pupil round_pupil(const RadialWavefront& wavefront);
 // Use it to compare with the exact PSF (the talk asks for a better approximation: the edge
 // law answers, with the numbers in docs/methods/diffraction.md).
 
-struct SeedMapOptions {
+struct PseudoMapOptions {
     int columns              = 64;      ///< U samples (log fringe width / CoC)
     int rows                 = 256;     ///< V samples across a column's band
     double min_width_ratio   = 1e-4;    ///< x at the map's large-bokeh end
@@ -221,12 +221,12 @@ struct SeedMapOptions {
 /// maximum the outermost fringe, e + (1 + A - e) sin^2(pi s / (2 s1)); beyond it
 /// 1 + A cos(2 pi (s - s1)) / (1 + (s - s1)): constant spacing of one fringe width, tapered
 /// to 1 (smoothstep) over the band's last two fringe widths.
-double seed_fringe_pattern(const SeedMapOptions& options, double s);
+double pseudo_fringe_pattern(const PseudoMapOptions& options, double s);
 
-class SeedDiffractionMap {
+class PseudoDiffractionMap {
 public:
-    explicit SeedDiffractionMap(const SeedMapOptions& options = {});
-    const SeedMapOptions& options() const { return options_; }
+    explicit PseudoDiffractionMap(const PseudoMapOptions& options = {});
+    const PseudoMapOptions& options() const { return options_; }
     /// Monochrome intensity at rho = r / R, unit energy (int 2 pi rho I drho = 1), for a
     /// bokeh whose fringe width relative to its CoC is `width_ratio_ref` at the reference
     /// wavelength, seen at `wavelength_ratio` = lambda / lambda_ref: the talk's horizontal
@@ -244,7 +244,7 @@ public:
     double width_ratio(double defocus_waves) const;
 
 private:
-    SeedMapOptions options_;
+    PseudoMapOptions options_;
     std::vector<float> value_, mean_;  // columns x rows, column-major; normalised
 };
 
@@ -252,23 +252,23 @@ private:
 enum class DiffractionMethod {
     None,     ///< the flat disc of geometric optics (1 / pi inside rho < 1)
     EdgeLaw,  ///< edge_law_radial_profile
-    SeedMap,  ///< seed_map_radial_profile (needs a map), faded at the output's Nyquist limit
+    PseudoMap,  ///< pseudo_map_radial_profile (needs a map), faded at the output's Nyquist limit
     Exact,    ///< exact_radial_profile (pure defocus; seconds for large bokeh, see the docs)
 };
 
 /// One wavelength's profile of a round bokeh of CoC `coc_px` pixels (the sign ignored) at an
 /// f-number, wavelength (nm) and pixel pitch (mm), by `method`. Null on bad values, or for
-/// SeedMap without a map (which must outlive the profile).
+/// PseudoMap without a map (which must outlive the profile).
 std::unique_ptr<RadialProfile> diffraction_radial_profile(DiffractionMethod method, double coc_px,
                                                           double fnumber, double wavelength_nm,
                                                           double pixel_pitch_mm,
-                                                          const SeedDiffractionMap* map = nullptr);
+                                                          const PseudoDiffractionMap* map = nullptr);
 
 /// The pseudo-diffraction map as a RadialProfile at W20 / lambda = defocus_waves, looked up
 /// at the map's reference wavelength's column for this W20 (so profiles at several
 /// wavelengths follow the talk's wavelength rule when built with their own defocus_waves).
 /// `pixel_rho` as in lookup. The map must outlive the profile. Null on bad values.
-std::unique_ptr<RadialProfile> seed_map_radial_profile(const SeedDiffractionMap& map,
+std::unique_ptr<RadialProfile> pseudo_map_radial_profile(const PseudoDiffractionMap& map,
                                                        double defocus_waves, double pixel_rho = 0.0);
 
 /// A three-channel radial profile sampled at rho = i * rho_step, i = 0 .. size - 1.
@@ -284,7 +284,7 @@ struct RgbRadialProfile {
 /// channel normalised to unit energy (white normalisation: a white light stays white).
 /// The spectrum's weights are spectrum.h's (spectral_samples); any three channel weights
 /// per wavelength will do. `samples` rho samples from 0 to the largest extent. False (and `out` empty) on bad values.
-bool seed_map_spectral_profile(RgbRadialProfile& out, const SeedDiffractionMap& map, double coc_px,
+bool pseudo_map_spectral_profile(RgbRadialProfile& out, const PseudoDiffractionMap& map, double coc_px,
                                double fnumber, double pixel_pitch_mm,
                                const std::vector<SpectralSample>& spectrum, int samples = 1024);
 

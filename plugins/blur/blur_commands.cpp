@@ -209,7 +209,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "(gaussian: boxes3, edge=hard: exact; disk/polygon/hex: reduced from 37.5/45 px, "
                            "below that bands (hex: parallelograms) or exact, whichever costs "
                            "less, with the fewest bands that keep 40 dB; OIIO's filters and iris: exact); "
-                           "taps: the seed's 9x9/17x17 "
+                           "taps: Kawase's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
                            "bilinearly (not for OIIO's filters); reference: brute force"),
         OptionSpec::Int("bands", 0, 0, 64,
@@ -221,11 +221,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                           "N, 1..16 (0: the kernel's narrower side over 25, a polygon's over 30, at "
                           "most 8; 1 below 1.5)"),
         OptionSpec::Float("sigma", 0.0, 0.0, 1024.0, "Gaussian sigma in pixels (0: W/4)"),
-        OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
-        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon and hex: degrees (0: a vertex up)"),
-        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon: 0 straight blades .. 1 circle"),
-        OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk/polygon: catadioptric hole (radius fraction)"),
     };
+    for (OptionSpec& o : bokeh::aperture_shape_option_specs())
+        c.options.push_back(std::move(o));
     c.options.insert(c.options.end(), shared.begin(), shared.end());
     c.inputs_for = [](const bokeh::OptionValues& o) { return o.get_string("kernel") == "image" ? 2 : 1; };
     r.add(c);

@@ -124,7 +124,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
     c.needs_scene_linear = true;
     c.options = {
         OptionSpec::Choice("method", { "auto", "layers", "gather", "reference", "truth" },
-                           "auto: layers set by the budget; gather: the seed's method; "
+                           "auto: layers set by the budget; gather: hikita12312's blurred levels; "
                            "reference: exact, slow; truth: thin-lens rays through a deep image (spp=)"),
         OptionSpec::Choice("quality", { "auto", "layers", "gather", "reference", "truth" },
                            "the same as method"),

@@ -108,23 +108,21 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
     std::vector<OptionSpec> options = {
         OptionSpec::Choice("kernel", { "disk", "hex", "polygon", "star", "image" },
                            "aperture: disk, bladed polygon, star, or the image on the stack"),
-        OptionSpec::Int("blades", 6, 3, 64, "polygon: blades; star: points"),
-        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon, hex and star: degrees"),
-        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
-        OptionSpec::Float("hole", 0.0, 0.0, 0.95, "catadioptric hole (radius fraction)"),
         OptionSpec::Float("inner", 0.5, 0.1, 1.0, "star: inner vertices' radius, fraction of the outer"),
-        OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)"),
-        OptionSpec::Float("fstop", 2.0, 0.5, 128.0, "f-number"),
-        OptionSpec::Float("focal", 50.0, 1.0, 5000.0, "focal length mm"),
-        OptionSpec::String("sensor", "36", "film back: width in mm or a preset (ff, super35, ...)"),
         OptionSpec::Int("width", 1920, 16, 65536, "image width in px the CoC is measured on"),
         OptionSpec::String("field", "0,0", "field position x,y in half-diagonals (x right, y up)"),
         OptionSpec::Int("size", 0, 0, 8191, "image side px (0: the PSF's own extent)"),
         OptionSpec::Bool("sheet", false, "a contact sheet: columns across defocus, rows across field"),
         OptionSpec::Int("columns", 9, 1, 64, "sheet: defocus columns (front .. focus .. back)"),
         OptionSpec::Int("rows", 4, 1, 64, "sheet: field rows (centre .. corner)"),
-        OptionSpec::Bool("map", false, "the seed's beam map: CoC across, ray height up"),
+        OptionSpec::Bool("map", false, "Kawase's beam map: CoC across, ray height up"),
     };
+    // The aperture and camera options every command shares (aperture_options.h), after the kernel.
+    std::vector<OptionSpec> shared = bokeh::aperture_shape_option_specs(true);
+    shared.push_back(bokeh::aspect_option_spec());
+    for (OptionSpec& o : bokeh::camera_option_specs(false))
+        shared.push_back(std::move(o));
+    options.insert(options.begin() + 1, shared.begin(), shared.end());
     for (OptionSpec& s : bokeh::lens_option_specs())
         options.push_back(std::move(s));
     bokeh::Command c = bokeh::make_command(

@@ -2,9 +2,40 @@
 
 #include "aperture_options.h"
 
+#include <bokeh/lens.h>
+
 #include <OpenImageIO/strutil.h>
 
 namespace bokeh {
+
+std::vector<OptionSpec> aperture_shape_option_specs(bool with_star)
+{
+    return {
+        OptionSpec::Int("blades", 6, 3, 64, with_star ? "polygon: aperture blades; star: points" : "polygon: aperture blades"),
+        OptionSpec::Float("rotation", 0.0, -360.0, 360.0,
+                          with_star ? "polygon, hex and star: degrees (0: a vertex up)" : "polygon and hex: degrees (0: a vertex up)"),
+        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
+        OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk, polygon and hex: catadioptric hole (radius fraction)"),
+    };
+}
+
+OptionSpec aspect_option_spec()
+{
+    return OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)");
+}
+
+std::vector<OptionSpec> camera_option_specs(bool from_image)
+{
+    return {
+        OptionSpec::Float("fstop", 2.8, kMinFstop, kMaxFstop, from_image ? "f-number (default: image's bokeh:fstop, else 2.8)" : "f-number"),
+        OptionSpec::Float("focal", 50.0, kMinFocalMm, kMaxFocalMm,
+                          from_image ? "focal length mm (default: image's bokeh:focal_mm, else 50)" : "focal length mm"),
+        OptionSpec::String("sensor", "36",
+                           from_image ? "film back width in mm or a preset (ff, super35, alexa-lf, ...); "
+                                        "default: image's bokeh:sensor_width_mm, else 36"
+                                      : "film back width in mm or a preset (ff, super35, alexa-lf, ...)"),
+    };
+}
 
 bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why)
 {

@@ -7,8 +7,22 @@
 #include <bokeh/plugin.h>
 
 #include <string>
+#include <vector>
 
 namespace bokeh {
+
+/// The aperture's shape options: blades, rotation, curvature, hole (the kernel choice is
+/// the command's: its list of shapes differs). `with_star`: the command draws a star
+/// (--bokeh), whose points `blades` counts; only the help says so.
+std::vector<OptionSpec> aperture_shape_option_specs(bool with_star = false);
+
+/// The anamorphic squeeze of a depth-dependent aperture (`aspect`, bokeh height / width,
+/// 0.05..20): --blur has none (its size is WxH).
+OptionSpec aspect_option_spec();
+
+/// The camera: fstop, focal, sensor. `from_image`: the command reads them from an image's
+/// metadata when not given (--defocus, --scene's truth), which the help says.
+std::vector<OptionSpec> camera_option_specs(bool from_image);
 
 /// The aperture options `kernel=NAME` uses, as --blur and --defocus spell them (`sigma`,
 /// `blades`, `rotation`, `curvature`, `hole`): false + `why` for the first one given

@@ -71,27 +71,22 @@ bool with_named_depth(const OptionValues& v, const std::shared_ptr<OIIO::ImageBu
 
 std::vector<OptionSpec> thin_lens_option_specs()
 {
-    return {
+    std::vector<OptionSpec> v = {
         OptionSpec::String("focus", "5", "focus distance in depth units, or a pixel x,y to sample "
                            "(default: image's bokeh:focus_m, else 5)"),
-        OptionSpec::Float("fstop", 2.8, 0.5, 1e4, "f-number (default: image's bokeh:fstop, else 2.8)"),
-        OptionSpec::Float("focal", 50.0, 0.1, 1e5, "focal length mm (default: image's bokeh:focal_mm, else 50)"),
-        OptionSpec::String("sensor", "36",
-                           "film back width in mm or a preset (ff, super35, alexa-lf, ...); "
-                           "default: image's bokeh:sensor_width_mm, else 36"),
     };
+    for (OptionSpec& o : camera_option_specs(true))
+        v.push_back(std::move(o));
+    return v;
 }
 
 std::vector<OptionSpec> defocus_aperture_option_specs()
 {
-    return {
-        OptionSpec::Choice("kernel", { "disk", "hex", "polygon" }, "aperture shape"),
-        OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades"),
-        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon and hex: degrees"),
-        OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
-        OptionSpec::Float("hole", 0.0, 0.0, 0.95, "catadioptric hole (radius fraction)"),
-        OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)"),
-    };
+    std::vector<OptionSpec> v = { OptionSpec::Choice("kernel", { "disk", "hex", "polygon" }, "aperture shape") };
+    for (OptionSpec& o : aperture_shape_option_specs())
+        v.push_back(std::move(o));
+    v.push_back(aspect_option_spec());
+    return v;
 }
 
 bool thin_lens_from(const OptionValues& v, const OIIO::ImageSpec& spec, CocOptions& coc, std::string& err)

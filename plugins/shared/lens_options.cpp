@@ -22,8 +22,8 @@ std::vector<OptionSpec> lens_option_specs()
         OptionSpec::Float("correction", -1.0, -1.0, 3.0,
                           "zonal correction: 0 none, 1 at the rim, 1.6 over-corrected (bubble); -1 the lens's own"),
         OptionSpec::Float("spherochromatism", 0.0, -5.0, 5.0, "change of spherical aberration per 100 nm"),
-        OptionSpec::Choice("diffraction", { "off", "exact", "seed" },
-                           "rim fringes: exact = the Fresnel edge law, seed = the seed's pseudo-diffraction map"),
+        OptionSpec::Choice("diffraction", { "off", "exact", "pseudo" },
+                           "rim fringes: exact = the Fresnel edge law, pseudo = Kawase's pseudo-diffraction map"),
         OptionSpec::String("wavelengths", "400-710", "spectrum integrated, nm (FIRST-LAST; one number: monochromatic)"),
         OptionSpec::Float("wavestep", 10.0, 0.5, 100.0, "spectral step, nm"),
         OptionSpec::Choice("illuminant", { "equal", "d65" }, "the light's spectrum"),
@@ -54,7 +54,7 @@ bool lens_character_from(const OptionValues& v, LensCharacter& lens, std::string
     lens.spherochromatism = v.get_float("spherochromatism");
     const std::string& diffraction = v.get_string("diffraction");
     lens.diffraction = diffraction == "exact" ? DiffractionModel::EdgeLaw
-                       : diffraction == "seed" ? DiffractionModel::SeedMap
+                       : diffraction == "pseudo" ? DiffractionModel::PseudoMap
                                                : DiffractionModel::Off;
     const std::string& range = v.get_string("wavelengths");
     const size_t dash        = range.find('-', 1);

@@ -243,7 +243,7 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
                                 o.method = bokeh::DefocusMethod::Layers;
                                 o.layers = 8;
                             } });
-        variants.push_back({ "gather (seed 001)", [](bokeh::DefocusOptions& o) {
+        variants.push_back({ "gather (hikita)", [](bokeh::DefocusOptions& o) {
                                 o.method = bokeh::DefocusMethod::Gather;
                             } });
         for (const Variant& v : variants) {

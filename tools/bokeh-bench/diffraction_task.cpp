@@ -58,8 +58,8 @@ std::vector<double> ring_profile(const std::function<double(double)>& profile, d
 bool run_diffraction_task(int reps, bool quick, std::vector<std::string>& rows)
 {
     OIIO::Timer build_timer;
-    const bokeh::SeedDiffractionMap map;
-    std::printf("diffraction: f/%g, %g nm, pixel %g mm; the seed map's table (%d x %d) built in "
+    const bokeh::PseudoDiffractionMap map;
+    std::printf("diffraction: f/%g, %g nm, pixel %g mm; the pseudo-diffraction map's table (%d x %d) built in "
                 "%.2f ms\n",
                 kFnumber, kWavelengthNm, kPitchMm, map.options().columns, map.options().rows,
                 build_timer() * 1e3);
@@ -89,9 +89,9 @@ bool run_diffraction_task(int reps, bool quick, std::vector<std::string>& rows)
                  const auto p = bokeh::edge_law_radial_profile(w);
                  return ring_profile([&](double rho) { return (*p)(rho); }, R, 4);
              }},
-            {"seed map",
+            {"pseudo map",
              [&] {
-                 const auto p = bokeh::seed_map_radial_profile(map, w, 1.0 / R);
+                 const auto p = bokeh::pseudo_map_radial_profile(map, w, 1.0 / R);
                  return ring_profile([&](double rho) { return (*p)(rho); }, R, 4);
              }},
             {"flat disc",

@@ -335,7 +335,7 @@ int main(int argc, char* argv[])
         ours("gaussian", "3 boxes (fast)", d, g, M::ThreeBoxes);
     }
     for (double d : { 9.0, 17.0 })
-        ours("disk", "seed bilinear taps", d, kernel(S::Disk, d), M::BilinearTaps);
+        ours("disk", "Kawase bilinear taps", d, kernel(S::Disk, d), M::BilinearTaps);
     // The peer in the same run: OIIO's brute-force convolution with make_kernel("disk").
     for (double d : quick ? std::vector<double>{ 9 } : std::vector<double>{ 9, 31 }) {
         Case c{ "disk", "OIIO IBA::convolve (hard disk)", "oiio", d, kernel(S::Disk, d), {} };
