@@ -690,7 +690,7 @@ TEST(Deep, BadSamplesFollowThePolicy)
     EXPECT_EQ(t[0].zb, 3.0) << "ZBack < Z: a point at Z";
     EXPECT_EQ(t[1].r, 0.0) << "NaN colour: 0";
     bokeh::DeepOptions strict;
-    strict.policy = bokeh::NonFinitePolicy::Error;
+    strict.nonfinite = bokeh::NonFinitePolicy::Error;
     for (auto fn : { +[](OIIO::ImageBuf& d, const OIIO::ImageBuf& s, const bokeh::DeepOptions& o) {
                          return bokeh::deep_tidy(d, s, o);
                      },

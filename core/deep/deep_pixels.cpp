@@ -402,7 +402,7 @@ bool apply_policy(const std::vector<Faults>& faults, const DeepOptions& opt, std
     }
     if (opt.repairs)
         *opt.repairs = total;
-    if (opt.policy == NonFinitePolicy::Error && total.total() > 0) {
+    if (opt.nonfinite == NonFinitePolicy::Error && total.total() > 0) {
         err = format("{} bad samples ({}; NaN policy 'error')", total.total(), first);
         return false;
     }

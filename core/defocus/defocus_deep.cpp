@@ -462,7 +462,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         return fail("zdilate is a remedy for flat images' filtered depth; a deep sample has its own depth");
     DeepOptions dopt;
     DeepRepairs repairs;
-    dopt.policy  = o.nonfinite;
+    dopt.nonfinite = o.nonfinite;
     dopt.repairs = &repairs;
     OIIO::ImageBuf tidy, flat;
     if (!deep_tidy(tidy, src, dopt, nthreads) || !flatten(flat, tidy, dopt, nthreads))

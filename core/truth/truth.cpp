@@ -636,7 +636,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
 
     TruthReport rep;
     DeepOptions dopt;
-    dopt.policy  = opt.nonfinite;
+    dopt.nonfinite = opt.nonfinite;
     dopt.repairs = &rep.repairs;
     OIIO::ImageBuf tidy;
     if (!deep_tidy(tidy, src, dopt, nthreads))

@@ -38,8 +38,8 @@ struct DeepRepairs {
 
 /// Options shared by the deep operations.
 struct DeepOptions {
-    NonFinitePolicy policy = NonFinitePolicy::Zero;
-    DeepRepairs* repairs   = nullptr;  ///< where to count repairs (may be null)
+    NonFinitePolicy nonfinite = NonFinitePolicy::Zero;  ///< bad samples: repaired and counted, or refused
+    DeepRepairs* repairs      = nullptr;                ///< where to count repairs (may be null)
 };
 
 /// Tidy `src` into `dst`: every volume split where another sample of its pixel starts or

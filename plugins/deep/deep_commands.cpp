@@ -30,9 +30,9 @@ OptionSpec nonfinite_option()
 bokeh::DeepOptions deep_options(const CommandContext& c, bokeh::DeepRepairs& repairs)
 {
     bokeh::DeepOptions o;
-    o.policy  = c.options.get_string("nonfinite") == "error" ? bokeh::NonFinitePolicy::Error
-                                                            : bokeh::NonFinitePolicy::Zero;
-    o.repairs = &repairs;
+    o.nonfinite = c.options.get_string("nonfinite") == "error" ? bokeh::NonFinitePolicy::Error
+                                                                : bokeh::NonFinitePolicy::Zero;
+    o.repairs   = &repairs;
     return o;
 }
 

@@ -342,7 +342,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     const double znear = kDepths[range % 15], zfar = kDepths[(range >> 4) % 15];
 
     bokeh::DeepOptions strict;
-    strict.policy = bokeh::NonFinitePolicy::Error;
+    strict.nonfinite = bokeh::NonFinitePolicy::Error;
     OIIO::ImageBuf scratch;
     if (bokeh::deep_tidy(scratch, a.buf, strict, 1) == a.needs_repair)
         finding(a.needs_repair ? "tidy with policy=error passed a damaged input"
