@@ -44,16 +44,6 @@ OIIO::ImageBuf deep_image(int w, int h, const std::function<std::vector<Smp>(int
     return make_deep(w, h, px);
 }
 
-DefocusOptions direct_options(DefocusMethod m)
-{
-    DefocusOptions o;
-    o.coc.mode = DepthMode::Direct;
-    o.method   = m;
-    o.border   = Border::Black;
-    o.grow     = true;
-    return o;
-}
-
 // The exact blur of a flat RGBA layer by the disk of diameter |coc| (rotated half a turn in
 // front of focus, as the defocus does), over `roi`, border black.
 OIIO::ImageBuf blurred_layer(const OIIO::ImageBuf& layer, float coc, const OIIO::ROI& roi)
@@ -114,7 +104,7 @@ TEST(DeepDefocus, TwoDepthsAreTheExactBlursOfTheirLayersComposited)
     });
     OIIO::ImageBuf out;
     DefocusReport rep;
-    ASSERT_TRUE(defocus(out, img, direct_options(DefocusMethod::Reference), &rep)) << out.geterror();
+    ASSERT_TRUE(defocus(out, img, direct_options(DefocusMethod::Reference, Border::Black), &rep)) << out.geterror();
     ASSERT_FALSE(out.deep());
     // The truth: blur(front) over blur(back), each layer whole (the background behind the
     // square included: a deep image holds it).
@@ -139,7 +129,7 @@ TEST(DeepDefocus, TwoDepthsAreTheExactBlursOfTheirLayersComposited)
     // square; near the square's blurred edge it is measurably farther from the truth.
     OIIO::ImageBuf flat, flat_out;
     ASSERT_TRUE(flatten(flat, img));
-    DefocusOptions fo = direct_options(DefocusMethod::Reference);
+    DefocusOptions fo = direct_options(DefocusMethod::Reference, Border::Black);
     ASSERT_TRUE(defocus(flat_out, flat, fo)) << flat_out.geterror();
     double err_deep = 0.0, err_flat = 0.0;
     int n = 0;
@@ -175,8 +165,8 @@ TEST(DeepDefocus, OneDepthEqualsTheFlatDefocusOfItsDeepen)
     ASSERT_TRUE(deepen(deep, flat));
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         OIIO::ImageBuf a, b;
-        ASSERT_TRUE(defocus(a, flat, direct_options(m))) << a.geterror();
-        ASSERT_TRUE(defocus(b, deep, direct_options(m))) << b.geterror();
+        ASSERT_TRUE(defocus(a, flat, direct_options(m, Border::Black))) << a.geterror();
+        ASSERT_TRUE(defocus(b, deep, direct_options(m, Border::Black))) << b.geterror();
         ASSERT_EQ(a.roi(), b.roi());
         EXPECT_LT(max_difference(a, b), 1e-5) << method_name(m);
     }
@@ -213,7 +203,7 @@ TEST(DeepDefocus, UniformStacksComeOutAsTheirFlatten)
         }
         const OIIO::ImageBuf deep = deep_image(48, 48, [&](int, int) { return stack; });
         for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Auto }) {
-            DefocusOptions o = direct_options(m);
+            DefocusOptions o = direct_options(m, Border::Black);
             o.border         = Border::Clamp;
             o.layers         = m == DefocusMethod::Layers ? 4 : 0;  // few rungs: more sharing
             OIIO::ImageBuf out;
@@ -245,7 +235,7 @@ TEST(DeepDefocus, EnergyOfPointsAndVolumesIsKept)
             dd.set_deep_value(p, c, 0, v[c]);
         OIIO::ImageBuf out;
         DefocusReport rep;
-        ASSERT_TRUE(defocus(out, img, direct_options(DefocusMethod::Layers), &rep)) << out.geterror();
+        ASSERT_TRUE(defocus(out, img, direct_options(DefocusMethod::Layers, Border::Black), &rep)) << out.geterror();
         const auto stats = OIIO::ImageBufAlgo::computePixelStats(out);
         const double npx = double(out.spec().width) * out.spec().height;
         const double light = stats.avg[0] * npx, cover = stats.avg[3] * npx;
@@ -280,7 +270,7 @@ TEST(DeepDefocus, DeepResultFlattensToTheFlatResult)
         s.push_back({ b[0], b[1], b[2], 1.0f, 25.0f });
         return s;
     });
-    DefocusOptions o = direct_options(DefocusMethod::Layers);
+    DefocusOptions o = direct_options(DefocusMethod::Layers, Border::Black);
     OIIO::ImageBuf flat_out, deep_out, flattened;
     DefocusReport rep;
     ASSERT_TRUE(defocus(flat_out, img, o, &rep)) << flat_out.geterror();
@@ -339,7 +329,7 @@ TEST(DeepDefocus, ASlopedOpaqueSurfaceStaysOpaque)
     OIIO::ImageBuf deep;
     ASSERT_TRUE(deepen(deep, flat));
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
-        DefocusOptions o = direct_options(m);
+        DefocusOptions o = direct_options(m, Border::Black);
         o.border         = Border::Clamp;
         OIIO::ImageBuf out, flat_out;
         ASSERT_TRUE(defocus(out, deep, o)) << out.geterror();
@@ -379,7 +369,7 @@ TEST(DeepDefocus, ASlopedSurfaceOverARecordedWallStaysOpaque)
                                  { 0.0f, 0.0f, 1.0f, 1.0f, 6.0f } };
     });
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
-        DefocusOptions o = direct_options(m);
+        DefocusOptions o = direct_options(m, Border::Black);
         o.border         = Border::Clamp;
         OIIO::ImageBuf out;
         ASSERT_TRUE(defocus(out, img, o)) << out.geterror();
@@ -415,8 +405,8 @@ TEST(DeepDefocus, ALightHiddenBehindACardGainsNoEnergy)
         };
         for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
             OIIO::ImageBuf with, without;
-            ASSERT_TRUE(defocus(with, scene(true), direct_options(m))) << with.geterror();
-            ASSERT_TRUE(defocus(without, scene(false), direct_options(m))) << without.geterror();
+            ASSERT_TRUE(defocus(with, scene(true), direct_options(m, Border::Black))) << with.geterror();
+            ASSERT_TRUE(defocus(without, scene(false), direct_options(m, Border::Black))) << without.geterror();
             double added = 0.0;
             for (int y = with.roi().ybegin; y < with.roi().yend; ++y)
                 for (int x = with.roi().xbegin; x < with.roi().xend; ++x)
@@ -529,7 +519,7 @@ TEST(DefocusViews, TheViewsTendToTheThinLensRays)
         ASSERT_TRUE(defocus_truth(truth, deep, t, &trep)) << truth.geterror();
         std::vector<double> rms;
         for (int views : { 1, 2, 4 }) {
-            DefocusOptions o       = direct_options(k.method);
+            DefocusOptions o       = direct_options(k.method, Border::Black);
             o.aperture.shape       = k.shape;
             o.aperture.blades      = 5;
             o.aspect               = k.aspect;
@@ -558,7 +548,7 @@ TEST(DefocusViews, MirroredSceneMirroredResult)
     // A disk's pupil grid is symmetric about its centre, so the views of a mirrored scene
     // are the mirrored views, for any count.
     for (int views : { 2, 3 }) {
-        DefocusOptions o  = direct_options(DefocusMethod::Layers);
+        DefocusOptions o  = direct_options(DefocusMethod::Layers, Border::Black);
         o.aperture_views = views;
         OIIO::ImageBuf a, b;
         CardScene scene, mirrored;
@@ -606,7 +596,7 @@ TEST(DefocusViews, OneDepthIsTheWholeAperturesBlur)
             const float t = 0.5f + 0.4f * std::sin(0.9f * x) * std::cos(0.6f * y);
             return std::array<float, 5>{ t, 0.5f * t, 0.25f, 1.0f, k.coc_px };
         });
-        DefocusOptions o  = direct_options(DefocusMethod::Reference);
+        DefocusOptions o  = direct_options(DefocusMethod::Reference, Border::Black);
         o.aperture.shape  = k.shape;
         o.aperture.blades = 6;
         o.aperture.hole   = k.hole;
@@ -635,7 +625,7 @@ TEST(DefocusViews, LightIsKept)
         ASSERT_TRUE(deepen(deep, flat));
         for (int up : { 1, 2 })
             for (const OIIO::ImageBuf* in : { &flat, static_cast<const OIIO::ImageBuf*>(&deep) }) {
-                DefocusOptions o  = direct_options(DefocusMethod::Layers);
+                DefocusOptions o  = direct_options(DefocusMethod::Layers, Border::Black);
                 o.aperture_views = 3;
                 o.supersample    = up;
                 OIIO::ImageBuf out;
@@ -658,7 +648,7 @@ TEST(DefocusViews, BadOptionsAreRefused)
         EXPECT_FALSE(defocus(out, deep, o));
         return out.geterror();
     };
-    DefocusOptions o  = direct_options(DefocusMethod::Layers);
+    DefocusOptions o  = direct_options(DefocusMethod::Layers, Border::Black);
     o.aperture_views = 0;
     EXPECT_NE(error_of(o).find("views 0 is outside 1..8"), std::string::npos);
     o.aperture_views = 9;
@@ -671,7 +661,7 @@ TEST(DefocusViews, BadOptionsAreRefused)
     EXPECT_NE(error_of(o).find("no pupil edge"), std::string::npos);
     OIIO::ImageBuf flat;
     ASSERT_TRUE(flatten(flat, deep));
-    DefocusOptions g  = direct_options(DefocusMethod::Gather);
+    DefocusOptions g  = direct_options(DefocusMethod::Gather, Border::Black);
     g.aperture_views = 2;
     OIIO::ImageBuf out;
     EXPECT_FALSE(defocus(out, flat, g));

@@ -22,54 +22,20 @@
 #include <OpenImageIO/deepdata.h>
 
 using namespace bokeh;
+using bokeh_test::at;
+using bokeh_test::channel_sum;
+using bokeh_test::direct_options;
+using bokeh_test::make_image;
+using bokeh_test::Px;
+using bokeh_test::run_defocus;
 
 namespace {
-
-struct Px {
-    float r = 0.0f, g = 0.0f, b = 0.0f, a = 1.0f, z = 0.0f;
-};
-
-OIIO::ImageBuf image(int w, int h, const std::function<Px(int, int)>& fn, OIIO::ROI full = {})
-{
-    return bokeh_test::rgbaz_image(
-        w, h,
-        [&](int x, int y) {
-            const Px p = fn(x, y);
-            return std::array<float, 5>{ p.r, p.g, p.b, p.a, p.z };
-        },
-        0, 0, full);
-}
-
-// Z is the signed CoC in px.
-DefocusOptions direct(DefocusMethod m = DefocusMethod::Layers, Border border = Border::Black)
-{
-    DefocusOptions o;
-    o.coc.mode = DepthMode::Direct;
-    o.method   = m;
-    o.border   = border;
-    return o;
-}
 
 DefocusOptions with_lens(DefocusOptions o, LensPreset preset)
 {
     o.lens_character = true;
     o.lens.preset    = preset;
     return o;
-}
-
-OIIO::ImageBuf run(const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport* rep = nullptr)
-{
-    OIIO::ImageBuf dst;
-    EXPECT_TRUE(defocus(dst, src, o, rep)) << dst.geterror();
-    return dst;
-}
-
-float at(const OIIO::ImageBuf& img, int x, int y, int c)
-{
-    const OIIO::ROI d = img.roi();
-    if (x < d.xbegin || x >= d.xend || y < d.ybegin || y >= d.yend)
-        return 0.0f;
-    return static_cast<const float*>(img.pixeladdr(x, y))[c];
 }
 
 // A sprite is drawn as ramps within 1e-3 of each PSF pixel's own value (below 1e-6 of the
@@ -105,7 +71,7 @@ Psf sprite_psf(const DefocusOptions& o, int width_px, double coc_px, float& peak
 // frame of CoC `coc_px`.
 OIIO::ImageBuf lone_light(int w, int h, int lx, int ly, float coc_px, OIIO::ROI full = {})
 {
-    return image(
+    return make_image(
         w, h,
         [=](int x, int y) {
             Px p;
@@ -115,7 +81,7 @@ OIIO::ImageBuf lone_light(int w, int h, int lx, int ly, float coc_px, OIIO::ROI 
                 p.r = p.g = p.b = 1e6f, p.a = 1.0f;
             return p;
         },
-        full);
+        0, 0, full);
 }
 
 // Channel c of `psf` at offset (dx, dy) from its centre; 0 outside it.
@@ -123,16 +89,6 @@ double psf_at(const Psf& psf, int dx, int dy, int c)
 {
     const int px = dx + psf.width / 2, py = dy + psf.height / 2;
     return px >= 0 && px < psf.width && py >= 0 && py < psf.height ? double(psf.at(px, py, c)) : 0.0;
-}
-
-double channel_sum(const OIIO::ImageBuf& img, int c)
-{
-    double s = 0.0;
-    const OIIO::ROI d = img.roi();
-    for (int y = d.ybegin; y < d.yend; ++y)
-        for (int x = d.xbegin; x < d.xend; ++x)
-            s += at(img, x, y, c);
-    return s;
 }
 
 bool bit_identical(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b)
@@ -177,7 +133,7 @@ float hash01(int x, int y)
 const OIIO::ROI kLightsDisplay(-48, 144, -48, 120);
 OIIO::ImageBuf lights_scene(float exposure = 1.0f)
 {
-    return image(
+    return make_image(
         96, 72,
         [&](int x, int y) {
             Px p;
@@ -191,7 +147,7 @@ OIIO::ImageBuf lights_scene(float exposure = 1.0f)
             }
             return p;
         },
-        kLightsDisplay);
+        0, 0, kLightsDisplay);
 }
 
 }  // namespace
@@ -204,13 +160,14 @@ TEST(DefocusSprites, LensCharacterOffIsBitForBitThePlainDefocus)
     for (DefocusMethod m : { DefocusMethod::Auto, DefocusMethod::Layers, DefocusMethod::Reference,
                              DefocusMethod::Gather }) {
         SCOPED_TRACE(method_name(m));
-        DefocusOptions described = with_lens(direct(m, Border::Clamp), LensPreset::Uncorrected);
+        DefocusOptions described = with_lens(direct_options(m, Border::Clamp), LensPreset::Uncorrected);
         described.lens_character      = false;
         described.highlight_threshold = 0.01f;
         described.max_sprites         = 3;
         described.lens.diffraction    = DiffractionModel::EdgeLaw;
         DefocusReport rep;
-        EXPECT_TRUE(bit_identical(run(src, direct(m, Border::Clamp)), run(src, described, &rep)));
+        EXPECT_TRUE(
+            bit_identical(run_defocus(src, direct_options(m, Border::Clamp)), run_defocus(src, described, &rep)));
         EXPECT_FALSE(rep.lens_character);
         EXPECT_EQ(rep.sprites, 0);
     }
@@ -218,12 +175,12 @@ TEST(DefocusSprites, LensCharacterOffIsBitForBitThePlainDefocus)
     for (int i = 0; i < 32 * 32; ++i)
         px[size_t(i)] = { { 0.1, 0.1, 0.1, 0.5, 2.0, 2.0 }, { 40.0 * hash01(i, 1), 5.0, 1.0, 1.0, 8.0, 8.0 } };
     const OIIO::ImageBuf deep = bokeh_test::make_deep(32, 32, px);
-    DefocusOptions plain = direct(DefocusMethod::Auto, Border::Clamp), described = plain;
+    DefocusOptions plain = direct_options(DefocusMethod::Auto, Border::Clamp), described = plain;
     described.lens.preset         = LensPreset::Achromat;
     described.highlight_threshold = 0.01f;
-    EXPECT_TRUE(bit_identical(run(deep, plain), run(deep, described)));
+    EXPECT_TRUE(bit_identical(run_defocus(deep, plain), run_defocus(deep, described)));
     plain.deep_output = described.deep_output = true;
-    EXPECT_TRUE(bit_identical(run(deep, plain), run(deep, described)));
+    EXPECT_TRUE(bit_identical(run_defocus(deep, plain), run_defocus(deep, described)));
 }
 
 TEST(DefocusSprites, EnergyIsCountedOnce)
@@ -236,12 +193,13 @@ TEST(DefocusSprites, EnergyIsCountedOnce)
     for (int views : { 1, 3 }) {
         for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat, LensPreset::Uncorrected }) {
             SCOPED_TRACE(lens_preset_name(preset) + std::string(views > 1 ? ", 3 x 3 views" : ""));
-            DefocusOptions o = with_lens(direct(), preset), p = direct();
+            DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), preset),
+                           p = direct_options(DefocusMethod::Layers, Border::Black);
             o.lens.diffraction = DiffractionModel::EdgeLaw;
             o.aperture_views = p.aperture_views = views;
             DefocusReport rep;
-            const OIIO::ImageBuf out   = run(src, o, &rep);
-            const OIIO::ImageBuf plain = run(src, p);
+            const OIIO::ImageBuf out   = run_defocus(src, o, &rep);
+            const OIIO::ImageBuf plain = run_defocus(src, p);
             EXPECT_EQ(rep.sprites, 12) << "every light is a whole sprite (20 > 2 x threshold)";
             EXPECT_EQ(rep.sprites_drawn, 12) << "each view draws them; the report counts them once";
             for (int c = 0; c < 3; ++c) {
@@ -261,10 +219,10 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
     // every pixel equal to 1e6 times lens_psf's (ramp_error).
     const OIIO::ROI display(-48, 113, -48, 113);
     const OIIO::ImageBuf src = lone_light(65, 65, 32, 32, 32.0f, display);
-    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.lens.diffraction = DiffractionModel::EdgeLaw;
     DefocusReport rep;
-    const OIIO::ImageBuf out = run(src, o, &rep);
+    const OIIO::ImageBuf out = run_defocus(src, o, &rep);
     EXPECT_EQ(rep.sprites, 1);
     EXPECT_FLOAT_EQ(rep.sprite_min_coc_px, 32.0f);
 
@@ -289,10 +247,10 @@ TEST(DefocusSprites, ASpriteCutByTheOutputsEdgeKeepsItsShape)
     // output that does not grow past the data window: the sprite's ramps and runs are cut
     // at the edges, and what is left is lens_psf's pixels there (ramp_error), nothing more.
     const OIIO::ImageBuf src = lone_light(65, 65, 3, 5, 32.0f);
-    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.lens.diffraction = DiffractionModel::EdgeLaw;
     o.grow             = false;
-    const OIIO::ImageBuf out = run(src, o);
+    const OIIO::ImageBuf out = run_defocus(src, o);
     ASSERT_EQ(out.roi().xbegin, 0);
     ASSERT_EQ(out.roi().xend, 65);
     ASSERT_EQ(out.roi().ybegin, 0);
@@ -332,7 +290,7 @@ TEST(DefocusSprites, FieldBinsAreInterpolated)
     // it would not change at all but at one jump).
     const OIIO::ROI display(-48, 113, -48, 113);
     auto frame = [&](int lx) { return lone_light(97, 65, lx, 32, 16.0f, display); };
-    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.lens.catseye   = 0.8;
     LensCharacter lens  = o.lens;
     lens.fstop          = o.coc.lens.fstop;
@@ -346,7 +304,7 @@ TEST(DefocusSprites, FieldBinsAreInterpolated)
     ASSERT_TRUE(lens_psf(a, lens, PsfRequest{ 16.0, std::floor(g) / 8.0, 0.0, 0 }, err)) << err;
     ASSERT_TRUE(lens_psf(b, lens, PsfRequest{ 16.0, (std::floor(g) + 1.0) / 8.0, 0.0, 0 }, err)) << err;
     ASSERT_EQ(a.width, b.width);
-    const OIIO::ImageBuf out = run(frame(39), o);
+    const OIIO::ImageBuf out = run_defocus(frame(39), o);
     double worst = 0.0, peak = 0.0;
     for (int c = 0; c < 3; ++c)
         for (int y = -48; y < 113; ++y)
@@ -368,7 +326,7 @@ TEST(DefocusSprites, FieldBinsAreInterpolated)
 
     std::vector<OIIO::ImageBuf> frames;
     for (int lx = 36; lx <= 60; ++lx)
-        frames.push_back(run(frame(lx), o));
+        frames.push_back(run_defocus(frame(lx), o));
     std::vector<double> steps;
     for (size_t i = 0; i + 1 < frames.size(); ++i) {
         double sq = 0.0;
@@ -401,7 +359,7 @@ TEST(DefocusSprites, ExposureRampDoesNotPop)
     // where the smoothstep over 16 steps moves at most 1.5 / 16 of it a step. Bound: every
     // d_k within 0.75 .. 1.33 of the mean of its two neighbours.
     auto scene = [](float e) {
-        return image(256, 128, [e](int x, int y) {
+        return make_image(256, 128, [e](int x, int y) {
             Px p;
             p.r = p.g = p.b = 0.01f * hash01(x, y) * e;
             p.z             = 26.0f;  // behind every light
@@ -412,15 +370,15 @@ TEST(DefocusSprites, ExposureRampDoesNotPop)
                 p.z = 10.0f + 14.0f * float(i % 5) / 4.0f;
             }
             return p;
-        }, OIIO::ROI(-32, 288, -32, 160));
+        }, 0, 0, OIIO::ROI(-32, 288, -32, 160));
     };
-    DefocusOptions o = with_lens(direct(), LensPreset::Uncorrected);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Uncorrected);
     o.lens.onion     = 0.8;
     std::vector<OIIO::ImageBuf> frames;
     std::vector<float> exposure;
     for (int k = 0; k < 24; ++k) {
         exposure.push_back(std::exp2(float(k) / 8.0f));
-        frames.push_back(run(scene(exposure.back()), o));
+        frames.push_back(run_defocus(scene(exposure.back()), o));
     }
     std::vector<double> d;
     for (int k = 0; k + 1 < 24; ++k) {
@@ -468,7 +426,7 @@ TEST(DefocusSprites, FocusPullDoesNotPop)
     // shape at once (a CoC bin, a layer boundary) would show. The measure is the existing test's: d_i = RMSE of frame
     // i+1 against frame i (linear), and a pop is a step |d_{i+1} - d_i| above 0.5 of the
     // mean d (the reference's steps stay under 0.1 of it on the plane alone).
-    const OIIO::ImageBuf src = image(160, 90, [](int x, int y) {
+    const OIIO::ImageBuf src = make_image(160, 90, [](int x, int y) {
         Px p;
         const float inv  = 1.0f + (0.1f - 1.0f) * float(x) / 159.0f;
         p.z              = 1.0f / inv;
@@ -501,7 +459,7 @@ TEST(DefocusSprites, FocusPullDoesNotPop)
             for (int i = 0; i < 24; ++i) {
                 o.coc.lens.focus_distance = 1.0 / (1.0 / 1.5 + (1.0 / 6.0 - 1.0 / 1.5) * i / 23.0);
                 DefocusReport rep;
-                frames.push_back(run(src, o, &rep));
+                frames.push_back(run_defocus(src, o, &rep));
                 sprites = std::max(sprites, rep.sprites);
             }
             // The whole frame (the existing test's d_i), and the lights' strip alone (x < 20:
@@ -554,10 +512,10 @@ TEST(DefocusSprites, ReportCountsASpriteSharedBetweenLayersOnce)
     // drawn in both, but each is one sprite, and none is merged (their PSFs are under 64 px
     // wide), so the report's drawn count is the sprite count. Deep input: a piece between
     // two rungs is one sprite too.
-    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.layers         = 4;
     DefocusReport rep;
-    run(lights_scene(), o, &rep);
+    run_defocus(lights_scene(), o, &rep);
     int shared = 0;
     for (int i = 0; i < 12; ++i) {
         const float coc = -12.0f + 32.0f * float(i) / 11.0f;
@@ -576,9 +534,9 @@ TEST(DefocusSprites, ReportCountsASpriteSharedBetweenLayersOnce)
     px[24 * 48 + 24].push_back({ 50.0, 50.0, 50.0, 1.0, 5.0, 5.0 });  // between the rungs at 1 and 12
     px[0].push_back({ 0.1, 0.1, 0.1, 1.0, 12.0, 12.0 });
     const OIIO::ImageBuf deep = bokeh_test::make_deep(48, 48, px);
-    DefocusOptions d = with_lens(direct(DefocusMethod::Layers, Border::Clamp), LensPreset::Achromat);
+    DefocusOptions d = with_lens(direct_options(DefocusMethod::Layers, Border::Clamp), LensPreset::Achromat);
     d.layers         = 3;
-    run(deep, d, &rep);
+    run_defocus(deep, d, &rep);
     std::printf("[ figures  ] deep, 3 layers (%.1f, %.1f, %.1f px): %lld sprites, %lld drawn\n",
                 rep.layer_coc_px.at(0), rep.layer_coc_px.at(1), rep.layer_coc_px.at(2),
                 static_cast<long long>(rep.sprites), static_cast<long long>(rep.sprites_drawn));
@@ -595,7 +553,7 @@ TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
     // the card's edges stays 0.3 (1e-5), while the light shows left of the card. (The lens's
     // in-focus PSF, its axial colour, softens and tints the card's own edges over a pixel
     // or two: InFocusLayersTakeTheLensPsf.)
-    const OIIO::ImageBuf src = image(96, 64, [](int x, int y) {
+    const OIIO::ImageBuf src = make_image(96, 64, [](int x, int y) {
         Px p;
         p.z = 24.0f;
         if (x == 30 && y == 32)
@@ -603,11 +561,12 @@ TEST(DefocusSprites, NearerSharpForegroundHidesASprite)
         if (x >= 40)
             p.r = p.g = p.b = 0.3f, p.z = 0.0f;
         return p;
-    }, OIIO::ROI(-32, 128, -32, 96));
+    }, 0, 0, OIIO::ROI(-32, 128, -32, 96));
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         SCOPED_TRACE(method_name(m));
         DefocusReport rep;
-        const OIIO::ImageBuf out = run(src, with_lens(direct(m), LensPreset::Uncorrected), &rep);
+        const OIIO::ImageBuf out
+            = run_defocus(src, with_lens(direct_options(m, Border::Black), LensPreset::Uncorrected), &rep);
         EXPECT_EQ(rep.sprites, 1);
         double card = 0.0, left = 0.0;
         for (int y = 0; y < 64; ++y) {
@@ -633,7 +592,7 @@ TEST(DefocusSprites, ASpriteIsOccludedAsItsLayerIs)
     // (measured 0.06 % and 7.6 %, at the disk's anti-aliased rim, where the lens-off PSF
     // and the aperture's kernel differ: LensPsf.OffIsTheFlatDiskKernel). Not divided by
     // the visibility the sprite came out 19 % short, its worst pixel 45 % of the peak.
-    const OIIO::ImageBuf src = image(64, 48, [](int x, int y) {
+    const OIIO::ImageBuf src = make_image(64, 48, [](int x, int y) {
         Px p;
         p.r = p.g = p.b = 0.02f;
         p.z             = 12.0f;
@@ -642,12 +601,12 @@ TEST(DefocusSprites, ASpriteIsOccludedAsItsLayerIs)
         if (x >= 24)
             p.r = p.g = p.b = 0.3f, p.z = 0.0f;
         return p;
-    }, OIIO::ROI(-16, 80, -16, 64));
+    }, 0, 0, OIIO::ROI(-16, 80, -16, 64));
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         SCOPED_TRACE(method_name(m));
-        DefocusOptions plain = direct(m), lens = with_lens(plain, LensPreset::Off);
+        DefocusOptions plain = direct_options(m, Border::Black), lens = with_lens(plain, LensPreset::Off);
         DefocusReport rep;
-        const OIIO::ImageBuf a = run(src, plain), b = run(src, lens, &rep);
+        const OIIO::ImageBuf a = run_defocus(src, plain), b = run_defocus(src, lens, &rep);
         EXPECT_EQ(rep.sprites, 1);
         double sum_a = 0.0, sum_b = 0.0, worst = 0.0, peak = 0.0;
         for (int y = 0; y < 48; ++y)
@@ -673,12 +632,12 @@ TEST(DefocusSprites, InFocusLayersTakeTheLensPsf)
     // 1e-4 of the texture's range. The scatter reference agrees within the same. Alpha
     // stays 1. Lens off, the texture is unchanged.
     const int w = 48, h = 40;
-    const OIIO::ImageBuf src = image(w, h, [](int x, int y) {
+    const OIIO::ImageBuf src = make_image(w, h, [](int x, int y) {
         Px p;
         p.r = 0.5f * hash01(x, y), p.g = 0.5f * hash01(y, x + 7), p.b = 0.5f * hash01(x + 3, y + 5);
         return p;
     });
-    DefocusOptions o                = with_lens(direct(DefocusMethod::Layers, Border::Clamp), LensPreset::Uncorrected);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Clamp), LensPreset::Uncorrected);
     o.coc.lens.sensor_width_mm      = 48.0 / 40.0;  // pitch 1/40 mm
     LensCharacter lens;
     lens.preset         = LensPreset::Uncorrected;
@@ -691,7 +650,7 @@ TEST(DefocusSprites, InFocusLayersTakeTheLensPsf)
     ASSERT_GE(psf.width, 7) << "the in-focus PSF should spread over pixels";
     const int hw = psf.width / 2, hh = psf.height / 2;
     DefocusReport rep;
-    const OIIO::ImageBuf out = run(src, o, &rep);
+    const OIIO::ImageBuf out = run_defocus(src, o, &rep);
     EXPECT_EQ(rep.sprites, 0);
     OIIO::ImageBuf ref;
     ASSERT_TRUE(defocus_scatter_reference(ref, src, o)) << ref.geterror();
@@ -717,7 +676,7 @@ TEST(DefocusSprites, InFocusLayersTakeTheLensPsf)
     EXPECT_LT(worst_ref, 0.5e-4);
     EXPECT_LT(worst_alpha, 1e-5);
     EXPECT_GT(moved, 0.05) << "the lens's in-focus blur is visible";
-    const OIIO::ImageBuf plain = run(src, direct(DefocusMethod::Layers, Border::Clamp));
+    const OIIO::ImageBuf plain = run_defocus(src, direct_options(DefocusMethod::Layers, Border::Clamp));
     double plain_moved = 0.0;
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
@@ -733,15 +692,15 @@ TEST(DefocusSprites, SharedPsfCacheChangesNoResult)
     // on 1 and 2 threads; the same lens gets the same cache, another lens (one field
     // changed) its own.
     const OIIO::ImageBuf src = lights_scene();
-    DefocusOptions o = with_lens(direct(DefocusMethod::Layers), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.lens.diffraction = DiffractionModel::EdgeLaw;
     clear_shared_psf_caches();
-    const OIIO::ImageBuf cold = run(src, o);
+    const OIIO::ImageBuf cold = run_defocus(src, o);
     OIIO::ImageBuf warm, warm1;
     ASSERT_TRUE(defocus(warm, src, o, nullptr, 2)) << warm.geterror();
     ASSERT_TRUE(defocus(warm1, src, o, nullptr, 1)) << warm1.geterror();
     clear_shared_psf_caches();
-    const OIIO::ImageBuf again = run(src, o);
+    const OIIO::ImageBuf again = run_defocus(src, o);
     EXPECT_TRUE(bit_identical(cold, warm));
     EXPECT_TRUE(bit_identical(cold, warm1));
     EXPECT_TRUE(bit_identical(cold, again));
@@ -778,23 +737,23 @@ TEST(DefocusSprites, DeepInputGetsSprites)
                 p.push_back({ 1e3, 1e3, 1e3, 1.0, 12.0, 12.0 });
         }
     const OIIO::ImageBuf deep = bokeh_test::make_deep(48, 48, px);
-    DefocusOptions o = with_lens(direct(DefocusMethod::Auto, Border::Clamp), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Auto, Border::Clamp), LensPreset::Achromat);
     DefocusReport rep;
-    const OIIO::ImageBuf out = run(deep, o, &rep);
+    const OIIO::ImageBuf out = run_defocus(deep, o, &rep);
     EXPECT_EQ(rep.sprites, 1);
     EXPECT_FLOAT_EQ(rep.sprite_max_coc_px, 12.0f);
     const double in = 48.0 * 48.0 * 0.05 + 0.5 * 1e3;  // the card's, and the light's half through it
     EXPECT_NEAR(channel_sum(out, 0) / in, 1.0, 1e-4);
     DefocusOptions deep_out = o;
     deep_out.deep_output    = true;
-    OIIO::ImageBuf as_deep = run(deep, deep_out), flat;
+    OIIO::ImageBuf as_deep = run_defocus(deep, deep_out), flat;
     ASSERT_TRUE(flatten(flat, as_deep, {}));
     EXPECT_NEAR(channel_sum(flat, 0) / in, 1.0, 1e-4) << "the deep result's flatten";
     // Pseudo-high resolution from deep input: twice the size, the same radiance (sum / 4);
     // a deep result is not supersampled.
     DefocusOptions fine = o;
     fine.supersample    = 2;
-    const OIIO::ImageBuf big = run(deep, fine, &rep);
+    const OIIO::ImageBuf big = run_defocus(deep, fine, &rep);
     EXPECT_EQ(big.roi().width(), 2 * out.roi().width());
     EXPECT_EQ(big.spec().full_width, 2 * deep.spec().full_width);
     EXPECT_EQ(rep.sprites, 1);
@@ -816,10 +775,10 @@ TEST(DefocusSprites, HybridAgainstTheScatterReference)
     const OIIO::ImageBuf src = lights_scene();
     for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat }) {
         SCOPED_TRACE(lens_preset_name(preset));
-        const DefocusOptions o = with_lens(direct(), preset);
+        const DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), preset);
         OIIO::ImageBuf ref;
         ASSERT_TRUE(defocus_scatter_reference(ref, src, o)) << ref.geterror();
-        const OIIO::ImageBuf out = run(src, o);
+        const OIIO::ImageBuf out = run_defocus(src, o);
         ImageError e;
         std::string err;
         ASSERT_TRUE(compare(e, out, ref, err)) << err;
@@ -827,8 +786,8 @@ TEST(DefocusSprites, HybridAgainstTheScatterReference)
                     e.psnr_db);
         EXPECT_GT(e.psnr_db, 35.0);
         if (preset == LensPreset::Off) {
-            DefocusOptions layered = direct(DefocusMethod::Reference);
-            const OIIO::ImageBuf model = run(src, layered);
+            DefocusOptions layered = direct_options(DefocusMethod::Reference, Border::Black);
+            const OIIO::ImageBuf model = run_defocus(src, layered);
             ImageError em;
             ASSERT_TRUE(compare(em, model, ref, err)) << err;
             std::printf("[ figures  ] layered reference vs scatter reference, lens off: PSNR %.1f dB\n", em.psnr_db);
@@ -846,7 +805,7 @@ namespace {
 OIIO::ImageBuf box_reduced(const OIIO::ImageBuf& big)
 {
     const OIIO::ROI r = big.roi();
-    return image(r.width() / 2, r.height() / 2, [&](int x, int y) {
+    return make_image(r.width() / 2, r.height() / 2, [&](int x, int y) {
         float v[3] = { 0, 0, 0 };
         for (int dy = 0; dy < 2; ++dy)
             for (int dx = 0; dx < 2; ++dx)
@@ -868,11 +827,11 @@ TEST(DefocusSprites, SupersampleDoublesTheOutputAndKeepsEnergy)
     const OIIO::ImageBuf src = lights_scene();
     for (LensPreset preset : { LensPreset::Off, LensPreset::Achromat, LensPreset::Uncorrected }) {
         SCOPED_TRACE(lens_preset_name(preset));
-        DefocusOptions o = with_lens(direct(), preset);
-        const OIIO::ImageBuf plain = run(src, o);
+        DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), preset);
+        const OIIO::ImageBuf plain = run_defocus(src, o);
         o.supersample = 2;
         DefocusReport rep;
-        const OIIO::ImageBuf big = run(src, o, &rep);
+        const OIIO::ImageBuf big = run_defocus(src, o, &rep);
         const OIIO::ROI p = plain.roi(), b = big.roi();
         EXPECT_EQ(b.xbegin, 2 * p.xbegin);
         EXPECT_EQ(b.xend, 2 * p.xend);
@@ -892,7 +851,7 @@ TEST(DefocusSprites, SupersampleDoublesTheOutputAndKeepsEnergy)
         // the layers' bilinear enlargement and the sprites' finer sampling.
         ImageError e;
         std::string err;
-        ASSERT_TRUE(compare(e, box_reduced(big), image(p.width(), p.height(), [&](int x, int y) {
+        ASSERT_TRUE(compare(e, box_reduced(big), make_image(p.width(), p.height(), [&](int x, int y) {
                                 Px q;
                                 q.r = at(plain, p.xbegin + x, p.ybegin + y, 0);
                                 q.g = at(plain, p.xbegin + x, p.ybegin + y, 1);
@@ -915,11 +874,11 @@ TEST(DefocusSprites, SupersampledLonePixelIsTheFinerPsf)
     // output pixel within 1e-5 of the peak, each channel's sum 4e6 (1e-5).
     const OIIO::ROI display(-48, 113, -48, 113);
     const OIIO::ImageBuf src = lone_light(65, 65, 32, 32, 32.0f, display);
-    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.lens.diffraction = DiffractionModel::EdgeLaw;
     o.supersample      = 2;
     DefocusReport rep;
-    const OIIO::ImageBuf out = run(src, o, &rep);
+    const OIIO::ImageBuf out = run_defocus(src, o, &rep);
     EXPECT_EQ(rep.sprites, 1);
 
     float peak;
@@ -965,17 +924,17 @@ TEST(DefocusSprites, BadOptionsRefusedByName)
         EXPECT_FALSE(defocus(dst, src, o));
         EXPECT_NE(dst.geterror().find(word), std::string::npos) << dst.geterror();
     };
-    DefocusOptions o = with_lens(direct(), LensPreset::Achromat);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.highlight_threshold = 0.0f;
     refused(o, "threshold");
-    o = with_lens(direct(), LensPreset::Achromat);
+    o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.max_sprites = -1;
     refused(o, "sprites");
-    refused(with_lens(direct(DefocusMethod::Gather), LensPreset::Achromat), "gather");
-    o = with_lens(direct(), LensPreset::Achromat);
+    refused(with_lens(direct_options(DefocusMethod::Gather, Border::Black), LensPreset::Achromat), "gather");
+    o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.lens.onion = 2.0;
     refused(o, "onion");
-    o = with_lens(direct(), LensPreset::Achromat);
+    o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.supersample = 3;
     refused(o, "supersample");
     o.supersample = 2;

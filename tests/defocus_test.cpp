@@ -25,56 +25,14 @@
 #include <OpenImageIO/imagebufalgo.h>
 
 using namespace bokeh;
+using bokeh_test::at;
+using bokeh_test::channel_sum;
+using bokeh_test::direct_options;
+using bokeh_test::make_image;
+using bokeh_test::Px;
+using bokeh_test::run_defocus;
 
 namespace {
-
-// One pixel of a test image: premultiplied colour, alpha, and the depth channel (in
-// DepthMode::Direct, the signed CoC in pixels itself).
-struct Px {
-    float r = 0.0f, g = 0.0f, b = 0.0f, a = 1.0f, z = 0.0f;
-};
-using PixelFn = std::function<Px(int x, int y)>;
-
-// A float R, G, B, A, Z image (alpha_channel 3, z_channel 4) over a w x h data window at
-// (x0, y0), display window `full` (default: the data window).
-OIIO::ImageBuf make_image(int w, int h, const PixelFn& fn, int x0 = 0, int y0 = 0, OIIO::ROI full = {})
-{
-    return bokeh_test::rgbaz_image(
-        w, h,
-        [&](int x, int y) {
-            const Px p = fn(x, y);
-            return std::array<float, 5>{ p.r, p.g, p.b, p.a, p.z };
-        },
-        x0, y0, full);
-}
-
-// Options for a Direct-mode image (Z is the signed CoC in px).
-DefocusOptions direct(DefocusMethod m, Border border = Border::Clamp, bool grow = true)
-{
-    DefocusOptions o;
-    o.coc.mode = DepthMode::Direct;
-    o.method   = m;
-    o.border   = border;
-    o.grow     = grow;
-    return o;
-}
-
-OIIO::ImageBuf run(const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport* rep = nullptr,
-                   int nthreads = 0)
-{
-    OIIO::ImageBuf dst;
-    EXPECT_TRUE(defocus(dst, src, o, rep, nthreads)) << dst.geterror();
-    return dst;
-}
-
-// Channel c of pixel (x, y); 0 outside the data window.
-float at(const OIIO::ImageBuf& img, int x, int y, int c)
-{
-    const OIIO::ROI d = img.roi();
-    if (x < d.xbegin || x >= d.xend || y < d.ybegin || y >= d.yend)
-        return 0.0f;
-    return static_cast<const float*>(img.pixeladdr(x, y))[c];
-}
 
 // Number of float values whose bits differ between `a` at (x, y) and `b` at (x + dx, y + dy),
 // over a's data window; -1 when the windows (shifted) or channel counts differ.
@@ -92,17 +50,6 @@ int64_t bit_differences(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b, int dx
                 n += std::memcmp(&u, &v, sizeof(float)) != 0;
             }
     return n;
-}
-
-// Sum of channel c over the data window, in double.
-double channel_sum(const OIIO::ImageBuf& img, int c)
-{
-    double s          = 0.0;
-    const OIIO::ROI d = img.roi();
-    for (int y = d.ybegin; y < d.yend; ++y)
-        for (int x = d.xbegin; x < d.xend; ++x)
-            s += at(img, x, y, c);
-    return s;
 }
 
 bool all_finite(const OIIO::ImageBuf& img)
@@ -176,7 +123,7 @@ TEST(DefocusIdentity, ZeroCocGivesTheInputBitForBit)
         for (Border b : { Border::Clamp, Border::Black }) {
             SCOPED_TRACE(method_name(m));
             DefocusReport rep;
-            const OIIO::ImageBuf out = run(src, direct(m, b), &rep);
+            const OIIO::ImageBuf out = run_defocus(src, direct_options(m, b), &rep);
             ASSERT_EQ(out.nchannels(), 4);
             EXPECT_EQ(out.roi(), OIIO::ROI(3, 51, 2, 42, 0, 1, 0, 4)) << "same data window";
             EXPECT_EQ(bit_differences(out, rgba), 0) << "values that differ from the input";
@@ -274,7 +221,8 @@ TEST(DefocusReference, MatchesABruteForceOfTheLayerModel)
         return p;
     });
     DefocusReport rep;
-    const OIIO::ImageBuf out = run(src, direct(DefocusMethod::Reference, Border::Black, false), &rep);
+    const OIIO::ImageBuf out
+        = run_defocus(src, direct_options(DefocusMethod::Reference, Border::Black, false), &rep);
     EXPECT_EQ(rep.layer_coc_px, (std::vector<float>{ -6.0f, 0.0f, 5.0f, 7.5f, 9.0f }));
     ASSERT_EQ(out.roi(), OIIO::ROI(0, 40, 0, 32, 0, 1, 0, 4));
     const std::vector<double> ref = brute_force_layers(src);
@@ -310,7 +258,7 @@ TEST(DefocusLight, LoneBrightPixelIsTheKernel)
 
     // Reference: exactly 1e6 times the kernel.
     {
-        const OIIO::ImageBuf out = run(src, direct(DefocusMethod::Reference, Border::Black));
+        const OIIO::ImageBuf out = run_defocus(src, direct_options(DefocusMethod::Reference, Border::Black));
         double worst = 0.0;
         for (int y = 0; y < 64; ++y)
             for (int x = 0; x < 64; ++x) {
@@ -328,10 +276,10 @@ TEST(DefocusLight, LoneBrightPixelIsTheKernel)
     // Layers, default settings and with the layer forced into a reduced buffer: energy kept
     // to 1e-3, one clean disk (nothing beyond radius + 2 px; reduced: + 1 + 2 s).
     for (float min_reduced : { 0.0f, 4.0f }) {
-        DefocusOptions o       = direct(DefocusMethod::Layers, Border::Black);
+        DefocusOptions o       = direct_options(DefocusMethod::Layers, Border::Black);
         o.min_reduced_coc_px   = min_reduced;
         DefocusReport rep;
-        const OIIO::ImageBuf out = run(src, o, &rep);
+        const OIIO::ImageBuf out = run_defocus(src, o, &rep);
         ASSERT_FALSE(rep.layer_reduction.empty());
         const int s         = rep.layer_reduction.back();
         const double reach  = 0.5 * kCoc + (s == 1 ? 2.0 : 1.0 + 2.0 * s);
@@ -374,9 +322,9 @@ TEST(DefocusAccuracy, LayersMatchReferenceOnLights)
     o.coc.lens.sensor_width_mm = s.get_float_attribute("bokeh:sensor_width_mm", 36.0f);
     o.method                   = DefocusMethod::Reference;
     DefocusReport rref, rlay;
-    const OIIO::ImageBuf ref = run(scene, o, &rref);
+    const OIIO::ImageBuf ref = run_defocus(scene, o, &rref);
     o.method                 = DefocusMethod::Layers;
-    const OIIO::ImageBuf lay = run(scene, o, &rlay);
+    const OIIO::ImageBuf lay = run_defocus(scene, o, &rlay);
     const ImageError e = error_of(lay, ref);
     std::printf("[ figures  ] lights 480x270 (focus %.2f m, f/%.2f): CoC %.1f .. %.1f px, reference %zu "
                 "layers, layers %zu: PSNR %.2f dB, RMSE %.4g, max %.4g\n",
@@ -422,7 +370,7 @@ TEST(DefocusOcclusion, InFocusObjectNeverBleedsIntoBackground)
         });
         for (DefocusMethod m : kMethods) {
             SCOPED_TRACE(std::string(method_name(m)) + (shallow ? " background 3 px" : " background 16 px"));
-            const OIIO::ImageBuf out = run(src, direct(m));
+            const OIIO::ImageBuf out = run_defocus(src, direct_options(m, Border::Clamp));
             double red_max = 0.0, red_sum = 0.0, rim_a = 1.0, rim_b = 1.0;
             for (int y = 0; y < 80; ++y)
                 for (int x = 0; x < 96; ++x) {
@@ -477,7 +425,7 @@ TEST(DefocusOcclusion, ForegroundSilhouetteSpreadsSoftly)
     });
     for (DefocusMethod m : kMethods) {
         SCOPED_TRACE(method_name(m));
-        const OIIO::ImageBuf out = run(src, direct(m));
+        const OIIO::ImageBuf out = run_defocus(src, direct_options(m, Border::Clamp));
         const double full        = at(out, (x0 + x1) / 2, (y0 + y1) / 2, 0);
         // Red at the 4th pixel outside each edge (centre 3.5 px out), along the middle half
         // of the edge: a disk of radius 8 covers 23 % of the square's half plane there.
@@ -535,13 +483,13 @@ TEST(DefocusOcclusion, OpaqueInputStaysOpaque)
     ASSERT_TRUE(make_scene(lights, "lights", so));
     for (DefocusMethod m : kMethods)
         for (int which = 0; which < 2; ++which) {
-            DefocusOptions o = direct(m);
+            DefocusOptions o = direct_options(m, Border::Clamp);
             if (which == 1) {
                 o.coc.mode                = DepthMode::Depth;
                 o.coc.lens.focus_distance = 6.0;
                 o.coc.lens.fstop          = 2.0;
             }
-            const OIIO::ImageBuf out = run(which == 0 ? square : lights, o);
+            const OIIO::ImageBuf out = run_defocus(which == 0 ? square : lights, o);
             double alpha_min = 1.0;
             int holes = 0, hx = 0, hy = 0;
             const OIIO::ROI d = out.roi();
@@ -594,7 +542,7 @@ TEST(DefocusTemporal, FocusPullDoesNotPop)
         std::vector<OIIO::ImageBuf> frames;
         for (int i = 0; i < 24; ++i) {
             o.coc.lens.focus_distance = 1.0 / (1.0 / 1.5 + (1.0 / 6.0 - 1.0 / 1.5) * i / 23.0);
-            frames.push_back(run(src, o));
+            frames.push_back(run_defocus(src, o));
         }
         std::vector<double> d;
         for (int i = 0; i + 1 < 24; ++i)
@@ -659,7 +607,7 @@ TEST(DefocusLarge, HalfFrameCoc)
     for (int i = 0; i < 2; ++i) {
         const DefocusMethod m = i == 0 ? DefocusMethod::Reference : DefocusMethod::Layers;
         DefocusReport rep;
-        outs[i] = run(uniform, direct(m, Border::Black, true), &rep);
+        outs[i] = run_defocus(uniform, direct_options(m, Border::Black, true), &rep);
         EXPECT_EQ(outs[i].roi(), OIIO::ROI(-12, 76, -12, 60, 0, 1, 0, 4)) << method_name(m);
         EXPECT_TRUE(all_finite(outs[i])) << method_name(m);
         const double e = energy_error(outs[i], uniform);
@@ -681,8 +629,8 @@ TEST(DefocusLarge, HalfFrameCoc)
     const OIIO::ImageBuf ramp = half_frame_image(
         [](int x, int y) { return -24.0f + 48.0f * (0.8f * float(x) / 63.0f + 0.2f * float(y) / 47.0f); });
     DefocusReport rl;
-    const OIIO::ImageBuf ref = run(ramp, direct(DefocusMethod::Reference));
-    const OIIO::ImageBuf lay = run(ramp, direct(DefocusMethod::Layers), &rl);
+    const OIIO::ImageBuf ref = run_defocus(ramp, direct_options(DefocusMethod::Reference, Border::Clamp));
+    const OIIO::ImageBuf lay = run_defocus(ramp, direct_options(DefocusMethod::Layers, Border::Clamp), &rl);
     EXPECT_TRUE(all_finite(lay));
     const ImageError er = error_of(lay, ref);
     std::printf("[ figures  ] CoC -24..24 ramp: layers (%zu rungs) vs reference PSNR %.2f dB\n",
@@ -701,11 +649,11 @@ TEST(DefocusLarge, HalfFrameCocInQuarterBuffer)
     // window grows by the radius and the reduction's reach (12 + 6 px, here up to the
     // display window), energy kept, and 30 dB against the reference.
     const OIIO::ImageBuf uniform = half_frame_image([](int, int) { return 24.0f; });
-    const OIIO::ImageBuf ref     = run(uniform, direct(DefocusMethod::Reference, Border::Black, true));
-    DefocusOptions o             = direct(DefocusMethod::Layers, Border::Black, true);
-    o.min_reduced_coc_px         = 6.0f;
+    const OIIO::ImageBuf ref = run_defocus(uniform, direct_options(DefocusMethod::Reference, Border::Black, true));
+    DefocusOptions o         = direct_options(DefocusMethod::Layers, Border::Black, true);
+    o.min_reduced_coc_px     = 6.0f;
     DefocusReport rep;
-    const OIIO::ImageBuf out = run(uniform, o, &rep);
+    const OIIO::ImageBuf out = run_defocus(uniform, o, &rep);
     ASSERT_FALSE(rep.layer_reduction.empty());
     EXPECT_EQ(rep.layer_reduction.back(), 4) << "min_reduced_coc_px = 6 puts a 24 px layer in a 1/4 buffer";
     EXPECT_EQ(out.roi(), OIIO::ROI(-16, 80, -16, 64, 0, 1, 0, 4));
@@ -727,7 +675,7 @@ TEST(DefocusLarge, HalfFrameCocInQuarterBuffer)
             return Px{ v[0], v[1], v[2], v[3], v[4] };
         },
         -8, -8, kHalfFrameDisplay);
-    const double e_padded = energy_error(run(padded, o), uniform);
+    const double e_padded = energy_error(run_defocus(padded, o), uniform);
     std::printf("[ figures  ] CoC 24 in a 1/4 buffer: energy error %.3g relative (%.3g with 8 px more "
                 "window); PSNR vs reference %.2f dB\n",
                 e, e_padded, vs_ref.psnr_db);
@@ -752,8 +700,8 @@ TEST(DefocusAccuracy, CocsSymmetricAroundFocusKeepEveryPixel)
         return p;
     });
     DefocusReport rref, rlay;
-    const OIIO::ImageBuf ref = run(src, direct(DefocusMethod::Reference), &rref);
-    const OIIO::ImageBuf lay = run(src, direct(DefocusMethod::Layers), &rlay);
+    const OIIO::ImageBuf ref = run_defocus(src, direct_options(DefocusMethod::Reference, Border::Clamp), &rref);
+    const OIIO::ImageBuf lay = run_defocus(src, direct_options(DefocusMethod::Layers, Border::Clamp), &rlay);
     EXPECT_EQ(rref.layer_coc_px, (std::vector<float>{ -3.0f, 3.0f }));
     double alpha_min = 1.0;
     for (int y = 0; y < 24; ++y)
@@ -811,11 +759,11 @@ TEST(DefocusNonFinite, ZeroPolicyAndErrorPolicy)
         o.coc.lens.focus_distance = 4.0;
         o.coc.lens.fstop          = 1.4;
         DefocusReport rep;
-        const OIIO::ImageBuf out = run(dirty, o, &rep);
+        const OIIO::ImageBuf out = run_defocus(dirty, o, &rep);
         EXPECT_TRUE(all_finite(out));
         EXPECT_EQ(rep.nonfinite.colour, 1);
         EXPECT_EQ(rep.nonfinite.depth, 2) << "NaN and -inf (+inf already means far)";
-        const OIIO::ImageBuf want = run(clean, o);
+        const OIIO::ImageBuf want = run_defocus(clean, o);
         EXPECT_EQ(bit_differences(out, want), 0) << "dirty and clean images defocus differently";
         if (m == DefocusMethod::Layers)
             std::printf("[ figures  ] non-finite: report colour %lld, depth %lld; summary: %s\n",
@@ -856,9 +804,9 @@ TEST(DefocusWindow, GrowsByTheLargestRadiusWithinTheDisplayWindow)
         for (DefocusMethod m : kMethods) {
             SCOPED_TRACE(std::string(method_name(m)) + " data window at " + std::to_string(k.x0) + ","
                          + std::to_string(k.y0) + (k.grow ? " grow" : " no grow"));
-            DefocusOptions o = direct(m, Border::Clamp, k.grow);
+            DefocusOptions o = direct_options(m, Border::Clamp, k.grow);
             o.aspect         = k.aspect;
-            const OIIO::ImageBuf out = run(image(k.x0, k.y0, k.w, k.h), o);
+            const OIIO::ImageBuf out = run_defocus(image(k.x0, k.y0, k.w, k.h), o);
             OIIO::ROI want = k.want;
             want.chbegin = 0, want.chend = 4;
             EXPECT_EQ(out.roi(), want);
@@ -880,8 +828,8 @@ TEST(DefocusDeterminism, ThreadCountDoesNotChangeResults)
     o.coc.lens.fstop          = scene.spec().get_float_attribute("bokeh:fstop", 2.0f);
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Gather }) {
         o.method = m;
-        const OIIO::ImageBuf one = run(scene, o, nullptr, 1);
-        const OIIO::ImageBuf two = run(scene, o, nullptr, 2);
+        const OIIO::ImageBuf one = run_defocus(scene, o, nullptr, 1);
+        const OIIO::ImageBuf two = run_defocus(scene, o, nullptr, 2);
         EXPECT_EQ(bit_differences(one, two), 0) << method_name(m) << ": 1 vs 2 threads";
     }
 }
@@ -904,8 +852,8 @@ TEST(DefocusDeterminism, TranslationEquivariance)
     const OIIO::ImageBuf b = make_image(64, 48, [&](int x, int y) { return pixel(x - 17, y - 9); }, 17, 9, display);
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference })
         for (Border border : { Border::Clamp, Border::Black }) {
-            const OIIO::ImageBuf oa = run(a, direct(m, border));
-            const OIIO::ImageBuf ob = run(b, direct(m, border));
+            const OIIO::ImageBuf oa = run_defocus(a, direct_options(m, border));
+            const OIIO::ImageBuf ob = run_defocus(b, direct_options(m, border));
             EXPECT_EQ(bit_differences(oa, ob, 7, 3), 0)
                 << method_name(m) << " border " << int(border) << ": output moved by (7, 3) differs";
         }
@@ -934,9 +882,9 @@ TEST(DefocusHalo, DepthDilationRemovesTheEdgeHalo)
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         double halo[2];
         for (int dilate : { 0, 1 }) {
-            DefocusOptions o  = direct(m);
+            DefocusOptions o  = direct_options(m, Border::Clamp);
             o.depth_dilate_px = dilate;
-            const OIIO::ImageBuf out = run(src, o);
+            const OIIO::ImageBuf out = run_defocus(src, o);
             double red = 0.0;
             for (int y = 0; y < 96; ++y)
                 for (int x = 0; x < 96; ++x)
@@ -982,9 +930,9 @@ TEST(DefocusIris, UniformDepthEqualsTheBlursIrisMode)
     bo.iris                    = 0.0f;
     const OIIO::ImageBuf plain = blur(src, k, bo);
     for (DefocusMethod m : { DefocusMethod::Reference, DefocusMethod::Layers }) {
-        DefocusOptions o = direct(m, Border::Clamp, false);
+        DefocusOptions o = direct_options(m, Border::Clamp, false);
         o.iris           = kIris;
-        const OIIO::ImageBuf out = run(src, o);
+        const OIIO::ImageBuf out = run_defocus(src, o);
         double worst = 0.0, effect = 0.0;
         for (int y = 0; y < 40; ++y)
             for (int x = 0; x < 48; ++x)
@@ -1014,11 +962,11 @@ TEST(DefocusIris, ASmallExponentTendsToThePlainDefocus)
         return p;
     });
     for (DefocusMethod m : { DefocusMethod::Reference, DefocusMethod::Layers }) {
-        const OIIO::ImageBuf plain = run(src, direct(m));
+        const OIIO::ImageBuf plain = run_defocus(src, direct_options(m, Border::Clamp));
         for (float k : { 1e-4f, 1e-7f, -1e-9f }) {
-            DefocusOptions o         = direct(m);
+            DefocusOptions o         = direct_options(m, Border::Clamp);
             o.iris                   = k;
-            const OIIO::ImageBuf got = run(src, o);
+            const OIIO::ImageBuf got = run_defocus(src, o);
             double worst             = 0.0;
             const OIIO::ROI d        = got.roi();
             for (int y = d.ybegin; y < d.yend; ++y)
@@ -1033,7 +981,7 @@ TEST(DefocusIris, ASmallExponentTendsToThePlainDefocus)
 TEST(DefocusIris, RangeTooWideIsRefused)
 {
     const OIIO::ImageBuf src = make_image(16, 12, [](int x, int) { Px p; p.r = x == 3 ? 1e3f : 0.0f; p.z = 3.0f; return p; });
-    DefocusOptions o = direct(DefocusMethod::Layers);
+    DefocusOptions o = direct_options(DefocusMethod::Layers, Border::Clamp);
     o.iris           = 1.0f;
     OIIO::ImageBuf dst;
     EXPECT_FALSE(defocus(dst, src, o));
@@ -1050,7 +998,7 @@ TEST(DefocusOptionsRange, ReductionBoundBetweenPowersOfTwo)
         p.z = 2.0f + float(x);  // CoC grows to 97 px across the frame: layers get reduced
         return p;
     });
-    DefocusOptions two = direct(DefocusMethod::Layers), three = two;
+    DefocusOptions two = direct_options(DefocusMethod::Layers, Border::Clamp), three = two;
     two.max_reduction   = 2;
     three.max_reduction = 3;
     DefocusReport r2, r3;
@@ -1088,7 +1036,7 @@ TEST(DefocusBadOptions, RefusedByName)
     };
     for (const Case& k : cases)
         for (DefocusMethod m : kMethods) {
-            DefocusOptions o = direct(m);
+            DefocusOptions o = direct_options(m, Border::Clamp);
             k.set(o);
             OIIO::ImageBuf dst;
             EXPECT_FALSE(defocus(dst, src, o)) << k.what;
@@ -1104,15 +1052,15 @@ TEST(DefocusBadOptions, RefusedByName)
     OIIO::ImageBuf deep(spec);
     ASSERT_TRUE(deep.deep());
     OIIO::ImageBuf dst;
-    EXPECT_FALSE(defocus(dst, deep, direct(DefocusMethod::Gather)));
+    EXPECT_FALSE(defocus(dst, deep, direct_options(DefocusMethod::Gather, Border::Clamp)));
     EXPECT_NE(dst.geterror().find("gather"), std::string::npos) << dst.geterror();
-    DefocusOptions iris = direct(DefocusMethod::Layers);
+    DefocusOptions iris = direct_options(DefocusMethod::Layers, Border::Clamp);
     iris.iris           = 2.0f;
     EXPECT_FALSE(defocus(dst, deep, iris));
     EXPECT_NE(dst.geterror().find("iris"), std::string::npos) << dst.geterror();
-    EXPECT_TRUE(defocus(dst, deep, direct(DefocusMethod::Layers))) << dst.geterror();
+    EXPECT_TRUE(defocus(dst, deep, direct_options(DefocusMethod::Layers, Border::Clamp))) << dst.geterror();
     // A deep result needs a deep image.
-    DefocusOptions deep_out = direct(DefocusMethod::Layers);
+    DefocusOptions deep_out = direct_options(DefocusMethod::Layers, Border::Clamp);
     deep_out.deep_output    = true;
     EXPECT_FALSE(defocus(dst, src, deep_out));
     EXPECT_NE(dst.geterror().find("deep"), std::string::npos) << dst.geterror();

@@ -107,6 +107,53 @@ OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5
     return img;
 }
 
+OIIO::ImageBuf make_image(int w, int h, const std::function<Px(int, int)>& fn, int x0, int y0, OIIO::ROI full)
+{
+    return rgbaz_image(
+        w, h,
+        [&](int x, int y) {
+            const Px p = fn(x, y);
+            return std::array<float, 5>{ p.r, p.g, p.b, p.a, p.z };
+        },
+        x0, y0, full);
+}
+
+float at(const OIIO::ImageBuf& img, int x, int y, int c)
+{
+    const OIIO::ROI d = img.roi();
+    if (x < d.xbegin || x >= d.xend || y < d.ybegin || y >= d.yend)
+        return 0.0f;
+    return static_cast<const float*>(img.pixeladdr(x, y))[c];
+}
+
+double channel_sum(const OIIO::ImageBuf& img, int c)
+{
+    double s          = 0.0;
+    const OIIO::ROI d = img.roi();
+    for (int y = d.ybegin; y < d.yend; ++y)
+        for (int x = d.xbegin; x < d.xend; ++x)
+            s += at(img, x, y, c);
+    return s;
+}
+
+bokeh::DefocusOptions direct_options(bokeh::DefocusMethod m, bokeh::Border border, bool grow)
+{
+    bokeh::DefocusOptions o;
+    o.coc.mode = bokeh::DepthMode::Direct;
+    o.method   = m;
+    o.border   = border;
+    o.grow     = grow;
+    return o;
+}
+
+OIIO::ImageBuf run_defocus(const OIIO::ImageBuf& src, const bokeh::DefocusOptions& o, bokeh::DefocusReport* rep,
+                           int nthreads)
+{
+    OIIO::ImageBuf dst;
+    EXPECT_TRUE(bokeh::defocus(dst, src, o, rep, nthreads)) << dst.geterror();
+    return dst;
+}
+
 OIIO::ImageBuf make_deep(int w, int h, const std::vector<DeepPixel>& px, bool half_colour, int x0, int y0)
 {
     OIIO::ImageSpec spec(w, h, 6, OIIO::TypeFloat);

@@ -1,6 +1,8 @@
 // test_util.h — helpers shared by the unit and CLI tests.
 #pragma once
 
+#include <bokeh/defocus.h>
+
 #include <array>
 #include <functional>
 #include <string>
@@ -53,6 +55,31 @@ void expect_clean_failure(const RunResult& r, const std::string& what, const std
 /// (x0, y0), display window `full` (default: the data window); `fn(x, y)` gives the pixel.
 OIIO::ImageBuf rgbaz_image(int w, int h, const std::function<std::array<float, 5>(int, int)>& fn,
                            int x0 = 0, int y0 = 0, OIIO::ROI full = {});
+
+/// One pixel of a flat test image: premultiplied colour, alpha, and the depth channel (in
+/// DepthMode::Direct, the signed CoC in pixels itself).
+struct Px {
+    float r = 0.0f, g = 0.0f, b = 0.0f, a = 1.0f, z = 0.0f;
+};
+
+/// rgbaz_image with each pixel a Px: a float R, G, B, A, Z image over a w x h data window
+/// at (x0, y0), display window `full` (default: the data window).
+OIIO::ImageBuf make_image(int w, int h, const std::function<Px(int, int)>& fn, int x0 = 0, int y0 = 0,
+                          OIIO::ROI full = {});
+
+/// Channel c of pixel (x, y) of a float image; 0 outside the data window.
+float at(const OIIO::ImageBuf& img, int x, int y, int c);
+
+/// Sum of channel c of a float image over its data window, in double.
+double channel_sum(const OIIO::ImageBuf& img, int c);
+
+/// Defocus options for a DepthMode::Direct image (Z is the signed CoC in px): the method,
+/// the border rule (each test names its own) and whether the data window grows.
+bokeh::DefocusOptions direct_options(bokeh::DefocusMethod m, bokeh::Border border, bool grow = true);
+
+/// The defocus of `src` with `o` (a test failure if it fails), its report in `rep`.
+OIIO::ImageBuf run_defocus(const OIIO::ImageBuf& src, const bokeh::DefocusOptions& o,
+                           bokeh::DefocusReport* rep = nullptr, int nthreads = 0);
 
 /// One sample of a deep R, G, B, A, Z, ZBack image (zb == z: a point).
 struct DeepSample {

@@ -286,7 +286,7 @@ int hexagon_reach(const Kernel& k, bool along_x)
     // A reach of ceil(r) + 2 is too short: measured, the parallelograms reach up to 5 px
     // past the hexagon (9 px: 10 against 4.5), and under clamp or mirror the frame's edge
     // pixels then lost up to 7.7e-6 of a constant image, read as black past the padding
-    // (tests/blur_test.cpp checks a constant image under every border).
+    // (tests/blur/blur_properties_test.cpp checks a constant image under every border).
     return int(std::ceil(r)) + 6;
 }
 

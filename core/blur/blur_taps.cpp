@@ -7,7 +7,7 @@
 // matches the group's marginals but not its joint weights. On a GPU the fetches are free;
 // on a CPU we convolve with the kernel they add up to (by row spans, blur.cpp).
 // Limits: the talk's two sizes only; the joint weights differ from the disk's, which is
-// the method's error (tests/blur_test.cpp measures it).
+// the method's error (tests/blur/blur_approx_test.cpp measures it).
 
 #include <bokeh/blur.h>
 
