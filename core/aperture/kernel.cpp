@@ -450,7 +450,7 @@ KernelWeights shape_weights(const Kernel& k, int nthreads)
                 // corners among them, 1/8 apart): points inside alone missed a rim pixel's
                 // clipped corner (the 31 px disk's pixel (15, 1) is 0.965 inside with all
                 // 25 inner points in) and a polygon's tip poking into a pixel (0.08 of one;
-                // tests/kernel_area_test.cpp). A unanimous look now leaves at most a
+                // tests/aperture/kernel_area_test.cpp). A unanimous look now leaves at most a
                 // boundary crossing the border between two points 1/8 apart: a sliver under
                 // 1/128 of the pixel.
                 int in = 0, looked = 0;

@@ -325,7 +325,7 @@ bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::Im
     return true;
 }
 
-bool flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt, int nthreads)
+bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt, int nthreads)
 {
     std::string err;
     if (!check_deep(src, "flatten", true, err)) {
@@ -404,7 +404,7 @@ bool flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& 
     return true;
 }
 
-bool deepen(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, float z_without_depth, int nthreads)
+bool deep_from_flat(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, float z_without_depth, int nthreads)
 {
     if (!src.initialized()) {
         dst.errorfmt("deepen: no image");

@@ -465,7 +465,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     dopt.nonfinite = o.nonfinite;
     dopt.repairs = &repairs;
     OIIO::ImageBuf tidy, flat;
-    if (!deep_tidy(tidy, src, dopt, nthreads) || !flatten(flat, tidy, dopt, nthreads))
+    if (!deep_tidy(tidy, src, dopt, nthreads) || !deep_flatten(flat, tidy, dopt, nthreads))
         return fail(tidy.has_error() ? tidy.geterror() : flat.geterror());
     const OIIO::ImageSpec& spec = tidy.spec();
     DeepChannels ch;

@@ -12,7 +12,7 @@
 // so cancellation costs ~3e-13), above it the erfc continued fraction evaluated by the
 // modified Lentz method (Press et al., "Numerical Recipes", 3rd ed., 5.2) on the complex
 // argument; exp(-z^2) = exp(i pi x^2 / 2) has modulus 1, so nothing overflows. Measured
-// against scipy.special.fresnel (tests/wave_optics_test.cpp): within 1e-13 absolute (the
+// against scipy.special.fresnel (tests/optics/wave_optics_test.cpp): within 1e-13 absolute (the
 // rounding of x^2 in the phase dominates far out: 4e-14 at x = 1000).
 //
 // Edge law: the bokeh's rim, seen over a few fringe widths, is a straight edge lit by a

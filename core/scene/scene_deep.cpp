@@ -13,7 +13,7 @@
 // nothing to merge), and the layer cut: layer k + 1 takes only hits deeper than every
 // sample of layer k. Layer 1 ends with alpha 1 (its last group takes every ray still
 // open), so what lies behind it cannot reach the flatten, which is the sharp scene up to
-// float rounding (tests/scene_truth_test.cpp). Point samples of a pixel are spread over its
+// float rounding (tests/scene/scene_truth_test.cpp). Point samples of a pixel are spread over its
 // cell (truth.h), so a surface hidden by a nearer one in some rays but lying in front of
 // the pixel's deepest visible sample has no place: it would show through in the flatten.
 // It is left out (the surfaces behind foreground edges inside a pixel; behind a pixel the

@@ -646,7 +646,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     if (coc.focus_at_pixel) {
         // The focus pixel's depth is that of its nearest visible sample (flatten's Z).
         OIIO::ImageBuf flat;
-        if (!flatten(flat, tidy, dopt, nthreads))
+        if (!deep_flatten(flat, tidy, dopt, nthreads))
             return fail(flat.geterror());
         const OIIO::ROI d = flat.roi();
         if (coc.focus_x >= d.xbegin && coc.focus_x < d.xend && coc.focus_y >= d.ybegin && coc.focus_y < d.yend

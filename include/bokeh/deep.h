@@ -8,7 +8,7 @@
 // coincident samples merge with the -log1p(-a) weights; tidy = split, merge, sort. Where
 // OpenImageIO 2.4 departs from them (no tidy before flatten, culling behind single opaque
 // samples in merge, holdout at the first opaque sample), these functions follow the rules
-// (docs/methods/deep.md lists the differences; tests/deep_test.cpp shows each).
+// (docs/methods/deep.md lists the differences; tests/deep/deep_test.cpp shows each).
 //
 // Channels: Z and ZBack (or Zback) are depths; A, AR, AG, AB are alphas; R, G, B take AR,
 // AG, AB where present and A otherwise; every other float or half channel is a colour
@@ -74,19 +74,20 @@ bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::Im
 bool deep_slice(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, double znear, double zfar,
                 const DeepOptions& opt = {}, int nthreads = 0);
 
-/// Flatten: tidy, then composite front to back with "over" (each colour through its own
-/// alpha's transmittance). The flat image has the deep one's channels (float); Z is the
-/// nearest depth and ZBack the farthest of the visible samples (a non-zero alpha, in front
-/// of an accumulated opacity that float stores as 1; all samples when none has alpha), 1e30 (OIIO's value) in pixels without samples; unsigned-int
-/// channels come from the nearest such sample.
-bool flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt = {},
-             int nthreads = 0);
+/// Flatten (--flatten; OIIO's ImageBufAlgo::flatten): tidy, then composite front to back
+/// with "over" (each colour through its own alpha's transmittance). The flat image has the
+/// deep one's channels (float); Z is the nearest depth and ZBack the farthest of the
+/// visible samples (a non-zero alpha, in front of an accumulated opacity that float stores
+/// as 1; all samples when none has alpha), 1e30 (OIIO's value) in pixels without samples;
+/// unsigned-int channels come from the nearest such sample.
+bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt = {},
+                  int nthreads = 0);
 
-/// Deepen a flat image: one sample a pixel holding its channel values, none where every
+/// Deepen a flat image (--deepen; OIIO's ImageBufAlgo::deepen): one sample a pixel holding its channel values, none where every
 /// non-depth channel is 0 and the depth is 0, not finite or >= 1e30 (OIIO's rule); Z =
 /// `z_without_depth` when the image has no Z channel. Channel types come from the flat
 /// image's native spec (half stays half).
-bool deepen(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, float z_without_depth = 1.0f,
-            int nthreads = 0);
+bool deep_from_flat(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, float z_without_depth = 1.0f,
+                    int nthreads = 0);
 
 }  // namespace bokeh

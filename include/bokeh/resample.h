@@ -28,7 +28,7 @@
 //               smallest sigma whose Mach score (metrics.h) is that of the C2 cubic B-spline
 //               (within 1.2 times) at 2x, 4x, 8x and 16x; 0.6 scores 1.4 to 2 times it, 0.5
 //               4.6 to 7 times: the sharpest Gaussian without bands. The figures are in
-//               tests/resample_test.cpp.
+//               tests/resample/resample_test.cpp.
 //   Box         area-exact: the weight of a source pixel is the part of the destination
 //               pixel's footprint it covers (nearest at integer enlargements)
 //   ReducedBlur the talk's "reduced-buffer blur": a small Gaussian at low resolution

@@ -88,14 +88,14 @@ bool holdout(CommandContext& c)
 bool flatten(CommandContext& c)
 {
     return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
-        return bokeh::flatten(dst, *c.inputs[0].buf, o, c.nthreads);
+        return bokeh::deep_flatten(dst, *c.inputs[0].buf, o, c.nthreads);
     });
 }
 
 bool deepen(CommandContext& c)
 {
     auto dst      = std::make_shared<OIIO::ImageBuf>();
-    const bool ok = bokeh::deepen(*dst, *c.inputs[0].buf, float(c.options.get_float("z")), c.nthreads);
+    const bool ok = bokeh::deep_from_flat(*dst, *c.inputs[0].buf, float(c.options.get_float("z")), c.nthreads);
     return finish(c, dst, ok, {});
 }
 

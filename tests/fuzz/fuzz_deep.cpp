@@ -363,7 +363,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     if (all_finite(tidy) && !same_bits(tidy, tidy2))
         finding("tidy is not idempotent", 0, 0);
 
-    const OIIO::ImageBuf flat_a = must(bokeh::flatten(d, a.buf, {}, 1), d, "flatten");
+    const OIIO::ImageBuf flat_a = must(bokeh::deep_flatten(d, a.buf, {}, 1), d, "flatten");
     check_values(flat_a, a.valid, "flatten: a NaN or infinity");
     if (a.valid)
         check_alpha_range(flat_a);
@@ -373,8 +373,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     check_values(merged, valid, "merge: a NaN or infinity");
     check_tidy(merged);
     if (valid && !(range & 1)) {
-        const OIIO::ImageBuf flat_b = must(bokeh::flatten(d, b.buf, {}, 1), d, "flatten (b)");
-        const OIIO::ImageBuf flat_m = must(bokeh::flatten(d, merged, {}, 1), d, "flatten (merged)");
+        const OIIO::ImageBuf flat_b = must(bokeh::deep_flatten(d, b.buf, {}, 1), d, "flatten (b)");
+        const OIIO::ImageBuf flat_m = must(bokeh::deep_flatten(d, merged, {}, 1), d, "flatten (merged)");
         check_alpha_range(flat_m);
         check_alpha_order(flat_a, flat_m, 1, tol, "merge: less opaque than an input");
         check_alpha_order(flat_b, flat_m, 1, tol, "merge: less opaque than an input");
@@ -384,7 +384,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
         const OIIO::ImageBuf held = must(bokeh::deep_holdout(d, a.buf, b.buf, {}, 1), d, "deep_holdout");
         check_values(held, valid, "holdout: a NaN or infinity");
         if (valid) {
-            const OIIO::ImageBuf flat_h = must(bokeh::flatten(d, held, {}, 1), d, "flatten (held out)");
+            const OIIO::ImageBuf flat_h = must(bokeh::deep_flatten(d, held, {}, 1), d, "flatten (held out)");
             check_alpha_range(flat_h);
             check_alpha_order(flat_h, flat_a, 1, tol, "holdout: more opaque than its source");
         }

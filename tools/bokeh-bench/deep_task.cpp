@@ -102,7 +102,7 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
     bokeh::TruthOptions same = to, other = to;  // the flatten's truth draws the same rays
     same.unknown = other.unknown = false;
     other.seed                   = to.seed + 1;
-    if (!ok || !bokeh::deepen(flat_deep, *shot.flat, 1.0f, t) || !bokeh::defocus_truth(truth_flat, flat_deep, same, nullptr, t)
+    if (!ok || !bokeh::deep_from_flat(flat_deep, *shot.flat, 1.0f, t) || !bokeh::defocus_truth(truth_flat, flat_deep, same, nullptr, t)
         || !bokeh::defocus_truth(truth_seed2, *shot.deep, other, nullptr, t)) {
         std::fprintf(stderr, "bokeh-bench: deep: %s: truth: %s%s%s\n", shot.name.c_str(), pic.truth.geterror().c_str(),
                      truth_flat.geterror().c_str(), truth_seed2.geterror().c_str());
@@ -283,7 +283,7 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
 
     OIIO::ImageBuf merged, flat, tidy_rep;
     if (!bokeh::deep_merge(merged, { &pass[0], &pass[1], &pass[2] }, false, {}, t)
-        || !bokeh::flatten(flat, merged, {}, t)) {
+        || !bokeh::deep_flatten(flat, merged, {}, t)) {
         std::fprintf(stderr, "bokeh-bench: deep: %s%s\n", merged.geterror().c_str(), flat.geterror().c_str());
         return false;
     }
@@ -315,7 +315,7 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
         OIIO::ImageBuf abc = IBA::deep_merge(ab, pass[2], true, {}, t);
     }, args.reps);
     add("tidy", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_tidy(d, merged, {}, t); }, args.reps);
-    add("flatten", "", lr, [&] { OIIO::ImageBuf d; bokeh::flatten(d, merged, {}, t); }, args.reps);
+    add("flatten", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_flatten(d, merged, {}, t); }, args.reps);
     add("flatten", "oiio", lr, [&] { OIIO::ImageBuf d = IBA::flatten(merged, {}, t); }, args.reps);
     add("holdout by Leaves", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_holdout(d, merged, pass[1], {}, t); }, args.reps);
     add("holdout by Leaves", "oiio", lr, [&] { OIIO::ImageBuf d = IBA::deep_holdout(merged, pass[1], {}, t); }, args.reps);
@@ -326,7 +326,7 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     add("defocus deep reference", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Reference, false), nullptr, t); }, std::max(1, args.reps / 3));
     if (have_rep) {
         add("tidy", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::deep_tidy(d, rep_img, {}, t); }, args.reps);
-        add("flatten", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::flatten(d, rep_img, {}, t); }, args.reps);
+        add("flatten", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::deep_flatten(d, rep_img, {}, t); }, args.reps);
         add("flatten", "oiio", "representativeDeepImage", [&] { OIIO::ImageBuf d = IBA::flatten(rep_img, {}, t); }, args.reps);
     }
     std::vector<std::function<void()>> fns;
@@ -354,7 +354,7 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     bokeh::defocus(ref, merged, with(bokeh::DefocusMethod::Reference, false), nullptr, t);
     bokeh::defocus(auto_flat, merged, with(bokeh::DefocusMethod::Auto, false), nullptr, t);
     bokeh::defocus(auto_deep, merged, with(bokeh::DefocusMethod::Auto, true), nullptr, t);
-    bokeh::flatten(deep_out_flat, auto_deep, {}, t);
+    bokeh::deep_flatten(deep_out_flat, auto_deep, {}, t);
     bokeh::defocus(flat_dof, flat, with(bokeh::DefocusMethod::Auto, false), nullptr, t);
     for (size_t i = 0; i < cases.size(); ++i) {
         const Case& c = cases[i];
@@ -386,7 +386,7 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     }
     if (have_rep) {
         OIIO::ImageBuf rep_flat;
-        if (!bokeh::flatten(rep_flat, rep_img, {}, t)) {
+        if (!bokeh::deep_flatten(rep_flat, rep_img, {}, t)) {
             std::fprintf(stderr, "bokeh-bench: deep: %s\n", rep_flat.geterror().c_str());
             return false;
         }

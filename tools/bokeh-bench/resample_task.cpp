@@ -59,7 +59,7 @@ const std::vector<F> kMethods = { F::Nearest,     F::Bilinear,         F::Catmul
 const std::vector<int> kFactors = { 2, 4, 8, 16 };
 
 // OIIO's filters and ours that they correspond to (resample.h; the Gaussians differ, see
-// tests/resample_test.cpp: OIIO's is sigma 0.75 cut at 1.5 source pixels).
+// tests/resample/resample_test.cpp: OIIO's is sigma 0.75 cut at 1.5 source pixels).
 const std::vector<std::pair<const char*, F>> kPeers = { { "triangle", F::Bilinear },
                                                         { "gaussian", F::Gaussian },
                                                         { "lanczos3", F::Lanczos3 },

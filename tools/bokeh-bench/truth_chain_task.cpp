@@ -147,7 +147,7 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
             return true;
         };
         OIIO::ImageBuf deepened;
-        if (!bokeh::deepen(deepened, sharp, 1.0f, t))
+        if (!bokeh::deep_from_flat(deepened, sharp, 1.0f, t))
             return false;
         auto defocus_with = [&](const OIIO::ImageBuf& src, bokeh::DefocusMethod m) {
             return [&, m](OIIO::ImageBuf& out) {

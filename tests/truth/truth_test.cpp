@@ -266,7 +266,7 @@ TEST(Truth, ZeroApertureEqualsTidyFlatten)
     const OIIO::ImageBuf deep = random_scene(23, 17, 7, 3, -2);
     OIIO::ImageBuf tidy, flat;
     ASSERT_TRUE(bokeh::deep_tidy(tidy, deep));
-    ASSERT_TRUE(bokeh::flatten(flat, tidy));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, tidy));
     for (int variant = 0; variant < 2; ++variant) {
         bokeh::TruthOptions o;
         o.coc.lens.focus_distance = 5.0;
@@ -601,7 +601,7 @@ TEST(Truth, SubPixelCocsFromTheCentreAreTheFlatten)
     const OIIO::ImageBuf deep = random_scene(23, 17, 11, 0, 0, 0.07f);  // CoCs 0.07 .. 0.91 px
     OIIO::ImageBuf tidy, flat, out;
     ASSERT_TRUE(bokeh::deep_tidy(tidy, deep));
-    ASSERT_TRUE(bokeh::flatten(flat, tidy));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, tidy));
     bokeh::TruthOptions o = direct_options(64);
     o.grow                = false;
     ASSERT_TRUE(bokeh::defocus_truth(out, deep, o, nullptr, 2)) << out.geterror();
@@ -655,7 +655,7 @@ TEST(Truth, RevealsHiddenBackground)
     EXPECT_LT(worst, 0.02);
     // The flat image holds no green; neither does its flat defocus.
     OIIO::ImageBuf flat, flat_out;
-    ASSERT_TRUE(bokeh::flatten(flat, deep));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, deep));
     bokeh::DefocusOptions d;
     d.coc    = o.coc;
     d.method = bokeh::DefocusMethod::Reference;
@@ -745,7 +745,7 @@ TEST(Truth, VolumeSlabStaysUniform)
     o.grow                    = false;
     OIIO::ImageBuf out, flat;
     ASSERT_TRUE(bokeh::defocus_truth(out, deep, o, nullptr, 2));
-    ASSERT_TRUE(bokeh::flatten(flat, deep));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, deep));
     double worst = 0.0;
     for (int y = 8; y < 16; ++y)
         for (int x = 8; x < 16; ++x)  // rays reach at most 5 px: all inside the slab
@@ -802,7 +802,7 @@ TEST(Truth, VolumesOfGaffersImage)
     OIIO::ImageBuf deep(path), tidy, flat;
     ASSERT_TRUE(deep.read(0, 0, true)) << deep.geterror();
     ASSERT_TRUE(bokeh::deep_tidy(tidy, deep));
-    ASSERT_TRUE(bokeh::flatten(flat, tidy));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, tidy));
     bokeh::TruthOptions o;
     o.coc.max_coc_px = 0.0;
     o.spp            = 4;

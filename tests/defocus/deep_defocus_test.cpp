@@ -128,7 +128,7 @@ TEST(DeepDefocus, TwoDepthsAreTheExactBlursOfTheirLayersComposited)
     // The flat defocus of the flattened image must invent the background behind the
     // square; near the square's blurred edge it is measurably farther from the truth.
     OIIO::ImageBuf flat, flat_out;
-    ASSERT_TRUE(flatten(flat, img));
+    ASSERT_TRUE(deep_flatten(flat, img));
     DefocusOptions fo = direct_options(DefocusMethod::Reference, Border::Black);
     ASSERT_TRUE(defocus(flat_out, flat, fo)) << flat_out.geterror();
     double err_deep = 0.0, err_flat = 0.0;
@@ -162,7 +162,7 @@ TEST(DeepDefocus, OneDepthEqualsTheFlatDefocusOfItsDeepen)
         return std::array<float, 5>{ 0.8f * a, 0.3f * a * (x % 3), 0.1f * a, a > 1.0f ? 1.0f : a, 7.0f };
     });
     OIIO::ImageBuf deep;
-    ASSERT_TRUE(deepen(deep, flat));
+    ASSERT_TRUE(deep_from_flat(deep, flat));
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         OIIO::ImageBuf a, b;
         ASSERT_TRUE(defocus(a, flat, direct_options(m, Border::Black))) << a.geterror();
@@ -284,7 +284,7 @@ TEST(DeepDefocus, DeepResultFlattensToTheFlatResult)
     EXPECT_GT(most, 2);
     // Its layers are disjoint in depth, so tidying changes nothing and the flatten is the
     // flat result.
-    ASSERT_TRUE(flatten(flattened, deep_out));
+    ASSERT_TRUE(deep_flatten(flattened, deep_out));
     OIIO::ImageBuf rgba;
     ASSERT_TRUE(OIIO::ImageBufAlgo::channels(rgba, flattened, 4, {}, {}));
     EXPECT_LT(max_difference(rgba, flat_out), 1e-5);
@@ -327,7 +327,7 @@ TEST(DeepDefocus, ASlopedOpaqueSurfaceStaysOpaque)
         return std::array<float, 5>{ 0.5f, 0.4f + 0.002f * y, 0.3f, 1.0f, -30.0f + 20.0f * float(x) / float(w) };
     });
     OIIO::ImageBuf deep;
-    ASSERT_TRUE(deepen(deep, flat));
+    ASSERT_TRUE(deep_from_flat(deep, flat));
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         DefocusOptions o = direct_options(m, Border::Black);
         o.border         = Border::Clamp;
@@ -622,7 +622,7 @@ TEST(DefocusViews, LightIsKept)
             return std::array<float, 5>{ lit ? 1000.0f : 0.0f, 0.0f, 0.0f, lit ? 1.0f : 0.0f, coc };
         });
         OIIO::ImageBuf deep;
-        ASSERT_TRUE(deepen(deep, flat));
+        ASSERT_TRUE(deep_from_flat(deep, flat));
         for (int up : { 1, 2 })
             for (const OIIO::ImageBuf* in : { &flat, static_cast<const OIIO::ImageBuf*>(&deep) }) {
                 DefocusOptions o  = direct_options(DefocusMethod::Layers, Border::Black);
@@ -660,7 +660,7 @@ TEST(DefocusViews, BadOptionsAreRefused)
     o.aperture.shape = KernelShape::Gaussian;
     EXPECT_NE(error_of(o).find("no pupil edge"), std::string::npos);
     OIIO::ImageBuf flat;
-    ASSERT_TRUE(flatten(flat, deep));
+    ASSERT_TRUE(deep_flatten(flat, deep));
     DefocusOptions g  = direct_options(DefocusMethod::Gather, Border::Black);
     g.aperture_views = 2;
     OIIO::ImageBuf out;

@@ -98,7 +98,7 @@ TEST(SceneDeep, FlattenIsTheSharpScene)
         ASSERT_TRUE(make_deep_scene(deep, name, o, 2)) << deep.geterror();
         ASSERT_TRUE(deep.deep());
         ASSERT_EQ(deep.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "Z" }));
-        ASSERT_TRUE(flatten(flat, deep, {}, 2)) << flat.geterror();
+        ASSERT_TRUE(deep_flatten(flat, deep, {}, 2)) << flat.geterror();
         double worst = 0.0, worst_z = 0.0;
         for (int y = 0; y < o.height; ++y)
             for (int x = 0; x < o.width; ++x) {
@@ -222,7 +222,7 @@ TEST(SceneTruth, AgreesWithTheDeepScenesTruth)
         ASSERT_TRUE(make_scene_truth(geo2, name, o, t2, nullptr, 2));
         ASSERT_TRUE(make_deep_scene(deep, name, o, 2));
         ASSERT_TRUE(make_scene(sharp, name, o, 2));
-        ASSERT_TRUE(deepen(deepened, sharp));
+        ASSERT_TRUE(deep_from_flat(deepened, sharp));
         ASSERT_TRUE(defocus_truth(from_deep, deep, deep_truth_options(t), nullptr, 2)) << from_deep.geterror();
         ASSERT_TRUE(defocus_truth(from_flat, deepened, deep_truth_options(t), nullptr, 2)) << from_flat.geterror();
         const OIIO::ImageBuf g = box4(geo), g2 = box4(geo2), d = box4(from_deep), f = box4(from_flat);

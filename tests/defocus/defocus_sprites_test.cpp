@@ -415,7 +415,7 @@ TEST(DefocusSprites, ExposureRampDoesNotPop)
 
 TEST(DefocusSprites, FocusPullDoesNotPop)
 {
-    // DefocusTemporal.FocusPullDoesNotPop (tests/defocus_test.cpp) with lens character on:
+    // DefocusTemporal.FocusPullDoesNotPop (tests/defocus/defocus_test.cpp) with lens character on:
     // its 160 x 90 textured slanted plane (1 / Z linear in x from 1 m to 10 m; 85 mm f/1.4
     // on 36 mm; focus 1.5 m -> 6 m in 24 frames, evenly in 1 / distance), plus 12 lights
     // in two columns at x = 2 and 6 (1.0 m: in front of the focus all the pull, CoC -8 ..
@@ -747,7 +747,7 @@ TEST(DefocusSprites, DeepInputGetsSprites)
     DefocusOptions deep_out = o;
     deep_out.deep_output    = true;
     OIIO::ImageBuf as_deep = run_defocus(deep, deep_out), flat;
-    ASSERT_TRUE(flatten(flat, as_deep, {}));
+    ASSERT_TRUE(deep_flatten(flat, as_deep, {}));
     EXPECT_NEAR(channel_sum(flat, 0) / in, 1.0, 1e-4) << "the deep result's flatten";
     // Pseudo-high resolution from deep input: twice the size, the same radiance (sum / 4);
     // a deep result is not supersampled.

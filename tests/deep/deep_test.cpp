@@ -173,7 +173,7 @@ TEST(Deep, FlattenIsTheDensityIntegral)
     const auto px  = random_pixels(w * h, 7);
     const auto img = make_deep(w, h, px);
     OIIO::ImageBuf flat;
-    ASSERT_TRUE(bokeh::flatten(flat, img)) << flat.geterror();
+    ASSERT_TRUE(bokeh::deep_flatten(flat, img)) << flat.geterror();
     ASSERT_FALSE(flat.deep());
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
@@ -188,8 +188,8 @@ TEST(Deep, TidyIsTidyIdempotentAndKeepsTheFlatten)
     OIIO::ImageBuf tidy, tidy2, flat, flat_tidy;
     ASSERT_TRUE(bokeh::deep_tidy(tidy, img)) << tidy.geterror();
     ASSERT_TRUE(bokeh::deep_tidy(tidy2, tidy)) << tidy2.geterror();
-    ASSERT_TRUE(bokeh::flatten(flat, img));
-    ASSERT_TRUE(bokeh::flatten(flat_tidy, tidy));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, img));
+    ASSERT_TRUE(bokeh::deep_flatten(flat_tidy, tidy));
     int split = 0;
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
@@ -262,8 +262,8 @@ TEST(Deep, MergeIsTheDensityIntegralOfThePooledSamplesAndCommutes)
     OIIO::ImageBuf abc, cba, flat1, flat2;
     ASSERT_TRUE(bokeh::deep_merge(abc, { &A, &B, &C })) << abc.geterror();
     ASSERT_TRUE(bokeh::deep_merge(cba, { &C, &B, &A })) << cba.geterror();
-    ASSERT_TRUE(bokeh::flatten(flat1, abc));
-    ASSERT_TRUE(bokeh::flatten(flat2, cba));
+    ASSERT_TRUE(bokeh::deep_flatten(flat1, abc));
+    ASSERT_TRUE(bokeh::deep_flatten(flat2, cba));
     // B stores half colour: the reference reads what B holds.
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
@@ -291,7 +291,7 @@ TEST(Deep, MergeOverDifferentWindowsAndChannelOrders)
     EXPECT_EQ(m.spec().width, 9);
     EXPECT_EQ(m.spec().height, 7);
     OIIO::ImageBuf flat;
-    ASSERT_TRUE(bokeh::flatten(flat, m));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, m));
     for (int y = 0; y < 7; ++y)
         for (int x = 0; x < 9; ++x) {
             Pixel all = read_pixel(A, x, y);
@@ -304,7 +304,7 @@ TEST(Deep, MergeOverDifferentWindowsAndChannelOrders)
     ASSERT_TRUE(OIIO::ImageBufAlgo::channels(reordered, B, 6, { 4, 5, 3, 0, 1, 2 }));
     OIIO::ImageBuf m2, flat2;
     ASSERT_TRUE(bokeh::deep_merge(m2, { &A, &reordered })) << m2.geterror();
-    ASSERT_TRUE(bokeh::flatten(flat2, m2));
+    ASSERT_TRUE(bokeh::deep_flatten(flat2, m2));
     EXPECT_EQ(max_difference(flat, flat2), 0.0);
     OIIO::ImageBuf renamed = B;
     renamed.specmod().channelnames[0] = "X";
@@ -347,7 +347,7 @@ TEST(Deep, PointPassesMergeWithVolumePasses)
         EXPECT_EQ(repairs.total(), 0) << "a point without ZBack is no fault to repair";
         EXPECT_EQ(merged.spec().channelindex("ZBack") >= 0, k.zback);
         EXPECT_EQ(merged.spec().channelindex("R"), 0) << "colour stays first";
-        ASSERT_TRUE(bokeh::flatten(flat, merged)) << flat.geterror();
+        ASSERT_TRUE(bokeh::deep_flatten(flat, merged)) << flat.geterror();
         for (int y = 0; y < h; ++y)
             for (int x = 0; x < w; ++x) {
                 Pixel all = (*k.a)[size_t(y * w + x)];
@@ -373,8 +373,8 @@ TEST(Deep, CullDropsOnlyWhatAccumulatedOpacityHides)
     EXPECT_EQ(culled.deepdata()->samples(0), 25);
     OIIO::ImageBuf oiio_culled = OIIO::ImageBufAlgo::deep_merge(img, make_deep(1, 1, { {} }), true);
     EXPECT_EQ(oiio_culled.deepdata()->samples(0), 31) << "OIIO culls behind single opaque samples only";
-    ASSERT_TRUE(bokeh::flatten(fk, kept));
-    ASSERT_TRUE(bokeh::flatten(fc, culled));
+    ASSERT_TRUE(bokeh::deep_flatten(fk, kept));
+    ASSERT_TRUE(bokeh::deep_flatten(fc, culled));
     EXPECT_LT(max_difference(fk, fc), 1e-7);
     // Behind an opaque sample: dropped by cull, kept (for a deep defocus) by default.
     const Pixel q = { { 0.1, 0.1, 0.1, 1.0, 2.0, 2.0 }, { 0.9, 0.9, 0.9, 0.9, 5.0, 5.0 } };
@@ -397,7 +397,7 @@ TEST(Deep, HoldoutOfOneSampleImagesIsTheDensityIntegral)
     OIIO::ImageBuf out, flat;
     ASSERT_TRUE(bokeh::deep_holdout(out, img, hold)) << out.geterror();
     ASSERT_TRUE(out.deep());
-    ASSERT_TRUE(bokeh::flatten(flat, out));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, out));
     int attenuated = 0;
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
@@ -452,7 +452,7 @@ TEST(Deep, HoldoutByItselfAndByNothing)
     const auto img = make_deep(3, 1, { opaque, half, fog });
     OIIO::ImageBuf out, flat;
     ASSERT_TRUE(bokeh::deep_holdout(out, img, img));
-    ASSERT_TRUE(bokeh::flatten(flat, out));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, out));
     float v[6];
     flat.getpixel(0, 0, v, 6);
     EXPECT_EQ(v[0], 0.0f);
@@ -467,8 +467,8 @@ TEST(Deep, HoldoutByItselfAndByNothing)
     OIIO::ImageBuf held, tidy, fh, ft;
     ASSERT_TRUE(bokeh::deep_holdout(held, many, none));
     ASSERT_TRUE(bokeh::deep_tidy(tidy, many));
-    ASSERT_TRUE(bokeh::flatten(fh, held));
-    ASSERT_TRUE(bokeh::flatten(ft, tidy));
+    ASSERT_TRUE(bokeh::deep_flatten(fh, held));
+    ASSERT_TRUE(bokeh::deep_flatten(ft, tidy));
     EXPECT_EQ(max_difference(fh, ft), 0.0);
 }
 
@@ -481,7 +481,7 @@ TEST(Deep, HoldoutDiffersFromOiioWherePartialAlphaHoldsOut)
     const auto hold = make_deep(1, 1, { { { 0.0, 0.0, 0.0, 0.5, 5.0, 5.0 } } });
     OIIO::ImageBuf ours, flat;
     ASSERT_TRUE(bokeh::deep_holdout(ours, img, hold));
-    ASSERT_TRUE(bokeh::flatten(flat, ours));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, ours));
     float v[6];
     flat.getpixel(0, 0, v, 6);
     EXPECT_NEAR(v[0], 0.4, 1e-7);
@@ -500,12 +500,12 @@ TEST(Deep, SlicesTileTheDepthRange)
     ASSERT_TRUE(bokeh::deep_slice(s2, img, 3.5, 100.0));
     ASSERT_TRUE(bokeh::deep_slice(s12, img, -1.0, 100.0));
     ASSERT_TRUE(bokeh::deep_merge(merged, { &s1, &s2 }));
-    ASSERT_TRUE(bokeh::flatten(f_merged, merged));
-    ASSERT_TRUE(bokeh::flatten(f_whole, s12));
+    ASSERT_TRUE(bokeh::deep_flatten(f_merged, merged));
+    ASSERT_TRUE(bokeh::deep_flatten(f_whole, s12));
     EXPECT_LT(max_difference(f_merged, f_whole), 2e-6);
     ASSERT_TRUE(bokeh::deep_slice(all, img, -HUGE_VAL, HUGE_VAL));
-    ASSERT_TRUE(bokeh::flatten(f_all, all));
-    ASSERT_TRUE(bokeh::flatten(f_src, img));
+    ASSERT_TRUE(bokeh::deep_flatten(f_all, all));
+    ASSERT_TRUE(bokeh::deep_flatten(f_src, img));
     EXPECT_EQ(max_difference(f_all, f_src), 0.0);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x)
@@ -527,9 +527,9 @@ TEST(Deep, DeepenAndFlattenRoundTrip)
         return std::array<float, 5> { 0.1f * a * x, 0.05f * a, a, a, 1.0f + 0.5f * y };
     });
     OIIO::ImageBuf deep, back;
-    ASSERT_TRUE(bokeh::deepen(deep, flat)) << deep.geterror();
+    ASSERT_TRUE(bokeh::deep_from_flat(deep, flat)) << deep.geterror();
     ASSERT_TRUE(deep.deep());
-    ASSERT_TRUE(bokeh::flatten(back, deep));
+    ASSERT_TRUE(bokeh::deep_flatten(back, deep));
     int empty = 0;
     for (int y = 0; y < 11; ++y)
         for (int x = 0; x < 23; ++x) {
@@ -544,7 +544,7 @@ TEST(Deep, DeepenAndFlattenRoundTrip)
         }
     EXPECT_EQ(empty, 0);
     OIIO::ImageBuf twice;
-    EXPECT_FALSE(bokeh::deepen(twice, deep));
+    EXPECT_FALSE(bokeh::deep_from_flat(twice, deep));
 }
 
 TEST(Deep, AgreesWithOiioReferenceOutputs)
@@ -556,7 +556,7 @@ TEST(Deep, AgreesWithOiioReferenceOutputs)
     ASSERT_TRUE(bokeh::read_image(src, az, err)) << err;
     ASSERT_TRUE(bokeh::read_image(ref, shared_data("oiio-testsuite/oiiotool-deep_ref_deepen.exr"), err)) << err;
     OIIO::ImageBuf deep;
-    ASSERT_TRUE(bokeh::deepen(deep, src));
+    ASSERT_TRUE(bokeh::deep_from_flat(deep, src));
     ASSERT_EQ(deep.deepdata()->pixels(), ref.deepdata()->pixels());
     for (int64_t p = 0; p < ref.deepdata()->pixels(); ++p) {
         ASSERT_EQ(deep.deepdata()->samples(p), ref.deepdata()->samples(p)) << "pixel " << p;
@@ -573,7 +573,7 @@ TEST(Deep, AgreesWithOiioReferenceOutputs)
     OIIO::ImageBuf alpha_src, flat_ref, ours;
     ASSERT_TRUE(bokeh::read_image(alpha_src, shared_data("oiio-testsuite/oiiotool-deep_src_deepalpha.exr"), err));
     ASSERT_TRUE(bokeh::read_image(flat_ref, shared_data("oiio-testsuite/oiiotool-deep_ref_flat.exr"), err));
-    ASSERT_TRUE(bokeh::flatten(ours, alpha_src));
+    ASSERT_TRUE(bokeh::deep_flatten(ours, alpha_src));
     double max_a = 0.0, max_z = 0.0;
     for (int y = 0; y < 120; ++y)
         for (int x = 0; x < 160; ++x) {
@@ -611,7 +611,7 @@ TEST(Deep, LowResLeftViewPassesFlattenToTheComposite)
     ASSERT_TRUE(bokeh::read_image(comp, shared_data("openexr-images/LowResLeftView_composited.exr"), err)) << err;
     OIIO::ImageBuf merged, flat;
     ASSERT_TRUE(bokeh::deep_merge(merged, { &b, &l, &t })) << merged.geterror();
-    ASSERT_TRUE(bokeh::flatten(flat, merged)) << flat.geterror();
+    ASSERT_TRUE(bokeh::deep_flatten(flat, merged)) << flat.geterror();
     // The composite also holds a Ground pass that is not among the files, so compare where
     // the three passes are opaque: nothing behind them shows. (Where the ground is in
     // front of a pass, the two differ: counted, not compared.)
@@ -648,8 +648,8 @@ TEST(Deep, RepresentativeVolumeImageTidiesAndFlattensToTheDensityIntegral)
     ASSERT_TRUE(bokeh::read_image(img, path, err)) << err;
     OIIO::ImageBuf tidy, flat, flat_tidy;
     ASSERT_TRUE(bokeh::deep_tidy(tidy, img)) << tidy.geterror();
-    ASSERT_TRUE(bokeh::flatten(flat, img));
-    ASSERT_TRUE(bokeh::flatten(flat_tidy, tidy));
+    ASSERT_TRUE(bokeh::deep_flatten(flat, img));
+    ASSERT_TRUE(bokeh::deep_flatten(flat_tidy, tidy));
     EXPECT_LT(max_difference(flat, flat_tidy), 1e-5);
     const OIIO::ImageSpec& s = img.spec();
     const int r = s.channelindex("R"), a = s.channelindex("A");
@@ -695,7 +695,7 @@ TEST(Deep, BadSamplesFollowThePolicy)
                          return bokeh::deep_tidy(d, s, o);
                      },
                      +[](OIIO::ImageBuf& d, const OIIO::ImageBuf& s, const bokeh::DeepOptions& o) {
-                         return bokeh::flatten(d, s, o);
+                         return bokeh::deep_flatten(d, s, o);
                      } }) {
         OIIO::ImageBuf bad;
         EXPECT_FALSE(fn(bad, img, strict));
@@ -703,7 +703,7 @@ TEST(Deep, BadSamplesFollowThePolicy)
     }
     // Flat images and deep ones without Z or alpha are refused by name.
     OIIO::ImageBuf bad;
-    EXPECT_FALSE(bokeh::flatten(bad, rgbaz_image(2, 2, [](int, int) { return std::array<float, 5> {}; })));
+    EXPECT_FALSE(bokeh::deep_flatten(bad, rgbaz_image(2, 2, [](int, int) { return std::array<float, 5> {}; })));
     EXPECT_NE(bad.geterror().find("flat"), std::string::npos) << bad.geterror();
     OIIO::ImageSpec noz(2, 2, 2, OIIO::TypeFloat);
     noz.channelnames = { "R", "A" };
@@ -727,7 +727,7 @@ TEST(Deep, ResultsDoNotDependOnTheThreadCount)
     ASSERT_TRUE(bokeh::deep_holdout(h2, a, b, {}, 2));
     EXPECT_TRUE(std::equal(h1.deepdata()->all_data().begin(), h1.deepdata()->all_data().end(),
                            h2.deepdata()->all_data().begin()));
-    ASSERT_TRUE(bokeh::flatten(f1, m1, {}, 1));
-    ASSERT_TRUE(bokeh::flatten(f2, m1, {}, 2));
+    ASSERT_TRUE(bokeh::deep_flatten(f1, m1, {}, 1));
+    ASSERT_TRUE(bokeh::deep_flatten(f2, m1, {}, 2));
     EXPECT_EQ(max_difference(f1, f2), 0.0);
 }
