@@ -125,7 +125,7 @@ std::string Determinism::s_dir;
 
 TEST_F(Determinism, BlurEveryKernelAndMethod)
 {
-    // Every method each kernel takes (tests/blur_test.cpp: exact_methods, approximations).
+    // Every method each kernel takes (tests/blur/blur_fixtures.cpp: exact_methods, approximations).
     const std::vector<std::pair<std::string, std::vector<std::string>>> kernels = {
         { "gaussian", { "auto", "exact", "fft", "separable", "boxes3", "fast", "reference" } },
         { "box", { "auto", "exact", "reference" } },
