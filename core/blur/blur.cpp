@@ -303,35 +303,33 @@ bool plan_blur(BlurPlan& plan, OIIO::ROI& roi, const Kernel& k, const BlurOption
     return true;
 }
 
-// The methods that go straight from the source to `dst` (no padded plane), when the plan
-// is one of them: true with their result in `done`. Iris mode transforms a padded plane,
-// so it keeps the plane path.
-bool blur_direct(bool& done, OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi, const BlurPlan& plan,
-                 const Kernel& k, const BlurOptions& opts, int nthreads)
+// The methods that go straight from the source to `dst` (no padded plane): their result
+// when the plan is one of them, else nothing. Iris mode transforms a padded plane, so it
+// keeps the plane path.
+std::optional<bool> blur_direct(OIIO::ImageBuf& dst, const OIIO::ImageBuf& in, const OIIO::ROI& roi,
+                                const BlurPlan& plan, const Kernel& k, const BlurOptions& opts, int nthreads)
 {
     const BlurMethod method = plan.method;
     const KernelWeights& weights = plan.weights;
     const auto& factors = plan.factors;
     if (opts.iris != 0.0f || weights.is_identity())
-        return false;
+        return std::nullopt;
     const std::vector<int> one_kernel(size_t(in.nchannels()), 0);
     if (method == BlurMethod::Exact && k.shape == KernelShape::Box)
-        done = box_direct(dst, in, roi, BoxPass(factors->first), BoxPass(factors->second), opts.border, nthreads);
-    else if (method == BlurMethod::Spans || method == BlurMethod::BilinearTaps)
-        done = convolve_spans_direct(dst, in, roi, weights.rx, weights.ry, plan.spans, opts.border, nthreads);
-    else if (method == BlurMethod::Separable)
-        done = separable_direct(dst, in, roi, factors->first, factors->second, opts.border, nthreads);
-    else if (method == BlurMethod::Fft)
-        done = convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads, opts.progress);
-    else if (method == BlurMethod::ThreeBoxes)
-        done = three_boxes_direct(dst, in, roi, BoxPass(plan.box3x), BoxPass(plan.box3y), opts.border, nthreads);
-    else if (method == BlurMethod::Bands)
-        done = convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
-    else if (method == BlurMethod::Parallelograms && hexagon_sweeps(k))
-        done = hexagon_direct(dst, in, roi, k, plan.rx, plan.ry, opts.border, nthreads);
-    else
-        return false;
-    return true;
+        return box_direct(dst, in, roi, BoxPass(factors->first), BoxPass(factors->second), opts.border, nthreads);
+    if (method == BlurMethod::Spans || method == BlurMethod::BilinearTaps)
+        return convolve_spans_direct(dst, in, roi, weights.rx, weights.ry, plan.spans, opts.border, nthreads);
+    if (method == BlurMethod::Separable)
+        return separable_direct(dst, in, roi, factors->first, factors->second, opts.border, nthreads);
+    if (method == BlurMethod::Fft)
+        return convolve_fft_direct(dst, in, roi, { weights }, one_kernel, opts.border, nthreads, opts.progress);
+    if (method == BlurMethod::ThreeBoxes)
+        return three_boxes_direct(dst, in, roi, BoxPass(plan.box3x), BoxPass(plan.box3y), opts.border, nthreads);
+    if (method == BlurMethod::Bands)
+        return convolve_bands_direct(dst, in, roi, weights, opts.border, nthreads);
+    if (method == BlurMethod::Parallelograms && hexagon_sweeps(k))
+        return hexagon_direct(dst, in, roi, k, plan.rx, plan.ry, opts.border, nthreads);
+    return std::nullopt;
 }
 
 // The plan run on a padded plane of the source (iris mode, the brute force, the
@@ -422,9 +420,8 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
         dst.errorfmt("blur: {}", err);
         return false;
     }
-    bool done = false;
-    if (blur_direct(done, dst, in, roi, plan, k, opts, nthreads))
-        return done;
+    if (const std::optional<bool> done = blur_direct(dst, in, roi, plan, k, opts, nthreads))
+        return *done;
     return blur_on_plane(dst, in, roi, plan, k, opts, nthreads);
 }
 
