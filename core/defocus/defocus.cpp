@@ -21,10 +21,12 @@
 #include <bokeh/defocus.h>
 #include <bokeh/parallel.h>
 
+#include "defocus/defocus_fill.h"
 #include "defocus/defocus_layers.h"
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
 #include <OpenImageIO/strutil.h>
 
@@ -35,6 +37,26 @@ using namespace detail;
 namespace {
 
 using OIIO::Strutil::fmt::format;
+
+// The disocclusion fill the options ask for (defocus_fill.h), counted in the report.
+void fill_uncovered(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads)
+{
+    std::unique_ptr<BackgroundPlate> plate;
+    if (o.fill != DisocclusionFill::Foreground)
+        plate = std::make_unique<BackgroundPlate>(f, nthreads);
+    const PlateFill how = o.fill == DisocclusionFill::Mirror ? PlateFill::Mirror : PlateFill::Smooth;
+    const FillCount n      = fill_disocclusions(out, f, rep.max_coc_px, plate.get(), how, nthreads);
+    rep.fill_continued_px  = n.continued;
+    rep.fill_foreground_px = n.foreground;
+}
+
+std::string fill_summary(const DefocusReport& rep)
+{
+    if (rep.fill_continued_px == 0 && rep.fill_foreground_px == 0)
+        return std::string();
+    return format(", uncovered background: {} px continued, {} px the foreground's own colour",
+                  rep.fill_continued_px, rep.fill_foreground_px);
+}
 
 }  // namespace
 
@@ -188,11 +210,11 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
     }
     }
     if (rep.method != DefocusMethod::Gather)
-        fill_disocclusions(out, f, rep.max_coc_px, nthreads);
+        fill_uncovered(out, f, opts, rep, nthreads);
     report_sprites(rep, f.sprites.get());
-    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}", method_name(rep.method),
+    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}{}", method_name(rep.method),
                          rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width() * f.up,
-                         f.out.height() * f.up,
+                         f.out.height() * f.up, fill_summary(rep),
                          rep.nonfinite.total() ? format(", {} non-finite values replaced",
                                                         rep.nonfinite.total())
                                                : std::string(),
@@ -227,7 +249,7 @@ bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, c
         dst.errorfmt("defocus scatter reference: {}", err);
         return false;
     }
-    fill_disocclusions(out, f, rep.max_coc_px, nthreads);  // as the layered method ends
+    fill_uncovered(out, f, o, rep, nthreads);  // as the layered method ends
     write_result(dst, src, f, out, nthreads);
     return true;
 }

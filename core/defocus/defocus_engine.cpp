@@ -24,8 +24,7 @@
 // sparse layer costs what it holds, not its bounding box.
 //
 // Known limits: a flat image holds no background behind its foreground; what the layers
-// leave uncovered there is filled with the source pixel (fill_disocclusions), so a
-// blurred foreground's silhouette stays hard on its inner side.
+// leave uncovered there is filled afterwards (core/defocus/defocus_fill.cpp).
 
 #include <bokeh/defocus.h>
 #include <bokeh/parallel.h>
@@ -528,34 +527,6 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     if (views.size() > 1)
         std::copy_n(mean.px.get(), mean.size(), out.px.get());
     return true;
-}
-
-// What the layers leave transparent where the source is opaque is background that a
-// flat image never held: behind a blurred foreground's fringe over a sharp background (the
-// sharp background's kernel cannot reach in from its visible neighbours). It is filled
-// with the source pixel itself, up to the source's coverage: the foreground stands in for
-// the unknown background, which keeps an opaque image opaque (a deep image has the real
-// background: deep.h).
-void detail::fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads)
-{
-    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y) {
-            float* d = out.row(y);
-            for (int x = 0; x < out.w; ++x, d += 4) {
-                const int64_t i = f.source(f.out.xbegin + x / f.up, f.out.ybegin + y / f.up);
-                // Only pixels with something behind them in depth can have lost it.
-                if (i < 0 || f.coc[size_t(i)] >= farthest)
-                    continue;
-                const float* px = f.linear().data() + size_t(i) * 4;
-                if (px[3] <= d[3])
-                    continue;
-                // Only the coverage the source had and the layers lost.
-                const float w = (px[3] - d[3]) / px[3];
-                for (int c = 0; c < 4; ++c)
-                    d[c] += w * px[c];
-            }
-        }
-    });
 }
 
 }  // namespace bokeh

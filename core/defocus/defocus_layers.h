@@ -162,12 +162,6 @@ Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step);
 bool reference_layers(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads,
                       std::string& err);
 
-/// What the layers leave transparent where the source is opaque (background a flat image
-/// never held, behind a blurred foreground's fringe) filled with the source pixel itself,
-/// up to the coverage it had: keeps an opaque image opaque. Only for pixels with a CoC
-/// nearer than `farthest` (something can lie behind them).
-void fill_disocclusions(Plane& out, const Frame& f, float farthest, int nthreads);
-
 /// The rungs of the layered method for CoCs `cocs` spanning [lo, hi]: one per distinct
 /// CoC (0.25 px bins) for scenes of at most 64 (when `exact_allowed`), else the budget's
 /// geometric ladder; a rung at 0 always.

@@ -28,6 +28,14 @@ enum class DefocusMethod {
     Reference,  ///< one full-resolution layer per distinct CoC value, exact kernels
 };
 
+/// What fills the background a blurred foreground uncovers inside its own silhouette, which
+/// a flat image never held (docs/methods/disocclusion.md).
+enum class DisocclusionFill {
+    Foreground,  ///< the foreground's own colour: the silhouette stays hard on its inner side
+    Smooth,      ///< the farther surfaces around it continued under it (a depth-aware pull-push)
+    Mirror,      ///< the background's texture mirrored across the silhouette (Smooth where it cannot)
+};
+
 struct DefocusOptions {
     CocOptions coc;
     /// The aperture: shape, blades, rotation, curvature, hole, edge. Its size is ignored
@@ -63,6 +71,9 @@ struct DefocusOptions {
     Border border = Border::Clamp;
     /// Grow the data window by the largest CoC radius, within the display window.
     bool grow = true;
+    /// Flat Layers and Reference: what fills the background a blurred foreground uncovers
+    /// (a deep image holds it; the gather has its own edge blur).
+    DisocclusionFill fill = DisocclusionFill::Smooth;
     NonFinitePolicy nonfinite = NonFinitePolicy::Zero;
     /// Reference: CoC values are quantised to this step (px) to count as one layer.
     float reference_step_px = 0.25f;
@@ -121,6 +132,10 @@ struct DefocusReport {
     std::vector<int> layer_reduction; ///< Layers: each layer's buffer reduction
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
     NonFiniteCount nonfinite;
+    /// Flat Layers and Reference: output pixels whose uncovered background was filled with
+    /// the continued background, and with the foreground's own colour (nothing behind it
+    /// within reach, or fill Foreground).
+    int64_t fill_continued_px = 0, fill_foreground_px = 0;
     /// Lens character: how many sprites were scattered, their CoC range, the seconds their
     /// selection, PSFs and scatter took, and the distinct PSFs they use (built, or taken from
     /// the process's PSF cache: shared_psf_cache, optics.h).

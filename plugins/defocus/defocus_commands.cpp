@@ -59,7 +59,7 @@ bool defocus_command(CommandContext& c)
         if (what != "image")
             return c.fail(format("method=truth gives an image, not output={}", what));
         for (const char* name : { "layers", "reduction", "budget", "bloom", "bloomgain", "iris", "zdilate",
-                                  "step", "border", "views" })
+                                  "step", "border", "views", "fill" })
             if (c.options.given(name))
                 return c.fail(format("{}= does not apply to method=truth", name));
         bokeh::TruthOptions t;
@@ -156,6 +156,10 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                         "px: each pixel takes the nearest depth around it (remedy for "
                         "anti-aliased depth halos)"),
         OptionSpec::Choice("border", { "clamp", "black", "mirror" }, "pixels past the data window"),
+        OptionSpec::Choice("fill", { "smooth", "mirror", "foreground" },
+                           "flat layers, reference: the background a blurred foreground uncovers inside its "
+                           "silhouette; smooth: the surfaces around it continued (a depth-aware pull-push), "
+                           "mirror: their texture mirrored across the silhouette, foreground: its own colour"),
         OptionSpec::Bool("grow", true, "grow the data window to hold the bokeh (within the display window)"),
         OptionSpec::Choice("nonfinite", { "zero", "error" },
                            "NaN/Inf: colour -> 0, depth -> far (counted, warned); or fail"),

@@ -207,6 +207,10 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
                : border == "mirror" ? Border::Mirror
                                     : Border::Clamp;
     o.grow      = v.get_bool("grow");
+    const std::string& fill = v.get_string("fill");
+    o.fill = fill == "foreground" ? DisocclusionFill::Foreground
+             : fill == "mirror"   ? DisocclusionFill::Mirror
+                                  : DisocclusionFill::Smooth;
     o.nonfinite = v.get_string("nonfinite") == "error" ? NonFinitePolicy::Error
                                                        : NonFinitePolicy::Zero;
     o.reference_step_px = float(v.get_float("step"));

@@ -220,9 +220,12 @@ TEST(DefocusReference, MatchesABruteForceOfTheLayerModel)
         p.b = p.a * (p.z == 7.5f ? 4.0f : texture(x, y, 3));
         return p;
     });
+    // The fill with the source's own colour is the one written out above; the continued
+    // background's fills have their own tests (defocus_fill_test.cpp).
+    DefocusOptions o = direct_options(DefocusMethod::Reference, Border::Black, false);
+    o.fill           = DisocclusionFill::Foreground;
     DefocusReport rep;
-    const OIIO::ImageBuf out
-        = run_defocus(src, direct_options(DefocusMethod::Reference, Border::Black, false), &rep);
+    const OIIO::ImageBuf out = run_defocus(src, o, &rep);
     EXPECT_EQ(rep.layer_coc_px, (std::vector<float>{ -6.0f, 0.0f, 5.0f, 7.5f, 9.0f }));
     ASSERT_EQ(out.roi(), OIIO::ROI(0, 40, 0, 32, 0, 1, 0, 4));
     const std::vector<double> ref = brute_force_layers(src);

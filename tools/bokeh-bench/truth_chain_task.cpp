@@ -11,7 +11,8 @@
 //                       squares (TruthPixel::Area)
 //   deep reference/auto the deep defocus (one layer per CoC step / the budget's layers)
 //   flat truth          defocus_truth of the sharp scene deepened (no hidden surfaces)
-//   flat reference/auto the flat defocus of the sharp scene
+//   flat reference/auto the flat defocus of the sharp scene (the default fill, and auto
+//                       with the mirror and the foreground fills: defocus.h)
 // PSNR as bench_common.h (tone-mapped, peak 1) over the frame's interior: the frame less
 // half the largest CoC and a pixel on each side, where the geometric truth's rays see past
 // the frame's edge and the others cannot. The disocclusion mask: interior pixels where the
@@ -149,10 +150,12 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
         OIIO::ImageBuf deepened;
         if (!bokeh::deep_from_flat(deepened, sharp, 1.0f, t))
             return false;
-        auto defocus_with = [&](const OIIO::ImageBuf& src, bokeh::DefocusMethod m) {
-            return [&, m](OIIO::ImageBuf& out) {
+        auto defocus_with = [&](const OIIO::ImageBuf& src, bokeh::DefocusMethod m,
+                                bokeh::DisocclusionFill fill = bokeh::DefocusOptions().fill) {
+            return [&, m, fill](OIIO::ImageBuf& out) {
                 bokeh::DefocusOptions o = dof;
                 o.method                = m;
+                o.fill                  = fill;
                 return bokeh::defocus(out, src, o, nullptr, t);
             };
         };
@@ -169,7 +172,11 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
             || !run("deep auto", defocus_with(deep, bokeh::DefocusMethod::Auto))
             || !run("flat truth", [&](OIIO::ImageBuf& out) { return bokeh::defocus_truth(out, deepened, to, nullptr, t); })
             || !run("flat reference", defocus_with(sharp, bokeh::DefocusMethod::Reference))
-            || !run("flat auto", defocus_with(sharp, bokeh::DefocusMethod::Auto)))
+            || !run("flat auto", defocus_with(sharp, bokeh::DefocusMethod::Auto))
+            || !run("flat auto fill=mirror",
+                    defocus_with(sharp, bokeh::DefocusMethod::Auto, bokeh::DisocclusionFill::Mirror))
+            || !run("flat auto fill=foreground",
+                    defocus_with(sharp, bokeh::DefocusMethod::Auto, bokeh::DisocclusionFill::Foreground)))
             return false;
 
         // The interior, and the mask: where the deep and the flat truth differ.
