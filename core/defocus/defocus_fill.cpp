@@ -61,6 +61,9 @@ inline float luminance(const float* rgb) { return 0.2126f * rgb[0] + 0.7152f * r
 // touches the silhouette continues under it (its hidden part is most likely more of it),
 // a light farther out does not come back as a phantom mirror image under the foreground.
 constexpr float kMirrorMaxGain = 2.0f;
+// The widest blur (px) the mirror gives a defocused background's texture; past it the
+// texture is gone and the mean over a larger disk costs its area per pixel for nothing.
+constexpr int kMirrorMaxBlurPx = 16;
 
 // The report counts a pixel as filled when it lost more coverage than this (rounding in
 // the layers' division leaves 1e-4 and less on pixels that lost nothing).
@@ -239,8 +242,22 @@ bool BackgroundPlate::mirrored(int x, int y, float coc_px, float rgba[4]) const
         std::fill_n(rgba, 4, 0.0f);
         return true;
     }
-    const float* m = px.data() + f_.img.index(mx, my) * 4;
-    std::copy_n(m, 4, rgba);
+    // A defocused background is seen blurred: the mean over the disk of its CoC (up to
+    // kMirrorMaxBlurPx across) around the mirror image, of the pixels that lie behind.
+    const int rb = std::min(int(0.5f * std::abs(f_.coc[f_.img.index(qx, qy)])), kMirrorMaxBlurPx / 2);
+    float mean[4] = { 0, 0, 0, 0 };
+    int count = 0;
+    for (int dy = -rb; dy <= rb; ++dy)
+        for (int dx = -rb; dx <= rb; ++dx)
+            if (dx * dx + dy * dy <= rb * rb && f_.source(mx + dx, my + dy) >= 0 && behind_at(mx + dx, my + dy)) {
+                const float* v = px.data() + f_.img.index(mx + dx, my + dy) * 4;
+                for (int c = 0; c < 4; ++c)
+                    mean[c] += v[c];
+                ++count;
+            }
+    for (int c = 0; c < 4; ++c)
+        rgba[c] = mean[c] / float(count);  // count >= 1: the mirror image itself lies behind
+    const float* m = rgba;
     if (m[3] <= 0.0f)
         return true;
     // Held to the brighter of the smooth continuation and the edge's own pixel.

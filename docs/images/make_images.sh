@@ -36,3 +36,25 @@ for lens in uncorrected achromat apochromat:chromatic=10; do
         60 -o "$out/bokeh_$name.png"
 done
 "$tool" -q --bokeh:lens=achromat:fstop=1.4:map=1 40 -o "$out/beam_map_achromat.png"
+
+# Flat silhouettes (docs/methods/disocclusion.md): a 150 px crop of a defocused foreground's
+# edge, 2x, in edges (the near orange panel over the in-focus checker) and lights (the post
+# over the floor), at 960x540: sharp, the thin-lens truth (256 rays), the flat defocus with
+# fill=foreground, fill=smooth (the default) and fill=mirror, and the deep defocus.
+for s in edges:3:1.06:645:180 lights:6:1.27:105:300; do
+    IFS=: read -r name focus fstop cx cy <<< "$s"
+    scene=$name:width=960:height=540
+    lens=focus=$focus:fstop=$fstop
+    "$tool" -q --scene $scene -o "$tmp/s_sharp.exr"
+    "$tool" -q --scene $scene:output=truth:spp=256 -o "$tmp/s_truth.exr"
+    "$tool" -q --scene $scene:output=deep --defocus:$lens -o "$tmp/s_deep.exr"
+    for fill in foreground smooth mirror; do
+        "$tool" -q "$tmp/s_sharp.exr" --defocus:$lens:fill=$fill -o "$tmp/s_$fill.exr"
+    done
+    for v in sharp truth foreground smooth mirror deep; do
+        "$tool" -q "$tmp/s_$v.exr" --ch R,G,B -o "$tmp/s_$v.png"
+        oiiotool "$tmp/s_$v.png" --cut 150x150+$cx+$cy --resize 300x300 -o "$tmp/${name}_$v.png"
+    done
+done
+oiiotool "$tmp"/edges_{sharp,truth,foreground,smooth,mirror,deep}.png \
+    "$tmp"/lights_{sharp,truth,foreground,smooth,mirror,deep}.png --mosaic:pad=4 6x2 -o "$out/silhouettes.png"

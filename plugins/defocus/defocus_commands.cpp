@@ -49,6 +49,9 @@ bool defocus_command(CommandContext& c)
     if (o.aperture_views > 1 && what != "image" && what != "deep")
         return c.fail(format("views= composites the layers per sub-aperture; output={} is a map of the frame's pixels",
                              what));
+    if (c.options.given("fill") && (method == "gather" || in.buf->deep()))
+        return c.fail(method == "gather" ? "fill= is for the layered methods; the gather has its own edge blur"
+                                         : "fill= is for flat images; a deep image holds the background it hides");
     bool ok;
     if (method == "truth") {
         // The thin-lens rays through the scene a deep image encodes (truth.h).

@@ -104,6 +104,44 @@ TEST(CliDefocus, VerboseNamesTheLayers)
     EXPECT_EQ(q.out.find("CoC"), std::string::npos) << q.out;
 }
 
+TEST(CliDefocus, FillChoosesWhatABlurredForegroundUncovers)
+{
+    // lights at f/1.27: the post (CoC about -10 px at this size) uncovers the floor behind it.
+    const std::string dir = fresh_dir("cli_defocus_fill");
+    const char* scene = "--scene lights:width=320:height=180";
+    auto run = [&](const std::string& fill) {
+        const RunResult r = bokehtool(format("-v {} --defocus:focus=6:fstop=1.27:fill={} -o {}/{}.exr", scene, fill, dir, fill));
+        EXPECT_EQ(r.status, 0) << r.err;
+        return r.out;
+    };
+    const std::string fg = run("foreground"), smooth = run("smooth"), mirror = run("mirror");
+    EXPECT_NE(fg.find("uncovered background: 0 px continued"), std::string::npos) << fg;
+    for (const std::string& out : { smooth, mirror }) {
+        const size_t at = out.find("uncovered background: ");
+        ASSERT_NE(at, std::string::npos) << out;
+        EXPECT_GT(std::atoi(out.c_str() + at + 22), 0) << out;
+    }
+    // The fills differ where the post's edge uncovers the floor, and only there: most pixels
+    // are the same in all three.
+    OIIO::ImageBuf a(dir + "/foreground.exr"), b(dir + "/smooth.exr");
+    int64_t differ = 0, total = 0;
+    for (OIIO::ImageBuf::ConstIterator<float> p(a), q(b); !p.done(); ++p, ++q, ++total) {
+        bool d = false;
+        for (int c = 0; c < 4; ++c)
+            d = d || std::abs(p[c] - q[c]) > 0.01f;
+        differ += d;
+    }
+    EXPECT_GT(differ, 50);
+    EXPECT_LT(differ, total / 10);
+    // Where it cannot apply, said so.
+    for (const char* bad : { "method=gather:fill=smooth", "fill=inpaint" }) {
+        const RunResult r = bokehtool(format("{} --defocus:focus=6:{} -o {}/bad.exr", scene, bad, dir));
+        EXPECT_EQ(r.status, 1) << bad;
+        EXPECT_NE(r.err.find("fill"), std::string::npos) << r.err;
+        EXPECT_FALSE(OIIO::Filesystem::exists(dir + "/bad.exr"));
+    }
+}
+
 TEST(CliDefocus, BadInputFailsCleanly)
 {
     const std::string dir = fresh_dir("cli_defocus_bad");
