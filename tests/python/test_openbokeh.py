@@ -484,6 +484,43 @@ def test_calls_from_several_threads_at_once_give_each_its_own_result(scene_array
         assert np.array_equal(got, want)
 
 
+def test_every_family_from_several_threads_at_once_gives_what_one_at_a_time_gives(scene_file, scene_array):
+    # Each thread its own call (its own images); the lens-character calls share the
+    # process's PSF cache, the defocus and the deep nodes their engines. Every result is
+    # compared, bit for bit, with the same call made alone.
+    img = ob.read_image(scene_file)
+    calls = [
+        lambda: ob.to_array(ob.defocus(img, focus=6, fstop=2)[0]),
+        lambda: ob.to_array(ob.defocus(img, focus=6, fstop=1.4, fill="mirror", views=2)[0]),
+        lambda: ob.to_array(ob.defocus(img, focus=6, fstop=2, lens="achromat", highlights=0.5)[0]),
+        lambda: ob.to_array(ob.defocus(ob.deepen(scene_array), focus=6, fstop=2)[0]),
+        lambda: ob.to_array(ob.bokeh(24, lens="achromat", diffraction="exact")),
+        lambda: ob.to_array(ob.bokeh(-18, lens="uncorrected", onion=0.5)),
+        lambda: ob.to_array(ob.resize(scene_array, "150x80")),
+        lambda: ob.blur(scene_array, 15, kernel="hex"),
+    ]
+    alone = [call() for call in calls]
+    together = [[None] * 3 for _ in calls]
+    errors = []
+
+    def run(i):
+        try:
+            for k in range(3):
+                together[i][k] = calls[i]()
+        except Exception as e:  # reported below, with the call's index
+            errors.append((i, e))
+
+    threads = [threading.Thread(target=run, args=(i,)) for i in range(len(calls))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors, errors
+    for i, want in enumerate(alone):
+        for got in together[i]:
+            assert np.array_equal(got, want), f"call {i} from a thread differs from the same call alone"
+
+
 # --- the examples ------------------------------------------------------------------------
 
 @pytest.mark.parametrize("example", ["defocus_scene.py", "deep_merge_flatten.py", "lens_bokeh.py"])
