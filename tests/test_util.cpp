@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <sstream>
@@ -16,6 +17,7 @@
 #include <gtest/gtest.h>
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/imageio.h>
 
 namespace bokeh_test {
 
@@ -189,5 +191,52 @@ void expect_clean_failure(const RunResult& r, const std::string& what, const std
         EXPECT_FALSE(exists(output)) << output << " was written";
     }
 }
+
+std::string stereo_parts_exr(const std::string& dir)
+{
+    const std::string path = dir + "/stereo_parts.exr";
+    std::vector<OIIO::ImageSpec> specs;
+    for (const char* part : { "rgba.left", "rgba.right", "depth.left", "depth.right" }) {
+        const bool depth = std::strncmp(part, "depth", 5) == 0;
+        OIIO::ImageSpec s(16, 8, depth ? 1 : 4, OIIO::TypeFloat);
+        s.channelnames = depth ? std::vector<std::string>{ "Z" } : std::vector<std::string>{ "R", "G", "B", "A" };
+        s.attribute("name", part);
+        s.attribute("view", std::strstr(part, "left") ? "left" : "right");
+        specs.push_back(s);
+    }
+    auto out = OIIO::ImageOutput::create(path);
+    EXPECT_TRUE(out && out->open(path, int(specs.size()), specs.data()));
+    for (size_t p = 0; p < specs.size(); ++p) {
+        const bool left = p % 2 == 0;
+        std::vector<float> px(size_t(16 * 8 * specs[p].nchannels));
+        for (size_t i = 0; i < px.size(); ++i)
+            px[i] = specs[p].nchannels == 1 ? (left ? 3.0f : 5.0f)
+                                            : (i % 4 == 0 ? (left ? 0.25f : 0.75f) : i % 4 == 3 ? 1.0f : 0.5f);
+        if (p > 0) {
+            EXPECT_TRUE(out->open(path, specs[p], OIIO::ImageOutput::AppendSubimage));
+        }
+        EXPECT_TRUE(out->write_image(OIIO::TypeFloat, px.data()));
+    }
+    EXPECT_TRUE(out->close());
+    return path;
+}
+
+std::string stereo_single_part_exr(const std::string& dir)
+{
+    const std::string path = dir + "/stereo_single.exr";
+    OIIO::ImageSpec s(16, 8, 10, OIIO::TypeFloat);
+    s.channelnames = { "left.R", "left.G", "left.B", "left.A", "left.Z",
+                       "right.R", "right.G", "right.B", "right.A", "right.Z" };
+    const char* views[] = { "left", "right" };
+    s.attribute("multiView", OIIO::TypeDesc(OIIO::TypeDesc::STRING, 2), views);
+    std::vector<float> px(size_t(16 * 8 * 10));
+    const float pixel[10] = { 0.25f, 0.5f, 0.5f, 1.0f, 3.0f, 0.75f, 0.5f, 0.5f, 1.0f, 5.0f };
+    for (size_t i = 0; i < px.size(); ++i)
+        px[i] = pixel[i % 10];
+    auto out = OIIO::ImageOutput::create(path);
+    EXPECT_TRUE(out && out->open(path, s) && out->write_image(OIIO::TypeFloat, px.data()) && out->close());
+    return path;
+}
+
 
 }  // namespace bokeh_test

@@ -95,6 +95,15 @@ OIIO::ImageBuf make_deep(int w, int h, const std::vector<DeepPixel>& px, bool ha
 /// Largest absolute difference of two images over all channels (inf if sizes differ).
 double max_difference(const OIIO::ImageBuf& a, const OIIO::ImageBuf& b);
 
+/// A stereo pair as renders write it, 16 x 8, in `dir`: part 0 the left view's R, G, B, A,
+/// part 1 the right view's, then a depth part per view (channel "Z"), each part tagged with
+/// its "view". Left: R = 0.25, Z = 3; right: R = 0.75, Z = 5. Returns its path.
+std::string stereo_parts_exr(const std::string& dir);
+
+/// The same pair in one part, every channel prefixed by its view (left.R ... right.Z),
+/// "multiView" listing left, right.
+std::string stereo_single_part_exr(const std::string& dir);
+
 }  // namespace bokeh_test
 
 #define BOKEHTOOL (::bokeh_test::paths::bokehtool)

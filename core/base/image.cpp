@@ -58,6 +58,22 @@ ChannelMap find_channels(const OIIO::ImageSpec& spec)
     return m;
 }
 
+std::string no_depth_message(const OIIO::ImageSpec& spec)
+{
+    std::vector<std::string> like;
+    for (const std::string& name : spec.channelnames) {
+        const std::string last = OIIO::Strutil::lower(name.substr(name.rfind('.') == std::string::npos ? 0 : name.rfind('.') + 1));
+        if (last == "z" || last == "depth" || last == "zdepth")
+            like.push_back(name);
+    }
+    if (like.empty())
+        return "the image has no depth channel (Z)";
+    return format("the image has no depth channel (Z); it holds {}: zchannel=NAME names one as the depth{}",
+                  OIIO::Strutil::join(like, ", "),
+                  spec.find_attribute("multiView") || like.size() > 1 ? ", or --view NAME reads one view of a stereo file"
+                                                                      : "");
+}
+
 int channel_index_named(const OIIO::ImageSpec& spec, const std::string& name, std::string& err)
 {
     const int found = spec.channelindex(name);

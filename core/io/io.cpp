@@ -15,6 +15,7 @@
 #include <bokeh/io.h>
 
 #include "io/exr_deflate.h"
+#include "io/io_views.h"
 
 #include <signal.h>
 #include <unistd.h>
@@ -38,6 +39,11 @@
 #include <OpenImageIO/strutil.h>
 
 namespace bokeh {
+
+using detail::channel_view;
+using detail::multiview_list;
+using detail::name_first_view_depth;
+using detail::select_single_part_view;
 
 using OIIO::Strutil::fmt::format;
 
@@ -77,12 +83,47 @@ static std::string part_name_of(const OIIO::ImageSpec& spec)
 // Each part is decoded on its own and pasted into the union of the data windows, which
 // starts zeroed: OpenEXR leaves pixels outside a data window undefined, Nuke and OIIO's
 // tools take them as 0.
-static bool read_merged_parts(OIIO::ImageBuf& dst, const std::string& path, int nparts,
-                              ReadInfo* info, std::string& err)
+// With `view` given, only the parts of that view and those of none are merged, the first
+// of them in part 0's place (io_views.cpp).
+static bool read_merged_parts(OIIO::ImageBuf& dst, const std::string& path, int file_parts,
+                              const std::string& view, ReadInfo* info, std::string& err)
 {
+    std::vector<int> keep;  // file part of each merged part
+    std::vector<std::string> views;
+    for (int p = 0; p < file_parts; ++p) {
+        OIIO::ImageBuf probe;
+        if (!probe.init_spec(path, p, 0)) {
+            err = format("{}: cannot read part {}: {}", path, p, first_line(probe.geterror()));
+            return false;
+        }
+        const std::string v = probe.spec().get_string_attribute("view");
+        if (!v.empty() && std::find(views.begin(), views.end(), v) == views.end())
+            views.push_back(v);
+        if (view.empty() || v.empty() || v == view)
+            keep.push_back(p);
+    }
+    if (!view.empty() && !views.empty() && std::find(views.begin(), views.end(), view) == views.end()) {
+        err = format("{}: no view '{}' (its parts' views: {})", path, view, OIIO::Strutil::join(views, ", "));
+        return false;
+    }
+    if (views.empty())  // not a multi-view file: every part, whatever view was asked for
+        for (int p = int(keep.size()); p < file_parts; ++p)
+            keep.push_back(p);
+    std::sort(keep.begin(), keep.end());
+    keep.erase(std::unique(keep.begin(), keep.end()), keep.end());
+    // The view asked for: its first part takes part 0's place (its channels keep their names).
+    for (size_t i = 0; i < keep.size() && !view.empty() && !views.empty(); ++i) {
+        OIIO::ImageBuf probe;
+        if (probe.init_spec(path, keep[i], 0) && probe.spec().get_string_attribute("view") == view) {
+            std::rotate(keep.begin(), keep.begin() + std::ptrdiff_t(i), keep.begin() + std::ptrdiff_t(i) + 1);
+            break;
+        }
+    }
+    const int nparts = int(keep.size());
     std::vector<OIIO::ImageBuf> parts(static_cast<size_t>(nparts));
-    for (int p = 0; p < nparts; ++p) {
-        OIIO::ImageBuf& part = parts[size_t(p)];
+    for (int i = 0; i < nparts; ++i) {
+        const int p          = keep[size_t(i)];
+        OIIO::ImageBuf& part = parts[size_t(i)];
         part.reset(path, p, 0);
         if (!part.init_spec(path, p, 0)) {
             err = format("{}: cannot read part {}: {}", path, p, first_line(part.geterror()));
@@ -109,12 +150,18 @@ static bool read_merged_parts(OIIO::ImageBuf& dst, const std::string& path, int 
     spec.alpha_channel = spec.z_channel = -1;
     ChannelTypes types;
     OIIO::ROI window = parts[0].roi();
+    int first_view_depths = 0, first_view_depth = -1;  // unprefixed Z of parts of part 0's view
     for (int p = 0; p < nparts; ++p) {
         const OIIO::ImageSpec& ps = parts[size_t(p)].spec();
         const std::string pname   = part_name_of(ps);
+        const std::string pview   = ps.get_string_attribute("view");
         window                    = OIIO::roi_union(window, parts[size_t(p)].roi());
         for (int c = 0; c < ps.nchannels; ++c) {
             const std::string own = ps.channel_name(c);
+            if (own == "Z" && (pview.empty() || pview == first_view)) {
+                ++first_view_depths;
+                first_view_depth = int(spec.channelnames.size());
+            }
             std::string name = merged_channel_name(own, p, pname, ps.get_string_attribute("view"),
                                                    first_view);
             // Taken by an earlier part (two views of "depth.Z"): the part's name in front.
@@ -135,6 +182,13 @@ static bool read_merged_parts(OIIO::ImageBuf& dst, const std::string& path, int 
     spec.width = window.width(), spec.height = window.height();
     spec.alpha_channel = spec.channelindex("A");
     spec.z_channel     = spec.channelindex("Z");
+    if (spec.z_channel < 0 && first_view_depths == 1 && !first_view.empty()) {
+        // A stereo file's depth: part 0's view's one Z, in a part of its own.
+        const std::string was = spec.channelnames[size_t(first_view_depth)];
+        name_first_view_depth(spec, first_view_depth);
+        types["Z"] = types[was];
+        types.erase(was);
+    }
     for (const char* per_part : { "oiio:subimagename", "oiio:subimages", "name", "view" })
         spec.erase_attribute(per_part);
 
@@ -162,7 +216,7 @@ static bool read_merged_parts(OIIO::ImageBuf& dst, const std::string& path, int 
 }
 
 // The part of read_image that can throw: OIIO and OpenEXR allocate and decode here.
-static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, ReadInfo* info,
+static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, const std::string& view, ReadInfo* info,
                          std::string& err)
 {
     auto probe = OIIO::ImageInput::open(path);
@@ -183,7 +237,7 @@ static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, ReadInfo*
     OIIO::ImageCache* cache = OIIO::ImageCache::create(true);
     cache->invalidate(OIIO::ustring(path), true);
     if (nparts > 1)
-        return read_merged_parts(dst, path, nparts, info, err);
+        return read_merged_parts(dst, path, nparts, view, info, err);
     OIIO::ImageBuf buf(path);
     const bool ok = deep ? buf.read(0, 0, true) : buf.read(0, 0, true, OIIO::TypeFloat);
     if (!ok || buf.has_error()) {
@@ -194,6 +248,24 @@ static bool read_checked(OIIO::ImageBuf& dst, const std::string& path, ReadInfo*
     if (info) {
         info->file_types = channel_types_of(buf.nativespec());
         info->part_names = { part_name_of(buf.spec()) };
+    }
+    const std::vector<std::string> views = multiview_list(buf.spec());
+    if (!deep && !views.empty()) {
+        const std::vector<std::string> names_in_file = buf.spec().channelnames;
+        if (!select_single_part_view(buf, path, view, err))
+            return false;
+        if (info) {  // the types by the names the channels now have
+            ChannelTypes renamed;
+            for (const auto& [name, type] : info->file_types) {
+                std::string plain;
+                const std::string of = channel_view(name, views, plain);
+                if (!view.empty() && of == view)
+                    renamed[plain] = type;
+                else if (view.empty())
+                    renamed[buf.spec().channelindex(plain) >= 0 && of == views.front() ? plain : name] = type;
+            }
+            info->file_types = std::move(renamed);
+        }
     }
     dst = std::move(buf);
     return true;
@@ -229,7 +301,7 @@ bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions&
                          memory_size_text(budget));
             return false;
         }
-        return read_checked(dst, path, info, err);
+        return read_checked(dst, path, opts.view, info, err);
     } catch (const std::bad_alloc&) {
         err = format("{}: out of memory while reading", path);
     } catch (const std::exception& e) {

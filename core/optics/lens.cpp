@@ -105,7 +105,7 @@ bool resolve_coc_options(CocOptions& o, const OIIO::ImageBuf& src, std::string& 
     using OIIO::Strutil::fmt::format;
     const ChannelMap ch = find_channels(src.spec());
     if (ch.z < 0) {
-        err = "the image has no depth channel (Z)";
+        err = no_depth_message(src.spec());
         return false;
     }
     if (!(o.max_coc_px >= 0.0) || !std::isfinite(o.max_coc_px)) {
@@ -193,7 +193,7 @@ bool signed_coc(std::vector<float>& coc, const OIIO::ImageBuf& src, const CocOpt
 {
     const ChannelMap ch = find_channels(src.spec());
     if (ch.z < 0) {
-        err = "the image has no depth channel (Z)";
+        err = no_depth_message(src.spec());
         return false;
     }
     OIIO::ImageBuf holder;

@@ -23,6 +23,11 @@ struct ChannelMap {
 /// and z_channel are used first when set.
 ChannelMap find_channels(const OIIO::ImageSpec& spec);
 
+/// "the image has no depth channel (Z)", naming the channels that look like a depth (last
+/// component Z, depth or zdepth, any case: "left.Z", "right.depth.Z") when it has some,
+/// and how to pick one.
+std::string no_depth_message(const OIIO::ImageSpec& spec);
+
 /// The index of the channel named `name` in `spec`; -1 + `err` when there is none, naming
 /// what there is: the channels of `name`'s layer when the image has that layer (a part of
 /// a multipart file merged by read_image is a layer: "depth.Z" is part "depth"'s "Z"),

@@ -29,6 +29,11 @@ struct ReadOptions {
     int64_t memory_budget_bytes = 0;
     /// How an error names the budget (a host names its own option here).
     std::string budget_name = "the memory budget";
+    /// A multi-view EXR: the view to read (its channels named without the view, the other
+    /// views left out); an error names the file's views when it has no such view. Empty:
+    /// the file's first view is the image, the others' channels prefixed by their view. A
+    /// file without views is read whole either way.
+    std::string view;
 };
 
 /// What reading `path` with read_image will allocate, from its header (and, for deep EXR,
@@ -62,7 +67,9 @@ struct ReadInfo {
 /// merged into one image (merged_channel_name gives the names); its data window is the
 /// union of the parts' data windows, and a part's channels are 0 outside its own data
 /// window (a depth of 0 is "no depth" for the lens); the display window and metadata are
-/// part 0's. A deep file: part 0 only. A flat file with a deep part is refused.
+/// part 0's. A stereo file's depth (part 0's view holds no Z, a later part of that view
+/// holds one) becomes the image's "Z". A deep file: part 0 only. A flat file with a deep
+/// part is refused.
 /// The file's own types are kept in `dst.nativespec()` for a single part and in
 /// `info->file_types` always.
 bool read_image(OIIO::ImageBuf& dst, const std::string& path, const ReadOptions& opts,

@@ -692,3 +692,55 @@ TEST(Cli, BlurRefusesDeepImages)
     const std::string out = fresh_dir("cli_blur_deep") + "/x.exr";
     expect_clean_failure(bokehtool(deep + " --blur 3 -o " + out), "deep images cannot be blurred", out);
 }
+
+TEST(Cli, DoubleDashMakesTheNextWordAnArgumentOrAFile)
+{
+    const std::string dir = fresh_dir("cli_double_dash");
+    // A negative CoC after --: the same PSF as without it (a number is never a command).
+    ASSERT_EQ(bokehtool(format("--bokeh -- -24 -o {}/a.exr", dir)).status, 0);
+    ASSERT_EQ(bokehtool(format("--bokeh -24 -o {}/b.exr", dir)).status, 0);
+    OIIO::ImageBuf a(dir + "/a.exr"), b(dir + "/b.exr");
+    ASSERT_TRUE(a.read() && b.read());
+    EXPECT_EQ(OIIO::ImageBufAlgo::compare(a, b, 0.0f, 0.0f).nfail, 0u);
+    // A file whose name begins with '-' is read after --, and refused as a command without.
+    ASSERT_EQ(bokehtool(format("--scene lights:width=16:height=8 -o {}/-plate.exr", dir)).status, 0);
+    const RunResult r = run_shell(format("cd {} && {} -- -plate.exr --blur 3 -o c.exr", dir, BOKEHTOOL));
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(OIIO::Filesystem::exists(dir + "/c.exr"));
+    const RunResult plain = run_shell(format("cd {} && {} -plate.exr --blur 3 -o e.exr", dir, BOKEHTOOL));
+    EXPECT_EQ(plain.status, 1);
+    EXPECT_NE(plain.err.find("-plate.exr"), std::string::npos) << plain.err;
+    // Nothing after it: one line naming it.
+    const RunResult bad = bokehtool(format("{}/a.exr -o {}/d.exr --", dir, dir));
+    EXPECT_EQ(bad.status, 1);
+    EXPECT_NE(bad.err.find("--: needs a word after it"), std::string::npos) << bad.err;
+    EXPECT_FALSE(OIIO::Filesystem::exists(dir + "/d.exr"));
+}
+
+TEST(Cli, StereoFilesDefocusByTheirViews)
+{
+    const std::string dir = fresh_dir("cli_stereo");
+    const std::string parts = stereo_parts_exr(dir), single = stereo_single_part_exr(dir);
+    // Parts: no options needed, the first view's depth is the image's Z.
+    RunResult r = bokehtool(format("{} --defocus:focus=4 -o {}/left.exr", parts, dir));
+    EXPECT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("--view right {} --defocus:focus=4 -o {}/right.exr", parts, dir));
+    EXPECT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf left(dir + "/left.exr"), right(dir + "/right.exr");
+    ASSERT_TRUE(left.read() && right.read());
+    EXPECT_NEAR(left.getchannel(8, 4, 0, 0), 0.25f, 1e-6f);
+    EXPECT_NEAR(right.getchannel(8, 4, 0, 0), 0.75f, 1e-6f);
+    // One part, every channel prefixed by its view: its first view by default, another by --view.
+    r = bokehtool(format("{} --defocus:focus=4 -o {}/single.exr", single, dir));
+    EXPECT_EQ(r.status, 0) << r.err;
+    r = bokehtool(format("--view right {} --defocus:focus=4 -o {}/single_right.exr", single, dir));
+    EXPECT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf sl(dir + "/single.exr"), sr(dir + "/single_right.exr");
+    ASSERT_TRUE(sl.read() && sr.read());
+    EXPECT_NEAR(sl.getchannel(8, 4, 0, 0), 0.25f, 1e-6f);
+    EXPECT_NEAR(sr.getchannel(8, 4, 0, 0), 0.75f, 1e-6f);
+    r = bokehtool(format("--view centre {} --defocus:focus=4 -o {}/centre.exr", single, dir));
+    EXPECT_EQ(r.status, 1);
+    EXPECT_NE(r.err.find("no view 'centre' (its views: left, right)"), std::string::npos) << r.err;
+    EXPECT_FALSE(OIIO::Filesystem::exists(dir + "/centre.exr"));
+}

@@ -1,13 +1,16 @@
 // Reading and writing: clear failures, atomic writes, types/windows/metadata kept, deep.
+#include <bokeh/image.h>
 #include <bokeh/io.h>
 
 #include <gtest/gtest.h>
 
 #include <cstring>
 #include <fstream>
+#include <tuple>
 
 #include <OpenImageIO/deepdata.h>
 #include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
 #include <OpenImageIO/strutil.h>
 #include <tbb/task_arena.h>
 
@@ -433,5 +436,91 @@ TEST(Write, ZipChunksReadBackThroughOpenExr)
             (threads == 1 ? one : two) = bytes;
         }
         EXPECT_TRUE(one == two) << "thread count changed the file";
+    }
+}
+
+
+TEST(MultiView, StereoPartsReadAsTheFirstViewWithItsDepth)
+{
+    const std::string dir = fresh_dir("io_stereo_parts"), path = stereo_parts_exr(dir);
+    OIIO::ImageBuf img;
+    std::string err;
+    ReadInfo info;
+    ASSERT_TRUE(read_image(img, path, ReadOptions(), &info, err)) << err;
+    EXPECT_EQ(img.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "right.R", "right.G", "right.B",
+                                                                  "right.A", "Z", "right.Z" }));
+    EXPECT_EQ(img.spec().z_channel, 8);
+    EXPECT_EQ(img.getchannel(3, 2, 0, 8), 3.0f) << "the left view's depth";
+    EXPECT_EQ(info.file_types.at("Z"), OIIO::TypeFloat);
+    // A view asked for: its parts only, named without the view.
+    for (const auto& [view, r, z] : { std::make_tuple("left", 0.25f, 3.0f), std::make_tuple("right", 0.75f, 5.0f) }) {
+        ReadOptions o;
+        o.view = view;
+        ASSERT_TRUE(read_image(img, path, o, &info, err)) << err;
+        EXPECT_EQ(img.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "Z" })) << view;
+        EXPECT_EQ(img.getchannel(3, 2, 0, 0), r) << view;
+        EXPECT_EQ(img.getchannel(3, 2, 0, 4), z) << view;
+    }
+    ReadOptions o;
+    o.view = "centre";
+    EXPECT_FALSE(read_image(img, path, o, err));
+    EXPECT_EQ(err, path + ": no view 'centre' (its parts' views: left, right)");
+}
+
+TEST(MultiView, SinglePartViewsByTheChannelPrefix)
+{
+    const std::string dir = fresh_dir("io_stereo_single"), path = stereo_single_part_exr(dir);
+    OIIO::ImageBuf img;
+    std::string err;
+    ASSERT_TRUE(read_image(img, path, err)) << err;
+    EXPECT_EQ(img.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "Z", "right.R", "right.G",
+                                                                  "right.B", "right.A", "right.Z" }))
+        << "without a view asked for, the first view is the image and the others keep their prefix";
+    EXPECT_EQ(img.getchannel(3, 2, 0, 4), 3.0f);
+    // Where no rule says which depth is the image's, the error names the candidates.
+    OIIO::ImageSpec two_depths(4, 4, 6, OIIO::TypeFloat);
+    two_depths.channelnames = { "R", "G", "B", "A", "left.Z", "right.depth.Z" };
+    EXPECT_EQ(no_depth_message(two_depths),
+              "the image has no depth channel (Z); it holds left.Z, right.depth.Z: zchannel=NAME names one as the "
+              "depth, or --view NAME reads one view of a stereo file");
+    two_depths.channelnames = { "R", "G", "B", "A", "N.x", "N.y" };
+    EXPECT_EQ(no_depth_message(two_depths), "the image has no depth channel (Z)");
+    for (const auto& [view, r, z] : { std::make_tuple("left", 0.25f, 3.0f), std::make_tuple("right", 0.75f, 5.0f) }) {
+        ReadOptions o;
+        o.view = view;
+        ReadInfo info;
+        ASSERT_TRUE(read_image(img, path, o, &info, err)) << err;
+        EXPECT_EQ(img.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "Z" })) << view;
+        EXPECT_EQ(img.spec().z_channel, 4);
+        EXPECT_EQ(img.getchannel(3, 2, 0, 0), r) << view;
+        EXPECT_EQ(img.getchannel(3, 2, 0, 4), z) << view;
+        EXPECT_EQ(info.file_types.size(), 5u);
+    }
+    ReadOptions o;
+    o.view = "centre";
+    EXPECT_FALSE(read_image(img, path, o, err));
+    EXPECT_EQ(err, path + ": no view 'centre' (its views: left, right)");
+    // OpenEXR's own convention: the default view's channels unprefixed ("R", "Z"), the
+    // other's prefixed ("right.R").
+    OIIO::ImageSpec s(4, 2, 10, OIIO::TypeFloat);
+    s.channelnames = { "R", "G", "B", "A", "Z", "right.R", "right.G", "right.B", "right.A", "right.Z" };
+    const char* views[] = { "left", "right" };
+    s.attribute("multiView", OIIO::TypeDesc(OIIO::TypeDesc::STRING, 2), views);
+    std::vector<float> px(4 * 2 * 10);
+    const float pixel[10] = { 0.25f, 0.5f, 0.5f, 1.0f, 3.0f, 0.75f, 0.5f, 0.5f, 1.0f, 5.0f };
+    for (size_t i = 0; i < px.size(); ++i)
+        px[i] = pixel[i % 10];
+    auto out = OIIO::ImageOutput::create(dir + "/conv.exr");  // (ImageBuf::write drops multiView)
+    ASSERT_TRUE(out && out->open(dir + "/conv.exr", s) && out->write_image(OIIO::TypeFloat, px.data())
+                && out->close());
+    ASSERT_TRUE(read_image(img, dir + "/conv.exr", err)) << err;
+    EXPECT_EQ(img.spec().z_channel, 4) << "the default view's Z, as written";
+    for (const auto& [view, r, z] : { std::make_tuple("left", 0.25f, 3.0f), std::make_tuple("right", 0.75f, 5.0f) }) {
+        ReadOptions o;
+        o.view = view;
+        ASSERT_TRUE(read_image(img, dir + "/conv.exr", o, err)) << err;
+        EXPECT_EQ(img.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "Z" })) << view;
+        EXPECT_EQ(img.getchannel(1, 1, 0, 0), r) << view;
+        EXPECT_EQ(img.getchannel(1, 1, 0, 4), z) << view;
     }
 }

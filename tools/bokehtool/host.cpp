@@ -196,6 +196,19 @@ void Host::register_host_commands()
                                       return true;
                                   }),
                      true);
+    add_host_command(host_command("--view", "NAME", 0, 0,
+                                  "Multi-view (stereo) EXR: read view NAME of every multi-view input, "
+                                  "its channels named without the view (R, G, B, A, Z), the other views "
+                                  "left out; a file without views is read whole. Default: a file's first "
+                                  "view is the image (its depth too, from a part of its own) and the "
+                                  "others' channels are prefixed by their view (right.R)",
+                                  [this](CommandContext& c) {
+                                      if (c.args[0].empty() || c.args[0].find('.') != std::string::npos)
+                                          return c.fail(format("'{}' is not a view name", c.args[0]));
+                                      m_read_options.view = c.args[0];
+                                      return true;
+                                  }),
+                     true);
     add_host_command(host_command("--timeout", "SECONDS", 0, 0,
                                   "Stop the run with an error after this long (a last resort on "
                                   "farms; temporary output files are removed)",
@@ -442,8 +455,9 @@ void Host::print_help() const
         "Images form a stack: an input file pushes one, a command pops its inputs and\n"
         "pushes its result, -o FILE writes the top. Options ride on a command:\n"
         "--cmd:opt=val:opt2=val. A file name with #, @ or %04d runs the command line once\n"
-        "per frame (shot.#.exr, --frames 1-10x2). Errors: one line, exit status 1, nothing\n"
-        "written.\n",
+        "per frame (shot.#.exr, --frames 1-10x2). -- makes the next word an argument or a\n"
+        "file name even if it begins with '-' (--bokeh -- -45, -- -plate.exr). Errors: one\n"
+        "line, exit status 1, nothing written.\n",
         kProgram, BOKEH_VERSION, kProgram);
     std::string current = "-";
     for (const Command& c : m_registry.commands()) {
@@ -554,14 +568,29 @@ void Host::message(const std::string& what) const
 // ---------------------------------------------------------------------------------------
 // Parsing and running.
 
+// `--` makes the word after it an argument or a file name even when it begins with '-'
+// (a negative CoC, a file named "-plate.exr"). ArgParse sees such a word with this mark in
+// front, which dispatch() takes off again.
+constexpr char kLiteralMark = '\x1f';
+
 bool Host::parse(const std::vector<std::string>& args, bool checking)
 {
     if (checking)
         m_line_recipe.clear();
     OIIO::ArgParse ap;
     ap.prog(kProgram).add_help(false).exit_on_error(false);
+    std::vector<std::string> words;
+    for (size_t i = 0; i < args.size(); ++i) {
+        if (args[i] != "--") {
+            words.push_back(args[i]);
+            continue;
+        }
+        if (i + 1 == args.size())
+            return fail("--", "needs a word after it (it makes that word an argument or a file name)");
+        words.push_back(kLiteralMark + args[++i]);
+    }
     std::vector<const char*> argv = { kProgram };
-    for (const std::string& a : args)
+    for (const std::string& a : words)
         argv.push_back(a.c_str());
 
     auto action = [this, &ap, checking](OIIO::cspan<const char*> a) {
@@ -598,10 +627,14 @@ static bool changes_no_output(const std::string& name)
     return std::find(std::begin(names), std::end(names), name) != std::end(names);
 }
 
-void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& words, bool checking)
+void Host::dispatch(OIIO::ArgParse&, const std::vector<std::string>& marked, bool checking)
 {
+    std::vector<std::string> words = marked;
+    for (std::string& w : words)
+        if (!w.empty() && w[0] == kLiteralMark)
+            w.erase(0, 1);
     const std::string& head = words[0];
-    const bool is_file      = head.empty() || head[0] != '-' || head == "-";
+    const bool is_file      = head.empty() || marked[0][0] == kLiteralMark || head[0] != '-' || head == "-";
     // The recipe: what decides the bytes written, so not where they go (-o's file name;
     // its modifiers stay) nor the options that change no output.
     const std::string head_name = head.substr(0, head.find(':'));
