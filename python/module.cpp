@@ -460,24 +460,28 @@ PYBIND11_MODULE(openbokeh, m)
     // --- io (io.h) ---------------------------------------------------------------------
     m.def(
         "read_image",
-        [](const std::string& path) {
+        [](const std::string& path, const std::string& view) {
             auto buf = std::make_shared<OIIO::ImageBuf>();
             std::string err;
             bool ok;
             {
                 py::gil_scoped_release release;
-                ok = bokeh::read_image(*buf, path, err);
+                bokeh::ReadOptions opts;
+                opts.view = view;
+                ok        = bokeh::read_image(*buf, path, opts, err);
             }
             if (!ok)
                 throw std::runtime_error(error_text("read_image", err));
             return image_to_imagebuf(buf, true);
         },
-        py::arg("path"),
-        "read_image(path) -> ImageBuf: a file, whole and checked now: flat images as float (the "
-        "file's types kept in nativespec for writing back), every part of a flat multipart EXR "
+        py::arg("path"), py::arg("view") = "",
+        "read_image(path, view='') -> ImageBuf: a file, whole and checked now: flat images as float "
+        "(the file's types kept in nativespec for writing back), every part of a flat multipart EXR "
         "merged into one image (depth.Z from part depth; as bokehtool reads it), deep ones as "
-        "stored (part 0). "
-        "RuntimeError with the reason (missing, a directory, truncated, ...).");
+        "stored (part 0). A multi-view (stereo) EXR: its first view is the image (its depth too), "
+        "the others' channels prefixed by their view; view='right' reads that view alone, as "
+        "bokehtool --view does. "
+        "RuntimeError with the reason (missing, a directory, truncated, no such view, ...).");
     m.def(
         "write_image",
         [](const py::object& image, const std::string& path, bool no_clobber, const py::object& channels) {

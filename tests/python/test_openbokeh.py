@@ -277,6 +277,30 @@ def test_compare_matches_bokehtool_diff(tmp, scene_file, scene_array):
 
 # --- io --------------------------------------------------------------------------------
 
+def test_read_image_picks_a_view_of_a_stereo_file(tmp):
+    # The single-part layout, every channel prefixed by its view, as bokehtool --view reads it.
+    path = fresh(tmp, "stereo.exr")
+    spec = oiio.ImageSpec(8, 4, 10, "float")
+    spec.channelnames = ("left.R", "left.G", "left.B", "left.A", "left.Z",
+                         "right.R", "right.G", "right.B", "right.A", "right.Z")
+    spec.attribute("multiView", oiio.TypeDesc("string[2]"), ("left", "right"))
+    pixel = np.array([0.25, 0.5, 0.5, 1, 3, 0.75, 0.5, 0.5, 1, 5], dtype=np.float32)
+    out = oiio.ImageOutput.create(path)
+    assert out.open(path, spec)
+    assert out.write_image(np.tile(pixel, (4, 8, 1)))
+    out.close()
+    first = ob.read_image(path)
+    assert first.spec().channelnames[:5] == ("R", "G", "B", "A", "Z")
+    right = ob.read_image(path, view="right")
+    assert right.spec().channelnames == ("R", "G", "B", "A", "Z")
+    assert np.array_equal(ob.to_array(right)[0, 0], [0.75, 0.5, 0.5, 1, 5])
+    rz = fresh(tmp, "right_rz.exr")
+    tool("--view", "right", path, "--ch", "R,Z", "-o", rz)
+    assert np.array_equal(pixels(rz)[0, 0], [0.75, 5])
+    with pytest.raises(RuntimeError, match=r"no view 'centre' \(its views: left, right\)"):
+        ob.read_image(path, view="centre")
+
+
 def test_write_and_read_keep_pixels_and_types(tmp, scene_array):
     path = fresh(tmp, "written.exr")
     ob.write_image(scene_array, path)
