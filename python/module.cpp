@@ -241,6 +241,18 @@ PYBIND11_MODULE(openbokeh, m)
             py::arg("channels") = py::none(), doc_of(s.command, std::string(s.text) + kCommon).c_str());
     }
 
+    m.def(
+        "lens_distort",
+        [](const py::object& image, int threads, const py::object& channels, const py::kwargs& kw) {
+            return run_one("lens_distort", "--lensdistort", image, {}, threads, channels, kw);
+        },
+        py::arg("image"), py::kw_only(), py::arg("threads") = 0, py::arg("channels") = py::none(),
+        doc_of("--lensdistort",
+               std::string("lens_distort(image, **options): warp by a lens's radial distortion and lateral "
+                           "colour, or (output=\"stmap\") its STMap, as bokehtool --lensdistort:OPTIONS.\n")
+                   + kCommon)
+            .c_str());
+
     // --- defocus (defocus.h) -----------------------------------------------------------
     m.def(
         "defocus",

@@ -24,7 +24,7 @@ PUBLIC = {
     "io": ["io.h", "color.h"],
     "metrics": ["metrics.h"],
     "aperture": ["aperture.h"],
-    "resample": ["resample.h"],
+    "resample": ["resample.h", "distortion.h"],
     "blur": ["blur.h"],
     "optics": ["lens.h", "optics.h", "spectrum.h", "wave_optics.h"],
     "deep": ["deep.h"],

@@ -58,3 +58,16 @@ for s in edges:3:1.06:645:180 lights:6:1.27:105:300; do
 done
 oiiotool "$tmp"/edges_{sharp,truth,foreground,smooth,mirror,deep}.png \
     "$tmp"/lights_{sharp,truth,foreground,smooth,mirror,deep}.png --mosaic:pad=4 6x2 -o "$out/silhouettes.png"
+
+# Lens distortion (docs/methods/distortion.md): the scene, distorted (barrel k1 = -0.15 with
+# lateral colour), undistorted back, and the distortion's STMap (s in red, t in green).
+"$tool" -q --scene lights:width=480:height=270 -o "$tmp/d_sharp.exr"
+"$tool" -q "$tmp/d_sharp.exr" --lensdistort:k1=-0.15:k2=0.02:lateralr=0.004:lateralb=-0.004 -o "$tmp/d_dist.exr"
+"$tool" -q "$tmp/d_dist.exr" --lensdistort:k1=-0.15:k2=0.02:lateralr=0.004:lateralb=-0.004:direction=undistort \
+    -o "$tmp/d_back.exr"
+"$tool" -q "$tmp/d_sharp.exr" --lensdistort:k1=-0.15:k2=0.02:output=stmap --ch R,G,B=0 -o "$tmp/d_stmap.exr"
+for v in sharp dist back stmap; do
+    "$tool" -q "$tmp/d_$v.exr" --ch R,G,B -o "$tmp/d_$v.png"
+done
+oiiotool "$tmp/d_sharp.png" "$tmp/d_dist.png" "$tmp/d_back.png" "$tmp/d_stmap.png" --mosaic:pad=4 2x2 \
+    -o "$out/distortion.png"

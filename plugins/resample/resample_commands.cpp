@@ -4,6 +4,7 @@
 // `--enlarge:filter=NAME N`. The work is bokeh::resize, resample, reduce and enlarge
 // (core/resample/resample.cpp).
 
+#include <bokeh/distortion.h>
 #include <bokeh/plugin.h>
 #include <bokeh/resample.h>
 
@@ -155,6 +156,32 @@ bool enlarge_command(CommandContext& c)
     return push(c, out);
 }
 
+// --lensdistort: the frame warped by a lens's radial distortion and lateral colour, or the
+// STMap of the warp.
+bool lensdistort_command(CommandContext& c)
+{
+    bokeh::LensDistortion l;
+    l.model       = c.options.get_string("model") == "division" ? bokeh::DistortionModel::Division
+                                                                : bokeh::DistortionModel::Polynomial;
+    l.k1          = c.options.get_float("k1");
+    l.k2          = c.options.get_float("k2");
+    l.lateral_r   = c.options.get_float("lateralr");
+    l.lateral_b   = c.options.get_float("lateralb");
+    l.centre_x_px = c.options.get_float("centrex");
+    l.centre_y_px = c.options.get_float("centrey");
+    const bokeh::DistortDirection dir = c.options.get_string("direction") == "undistort"
+                                            ? bokeh::DistortDirection::Undistort
+                                            : bokeh::DistortDirection::Distort;
+    const OIIO::ImageBuf& src = *c.inputs[0].buf;
+    auto out                  = std::make_shared<OIIO::ImageBuf>();
+    const bool stmap          = c.options.get_string("output") == "stmap";
+    const bool ok = stmap ? bokeh::distortion_stmap(*out, src.spec(), l, dir, c.nthreads)
+                          : bokeh::lens_distort(*out, src, l, dir, {}, c.nthreads);
+    if (!ok)
+        return c.fail(out->geterror());
+    return push(c, out);
+}
+
 std::vector<OptionSpec> filter_options(const std::string& first)
 {
     // The chosen default first (a Choice's default is its first word), then the rest.
@@ -215,6 +242,31 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "count block pixels outside the data window as 0 (keeps the energy)") });
     reduce.needs_scene_linear = true;
     r.add(reduce);
+
+    bokeh::Command lensdistort = bokeh::make_command(
+        "--lensdistort", "", 1,
+        "Warp the frame by a lens's radial distortion and lateral colour (distort a pinhole "
+        "frame as the lens records it, or undistort a plate), or write the warp's STMap "
+        "(docs/methods/distortion.md)",
+        lensdistort_command,
+        { OptionSpec::Choice("direction", { "distort", "undistort" },
+                             "distort: a pinhole (CG) frame -> as the lens records it; undistort: a plate -> the "
+                             "pinhole frame"),
+          OptionSpec::Choice("model", { "polynomial", "division" },
+                             "polynomial: r_d = r_u (1 + k1 r_u^2 + k2 r_u^4); division: r_u = r_d / (1 + k1 r_d^2 "
+                             "+ k2 r_d^4); r in half-diagonals of the display window"),
+          OptionSpec::Float("k1", 0.0, -10.0, 10.0, "first radial coefficient (< 0: barrel)"),
+          OptionSpec::Float("k2", 0.0, -10.0, 10.0, "second radial coefficient"),
+          OptionSpec::Float("lateralr", 0.0, -0.5, 0.5,
+                            "lateral colour: red's magnification against green's, minus 1 (0.001: red 0.1 % larger)"),
+          OptionSpec::Float("lateralb", 0.0, -0.5, 0.5, "lateral colour: blue's magnification against green's, minus 1"),
+          OptionSpec::Float("centrex", 0.0, -1e5, 1e5, "the distortion centre's offset from the frame's centre, px (right)"),
+          OptionSpec::Float("centrey", 0.0, -1e5, 1e5, "the distortion centre's offset from the frame's centre, px (down)"),
+          OptionSpec::Choice("output", { "image", "stmap" },
+                             "image: the warped frame (bilinear; depth channels nearest); stmap: R, G = Nuke STMap "
+                             "s, t of each output pixel's source (no lateral colour)") });
+    lensdistort.needs_scene_linear = true;
+    r.add(lensdistort);
 
     bokeh::Command enlarge = bokeh::make_command(
         "--enlarge", "N", 1,

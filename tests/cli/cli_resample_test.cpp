@@ -1,5 +1,6 @@
-// bokehtool --resize, --resample, --reduce and --enlarge as a user runs them: the same
+// bokehtool --resize, --resample, --reduce, --enlarge and --lensdistort as a user runs them: the same
 // pixels as the library functions, the sizes oiiotool's spellings give, and bad input.
+#include <bokeh/distortion.h>
 #include <bokeh/resample.h>
 
 #include <gtest/gtest.h>
@@ -145,6 +146,11 @@ TEST(CliResample, BadInputFailsCleanly)
         { "--enlarge 0.5", "--enlarge: factor 0.5 is outside 1..256 (to reduce, use reduce or resize)" },
         { "--enlarge:sigma=-1 2", "option 'sigma' = -1 is out of range" },
         { "--enlarge", "--enlarge" },
+        { "--lensdistort:k1=-3", "--lensdistort: lens distortion: k1 -3 and k2 0 fold the polynomial mapping over "
+                                 "itself at 0.334 of the half-diagonal" },
+        { "--lensdistort:k1=20", "--lensdistort: option 'k1' = 20 is out of range [-10, 10]" },
+        { "--lensdistort:lateralr=0.01:output=stmap", "an STMap holds one source position a pixel" },
+        { "--lensdistort:model=fisheye", "option 'model' = 'fisheye' is not one of: polynomial, division" },
     };
     for (const Case& c : cases) {
         SCOPED_TRACE(c.args);
@@ -154,5 +160,24 @@ TEST(CliResample, BadInputFailsCleanly)
     if (!deep.empty()) {
         expect_clean_failure(bokehtool(deep + " --enlarge 2 -o " + out),
                              "deep images cannot be resampled; flatten them first", out);
+        expect_clean_failure(bokehtool(deep + " --lensdistort:k1=0.1 -o " + out),
+                             "a deep image cannot be warped; flatten it first", out);
     }
+}
+
+TEST(CliResample, LensDistortGivesTheLibrarysPixelsAndItsStmap)
+{
+    const std::string dir = fresh_dir("cli_lensdistort");
+    OIIO::ImageBuf src;
+    const std::string in = make_input(dir, src);
+    ASSERT_EQ(bokehtool(format("{} --lensdistort:k1=-0.1:k2=0.02:lateralr=0.003 -o {}/d.exr", in, dir)).status, 0);
+    ASSERT_EQ(bokehtool(format("{} --lensdistort:k1=-0.1:k2=0.02:output=stmap -o {}/st.exr", in, dir)).status, 0);
+    bokeh::LensDistortion l;
+    l.k1 = -0.1, l.k2 = 0.02, l.lateral_r = 0.003;
+    OIIO::ImageBuf want;
+    ASSERT_TRUE(bokeh::lens_distort(want, src, l, bokeh::DistortDirection::Distort)) << want.geterror();
+    EXPECT_EQ(max_difference(read(dir + "/d.exr"), want), 0.0);
+    const OIIO::ImageBuf st = read(dir + "/st.exr");
+    EXPECT_EQ(st.spec().channelnames, (std::vector<std::string>{ "R", "G" }));
+    EXPECT_EQ(st.roi().width(), 40);
 }

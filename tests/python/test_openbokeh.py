@@ -277,6 +277,26 @@ def test_compare_matches_bokehtool_diff(tmp, scene_file, scene_array):
 
 # --- io --------------------------------------------------------------------------------
 
+@pytest.mark.parametrize("options", [
+    {"k1": -0.1, "k2": 0.01},
+    {"k1": 0.05, "model": "division", "direction": "undistort", "lateralr": 0.002, "lateralb": -0.002},
+    {"k1": -0.1, "output": "stmap"},
+])
+def test_lens_distort_matches_bokehtool(tmp, scene_file, scene_array, options):
+    out = fresh(tmp, "distort.exr")
+    tool(scene_file, f"--lensdistort{modifiers(options)}", "-o", out)
+    got = ob.lens_distort(scene_array, **options)
+    assert np.array_equal(got, pixels(out))
+
+
+def test_lens_distort_against_numpy(scene_array):
+    # No distortion is the identity; a pure lateral colour keeps green where it was.
+    assert np.allclose(ob.lens_distort(scene_array), scene_array, atol=1e-6)
+    moved = ob.lens_distort(scene_array, lateralr=0.01, lateralb=-0.01)
+    assert np.allclose(moved[..., 1], scene_array[..., 1], atol=1e-6)
+    assert not np.allclose(moved[..., 0], scene_array[..., 0], atol=1e-3)
+
+
 def test_read_image_picks_a_view_of_a_stereo_file(tmp):
     # The single-part layout, every channel prefixed by its view, as bokehtool --view reads it.
     path = fresh(tmp, "stereo.exr")
