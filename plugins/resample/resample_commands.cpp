@@ -138,11 +138,45 @@ bool reduce_command(CommandContext& c)
     return push(c, out);
 }
 
+// --enlarge:depthaware=pcf|bilateral: the low-resolution layer on top of the stack enlarged
+// over the full-resolution image below it (its Z), as the defocus composites its reduced
+// layers (resample.h, enlarge_depth_aware).
+bool enlarge_depth_aware_command(CommandContext& c, double k)
+{
+    for (const char* name : { "filter", "border", "sigma", "blur", "offset", "clamp" })
+        if (c.options.given(name))
+            return c.fail(format("{}= is for the filtered enlargement; depthaware= samples by depth", name));
+    bokeh::DepthAwareOptions o;
+    o.method          = c.options.get_string("depthaware") == "bilateral" ? bokeh::DepthAwareMethod::JointBilateral
+                                                                          : bokeh::DepthAwareMethod::PCF;
+    o.depth_tolerance = float(c.options.get_float("tolerance"));
+    o.sigma_depth     = float(c.options.get_float("sigmadepth"));
+    const OIIO::ImageBuf& full = *c.inputs[0].buf;
+    const OIIO::ImageBuf& low  = *c.inputs[1].buf;
+    if (!bokeh::within_memory_budget(c, bokeh::image_bytes(full.spec().width, full.spec().height,
+                                                           4 * int64_t(low.nchannels())),
+                                     format("a {}x{} result of {} channels", full.spec().width,
+                                            full.spec().height, low.nchannels())))
+        return false;
+    auto out = std::make_shared<OIIO::ImageBuf>();
+    if (!bokeh::enlarge_depth_aware(*out, low, full, k, o, c.nthreads))
+        return c.fail(out->geterror());
+    bokeh::StackImage result = c.inputs[1];
+    result.buf               = out;
+    c.outputs.push_back(std::move(result));
+    return true;
+}
+
 bool enlarge_command(CommandContext& c)
 {
     double k = 0.0;
     if (!parse_number(c.args[0], k))
         return c.fail(format("'{}' is not a factor (a number >= 1)", c.args[0]));
+    if (c.options.get_string("depthaware") != "none")
+        return enlarge_depth_aware_command(c, k);
+    for (const char* name : { "tolerance", "sigmadepth" })
+        if (c.options.given(name))
+            return c.fail(format("{}= is for depthaware=pcf|bilateral", name));
     const OIIO::ImageSpec& in = c.inputs[0].buf->spec();
     if (k >= 1.0 && k < 1e9) {  // the library refuses the rest, naming the factor
         const int64_t w = int64_t(std::ceil(in.width * k)), h = int64_t(std::ceil(in.height * k));
@@ -268,11 +302,23 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
     lensdistort.needs_scene_linear = true;
     r.add(lensdistort);
 
+    std::vector<OptionSpec> enlarge_options = filter_options("bilinear");
+    enlarge_options.push_back(OptionSpec::Choice(
+        "depthaware", { "none", "pcf", "bilateral" },
+        "enlarge the low-resolution layer on top of the stack over the full-resolution image below it "
+        "(both with Z): pcf hides the layer behind nearer full-resolution surfaces with their edges "
+        "(percentage-closer filtering); bilateral (joint-bilateral) keeps it from bleeding across "
+        "depth edges; the result has the layer's channels over the full image's windows"));
+    enlarge_options.push_back(
+        OptionSpec::Float("tolerance", 0.01, 0.0, 10.0, "pcf: relative depth bias of the in-front test"));
+    enlarge_options.push_back(OptionSpec::Float("sigmadepth", 0.02, 1e-6, 10.0, "bilateral: relative depth sigma"));
     bokeh::Command enlarge = bokeh::make_command(
         "--enlarge", "N", 1,
         "Enlarge by the factor N (>= 1, fractions allowed; pixel centres as --resize, anchored at "
-        "0 so that --reduce N --enlarge N puts pixels back)",
-        enlarge_command, filter_options("bilinear"));
+        "0 so that --reduce N --enlarge N puts pixels back); depth-aware over a full-resolution "
+        "image with :depthaware=",
+        enlarge_command, enlarge_options);
+    enlarge.inputs_for = [](const bokeh::OptionValues& o) { return o.get_string("depthaware") == "none" ? 1 : 2; };
     enlarge.needs_scene_linear = true;
     r.add(enlarge);
 }

@@ -181,3 +181,46 @@ TEST(CliResample, LensDistortGivesTheLibrarysPixelsAndItsStmap)
     EXPECT_EQ(st.spec().channelnames, (std::vector<std::string>{ "R", "G" }));
     EXPECT_EQ(st.roi().width(), 40);
 }
+
+TEST(CliResample, DepthAwareEnlargeGivesTheLibrarysPixels)
+{
+    // A full-resolution frame (a near square at Z 2 over a wall at Z 10) and a layer at a
+    // quarter of its resolution at Z 5: PCF hides the layer behind the square with the
+    // square's own edges; bilateral enlarges it without hiding it.
+    const std::string dir = fresh_dir("cli_enlarge_depthaware");
+    const OIIO::ImageBuf full = rgbaz_image(64, 48, [](int x, int y) {
+        const bool near = x >= 20 && x < 40 && y >= 12 && y < 30;
+        return std::array<float, 5>{ 0.2f, 0.3f, 0.4f, 1.0f, near ? 2.0f : 10.0f };
+    });
+    const OIIO::ImageBuf low = rgbaz_image(16, 12, [](int x, int y) {
+        return std::array<float, 5>{ 1.0f + 0.1f * float(x), 0.5f, 0.25f, 1.0f, 5.0f + 0.0f * float(y) };
+    });
+    ASSERT_TRUE(full.write(dir + "/full.exr") && low.write(dir + "/low.exr"));
+    for (const auto& [name, method] : { std::make_pair("pcf", bokeh::DepthAwareMethod::PCF),
+                                        std::make_pair("bilateral", bokeh::DepthAwareMethod::JointBilateral) }) {
+        SCOPED_TRACE(name);
+        const RunResult r = bokehtool(format("{0}/full.exr {0}/low.exr --enlarge:depthaware={1} 4 -o {0}/{1}.exr", dir, name));
+        ASSERT_EQ(r.status, 0) << r.err;
+        bokeh::DepthAwareOptions o;
+        o.method = method;
+        OIIO::ImageBuf want;
+        ASSERT_TRUE(bokeh::enlarge_depth_aware(want, low, full, 4.0, o)) << want.geterror();
+        const OIIO::ImageBuf got = read(format("{}/{}.exr", dir, name));
+        EXPECT_EQ(max_difference(got, want), 0.0);
+        // Inside the near square PCF leaves nothing of the layer (it lies behind), outside all of it.
+        if (method == bokeh::DepthAwareMethod::PCF) {
+            EXPECT_EQ(got.getchannel(30, 20, 0, 3), 0.0f);
+            EXPECT_EQ(got.getchannel(5, 5, 0, 3), 1.0f);
+        } else {
+            EXPECT_EQ(got.getchannel(30, 20, 0, 3), 1.0f);
+        }
+    }
+    const std::string out = dir + "/bad.exr";
+    expect_clean_failure(bokehtool(format("{}/low.exr --enlarge:depthaware=pcf 4 -o {}", dir, out)),
+                         "--enlarge: needs 2 image(s) on the stack but 1 is there", out);
+    expect_clean_failure(bokehtool(format("{0}/full.exr {0}/low.exr --enlarge:depthaware=pcf:filter=bspline 4 -o {1}",
+                                          dir, out)),
+                         "filter= is for the filtered enlargement; depthaware= samples by depth", out);
+    expect_clean_failure(bokehtool(format("{0}/low.exr --enlarge:tolerance=0.1 4 -o {1}", dir, out)),
+                         "tolerance= is for depthaware=pcf|bilateral", out);
+}
