@@ -263,6 +263,7 @@ bool scene(CommandContext& c)
         t.aspect = float(c.options.get_float("aspect"));
         t.spp    = c.options.get_int("spp");
         t.seed   = uint32_t(c.options.get_int("rayseed"));
+        t.progress = c.progress;
         bokeh::SceneTruthReport report;
         if (!bokeh::make_scene_truth(*out.buf, name, o, t, &report, c.nthreads))
             return c.fail(out.buf->geterror());

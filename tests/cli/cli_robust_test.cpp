@@ -185,6 +185,24 @@ TEST(Robust, TimeoutStopsTheRunCleanly)
     EXPECT_EQ(r.status, 0) << r.err;
 }
 
+TEST(Robust, TimeoutStopsEarlyWhenTheCommandsPaceCannotMeetIt)
+{
+    // A scene truth of 300000 rays a pixel would run about 90 s here; under --timeout 30 its
+    // pace stops it within seconds (not at the limit), naming the estimate.
+    const std::string dir = fresh_dir("robust_pace"), out = dir + "/truth.exr";
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunResult r = bokehtool(format("--timeout 30 --scene lights:width=48:height=48:output=truth:spp=300000 -o {}", out));
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_EQ(r.status, 124) << r.err;
+    EXPECT_NE(r.err.find("bokehtool ERROR: --timeout: --scene would end after about"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("past the limit of 30 s; stopped now"), std::string::npos) << r.err;
+    EXPECT_LT(seconds, 30.0) << "stopped by its pace, before the limit";
+    EXPECT_FALSE(OIIO::Filesystem::exists(out));
+    // A command whose pace meets the limit runs to the end.
+    const RunResult ok = bokehtool(format("--timeout 60 --scene lights:width=48:height=24:output=truth:spp=256 -o {}", out));
+    EXPECT_EQ(ok.status, 0) << ok.err;
+}
+
 TEST(Robust, SigtermDuringAWriteRemovesItsTemporaryFile)
 {
     const std::string dir = fresh_dir("robust_sigterm"), out = dir + "/big.exr";

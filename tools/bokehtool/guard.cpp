@@ -25,6 +25,11 @@ namespace {
 
 char g_command[128] = "bokehtool";
 char g_frame[64]    = "";  // "frame 3, 3 of 5" in a sequence
+// The watchdog's limit and start, and when the running command began (guard_progress).
+using Clock = std::chrono::steady_clock;
+std::atomic<double> g_timeout_s{ 0.0 };
+std::atomic<int64_t> g_run_start_ns{ 0 }, g_command_start_ns{ 0 };
+int64_t now_ns() { return std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count(); }
 int g_stderr = 2;  // the terminal's stderr, also while a StderrCapture holds fd 2
 
 void write_text(const char* s) { (void)!write(g_stderr, s, std::strlen(s)); }
@@ -92,6 +97,29 @@ void set_guard_command(const std::string& name)
     const size_t n = std::min(name.size(), sizeof g_command - 1);
     std::memcpy(g_command, name.data(), n);
     g_command[n] = 0;
+    g_command_start_ns = now_ns();
+}
+
+void guard_progress(float fraction)
+{
+    const double limit = g_timeout_s.load();
+    if (!(limit > 0.0) || fraction < kPaceMinFraction || fraction >= 1.0f)
+        return;
+    const double in_command = 1e-9 * double(now_ns() - g_command_start_ns.load());
+    if (in_command < kPaceMinSeconds)
+        return;
+    const double before = 1e-9 * double(g_command_start_ns.load() - g_run_start_ns.load());
+    const double ends   = before + in_command / double(fraction);
+    if (ends <= kPaceMargin * limit)
+        return;
+    bokeh::remove_partial_writes();
+    write_text(OIIO::Strutil::fmt::format("bokehtool ERROR: --timeout: {} would end after about {:.0f} s at its pace "
+                                          "({:.0f} % in {:.1f} s{}{}), past the limit of {:g} s; stopped now, "
+                                          "temporary output files removed\n",
+                                          g_command, ends, 100.0 * fraction, in_command, g_frame[0] ? ", " : "",
+                                          g_frame, limit)
+                   .c_str());
+    std::_Exit(kTimeoutStatus);
 }
 
 void set_guard_frame(const std::string& frame)
@@ -153,6 +181,8 @@ Watchdog::Watchdog(double seconds)
 {
     if (!(seconds > 0))
         return;
+    g_run_start_ns = now_ns();
+    g_timeout_s    = seconds;
     m_thread = std::thread([this, seconds] {
         std::unique_lock<std::mutex> lock(m_mutex);
         const auto limit = std::chrono::duration<double>(seconds);
@@ -170,6 +200,7 @@ Watchdog::Watchdog(double seconds)
 
 Watchdog::~Watchdog()
 {
+    g_timeout_s = 0.0;
     if (!m_thread.joinable())
         return;
     {

@@ -22,6 +22,18 @@ void set_guard_command(const std::string& name);
 /// The frame of a sequence the --timeout message names ("frame 3, 3 of 5"; "" for none).
 void set_guard_frame(const std::string& frame);
 
+/// A command's progress (0..1) under a --timeout: once it is kPaceMinFraction done and has
+/// run kPaceMinSeconds, its pace says when it would end; past kPaceMargin times the limit,
+/// the run stops now as the watchdog would (one line naming the command and the estimate,
+/// temporary files removed, kTimeoutStatus), instead of at the limit. A truth of millions of
+/// rays a pixel is refused in seconds, not after the hours --timeout allows. The margin is
+/// wide because a defocus's progress counts tiles weighted by their kernels, whose cost
+/// varies by more than the truth's rows do.
+void guard_progress(float fraction);
+constexpr float kPaceMinFraction = 0.01f;
+constexpr double kPaceMinSeconds = 2.0;
+constexpr double kPaceMargin     = 1.5;
+
 /// The exit status of a run stopped by --timeout: 124, as GNU timeout(1) gives, so that a
 /// farm tells "too slow, retry elsewhere" from 1, "the command or an input is wrong".
 constexpr int kTimeoutStatus = 124;

@@ -210,8 +210,10 @@ void Host::register_host_commands()
                                   }),
                      true);
     add_host_command(host_command("--timeout", "SECONDS", 0, 0,
-                                  "Stop the run with an error after this long (a last resort on "
-                                  "farms; temporary output files are removed)",
+                                  "Stop the run with an error after this long, or as soon as the "
+                                  "running command's pace (its progress) says it would end past "
+                                  "1.5 times the limit (a last resort on farms; temporary output "
+                                  "files are removed; exit status 124)",
                                   [this](CommandContext& c) {
                                       OIIO::string_view s(c.args[0]);
                                       float t = 0;
@@ -720,7 +722,12 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     std::shared_ptr<ProgressLine> progress;
     if (m_progress && m_verbosity > 0) {
         progress     = std::make_shared<ProgressLine>(cmd.name, m_progress_interval_s);
-        ctx.progress = [progress](float fraction) { progress->report(fraction); };
+        ctx.progress = [progress](float fraction) {
+            progress->report(fraction);
+            guard_progress(fraction);
+        };
+    } else if (m_timeout_seconds > 0) {  // the pace against --timeout (guard.h)
+        ctx.progress = [](float fraction) { guard_progress(fraction); };
     }
     ctx.inputs.assign(m_stack.end() - inputs, m_stack.end());
     m_stack.resize(m_stack.size() - size_t(inputs));
