@@ -524,9 +524,10 @@ ApertureSampler::ApertureSampler(const Kernel& k, float aspect)
         m_first_normal = 0.5 * kPi + k.rotation_deg * kPi / 180.0 + 0.5 * m_sector;
         m_apothem      = std::cos(0.5 * m_sector);
         m_curvature    = k.curvature;
-        // Within a sector, the edge distance at angle t from its normal is
-        // d(t) = (1 - q) A / cos t + q (A the apothem, q the curvature), and the area up to
-        // t is half the integral of d^2: (1 - q)^2 A^2 tan t + 2 q (1 - q) A asinh(tan t) + q^2 t.
+        // Within a sector, the edge distance at angle t from its normal is the aperture's,
+        // polygon_edge_distance: d(t) = (1 - q) A / cos t + q (A the apothem, q the curvature),
+        // so the area up to t is half the integral of d^2:
+        // (1 - q)^2 A^2 tan t + 2 q (1 - q) A asinh(tan t) + q^2 t.
         const double A = m_apothem, q = m_curvature;
         auto H = [&](double t) {
             const double tn = std::tan(t);
@@ -560,7 +561,7 @@ std::array<double, 2> ApertureSampler::operator()(double u1, double u2) const
         const int i    = std::min(kAngleSteps - 1, int(f));
         const double t = m_angle[size_t(i)] + (m_angle[size_t(i) + 1] - m_angle[size_t(i)]) * (f - i);
         phi            = m_first_normal + j * m_sector + t;
-        d              = (1.0 - m_curvature) * m_apothem / std::cos(t) + m_curvature;
+        d              = polygon_edge_distance(m_blades, m_curvature, t + 0.5 * m_sector);  // t from the sector's normal
     } else {
         phi = 2.0 * kPi * u1;
     }
