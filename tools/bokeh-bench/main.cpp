@@ -132,8 +132,16 @@ int main(int argc, char* argv[])
             ++i;
         else if (a == "--data" && i + 1 < argc)
             args.data_dir = argv[++i];
-        else if (a == "--images" && i + 1 < argc)
+        else if (a == "--images" && i + 1 < argc) {
             args.images_dir = argv[++i];
+            std::error_code why;
+            std::filesystem::create_directories(args.images_dir, why);
+            if (!std::filesystem::is_directory(args.images_dir)) {
+                std::fprintf(stderr, "bokeh-bench: --images %s: cannot make the folder: %s\n",
+                             args.images_dir.c_str(), why.message().c_str());
+                return 1;
+            }
+        }
         else if (a == "--scenes" && i + 1 < argc)
             args.only = OIIO::Strutil::splits(argv[++i], ",");
         else if (a == "--reps" && i + 1 < argc)
