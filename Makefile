@@ -42,7 +42,8 @@ demo: tool
 	$(BOKEHTOOL) out/sharp.exr --defocus:focus=6:fstop=2:output=focalplane -o out/focalplane.png
 	$(BOKEHTOOL) -v out/sharp.exr --defocus:focus=6:fstop=2:lens=achromat:diffraction=exact:onion=0.15 --ch R,G,B -o out/demo_lens.png
 	$(BOKEHTOOL) --bokeh:lens=achromat:fstop=1.4:diffraction=exact:onion=0.15:catseye=0.5:sheet=1 60 -o out/bokeh_sheet.png
-	@echo "demo: wrote out/sharp.exr (the scene, RGBA+Z), out/demo.exr + out/demo.png (its depth of field), out/demo_lens.png (the same with an achromat's lens character on the highlights), out/focalplane.png, out/bokeh_sheet.png (an achromat's bokeh across defocus and field)"
+	$(BOKEHTOOL) out/sharp.exr --defocus:focus=6:fstop=2:lens=achromat:catseye=0.5 --lensdistort:k1=-0.06:k2=0.01:lateralr=0.002:lateralb=-0.002 --ch R,G,B -o out/demo_field.png
+	@echo "demo: wrote out/sharp.exr (the scene, RGBA+Z), out/demo.exr + out/demo.png (its depth of field), out/demo_lens.png (the same with an achromat's lens character on the highlights), out/focalplane.png, out/bokeh_sheet.png (an achromat's bokeh across defocus and field), out/demo_field.png (the lens across the field: cat's eye, barrel distortion, lateral colour)"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
