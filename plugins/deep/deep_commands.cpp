@@ -7,11 +7,15 @@
 // --deepholdout keeps the result deep.
 
 #include <bokeh/deep.h>
+#include <bokeh/io.h>
 #include <bokeh/plugin.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include <OpenImageIO/strutil.h>
+
+#include "memory_budget.h"
 
 namespace {
 
@@ -71,8 +75,22 @@ bool tidy(CommandContext& c)
 bool merge(CommandContext& c)
 {
     std::vector<const OIIO::ImageBuf*> srcs;
-    for (const StackImage& in : c.inputs)
+    // What the merge will hold before it is allocated, counted as a read counts a deep file
+    // (io_budget.cpp: a pixel 16 + 8 x channels bytes, a sample a float a channel), twice:
+    // the pooled image and its tidied copy (deep.h).
+    int64_t samples = 0, channels = 0, pixels = 0;
+    for (const StackImage& in : c.inputs) {
         srcs.push_back(in.buf.get());
+        if (in.buf->deep() && in.buf->deepdata()) {
+            const bokeh::DeepStats st = bokeh::deep_stats(*in.buf->deepdata());
+            samples += st.total_samples;
+            pixels   = std::max(pixels, st.pixels);
+            channels = std::max<int64_t>(channels, in.buf->nchannels());
+        }
+    }
+    if (!bokeh::within_memory_budget(c, 2 * (pixels * (16 + 8 * channels) + samples * 4 * channels),
+                                     format("a merge of {} deep samples of {} channels", samples, channels)))
+        return false;
     return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
         return bokeh::deep_merge(dst, srcs, c.options.get_bool("cull"), o, c.nthreads);
     });

@@ -116,6 +116,14 @@ TEST(Robust, TypedSizesAreCheckedBeforeMemoryIsTaken)
     expect_clean_failure(r, "--resample: a 70000x70000 result of 5 channels would take", out);
     r = bokehtool(small + "--resize 128x72 -o " + dir + "/resized.exr");
     EXPECT_EQ(r.status, 0) << r.err;
+    // A deep merge: its inputs fit (3.05 MiB each), the pooled and tidied samples do not.
+    const std::string two_deep = "--scene lights:width=200:height=100:output=deep "
+                                 "--scene lights:width=200:height=100:output=deep:seed=2 ";
+    r = bokehtool("--maxmemory 3.5M " + two_deep + "--deepmerge -o " + out);
+    expect_clean_failure(r, "--deepmerge: a merge of 49092 deep samples of 5 channels would take 4.0 MiB, over the "
+                            "memory budget of 3.5 MiB", out);
+    r = bokehtool(format("--maxmemory 5M {}--deepmerge -o {}/merged.exr", two_deep, dir));
+    EXPECT_EQ(r.status, 0) << r.err;
 }
 
 TEST(Robust, DeepFileRefusedOnItsSampleCount)
