@@ -218,6 +218,11 @@ void encode_chunk(ChunkCoder& coder, const std::vector<const unsigned char*>& li
             o = std::copy(line, line + line_bytes, o);
     } else {
         stored.resize(packed);
+        // The bound reserved a raw chunk's size; kept, the chunks' slack adds up to about
+        // a second uncompressed copy of the frame while the file is assembled. Measured
+        // (/usr/bin/time, `bokehtool in.exr -o out.exr` of a 3840x2160 half RGBA+Z zip
+        // frame): peak resident 719 MB kept, 657 MB given back.
+        stored.shrink_to_fit();
     }
 }
 
