@@ -146,6 +146,12 @@ const char* method_name(DefocusMethod m)
 namespace {
 
 // The result plane (RGBA over f.out) into dst: R, G, B(, A) as float, src's metadata.
+void release_pixels(Frame& f)
+{
+    for (std::vector<float>* v : { &f.img.rgba, &f.img.z, &f.coc, &f.linear_rgba })
+        std::vector<float>().swap(*v);
+}
+
 void write_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Plane& out, int nthreads)
 {
     const int nc = f.img.has_alpha ? 4 : 3;
@@ -212,6 +218,9 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
     if (rep.method != DefocusMethod::Gather)
         fill_uncovered(out, f, opts, rep, nthreads);
     report_sprites(rep, f.sprites.get());
+    // The frame's pixels are done with: given back before the result is allocated, the
+    // peak is the larger of the two, not their sum.
+    release_pixels(f);
     rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}{}", method_name(rep.method),
                          rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width() * f.up,
                          f.out.height() * f.up, fill_summary(rep),
