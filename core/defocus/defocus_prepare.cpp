@@ -158,6 +158,7 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
         for (int64_t i = b; i < e; ++i)
             f.coc[size_t(i)] = coc_of(f.img.z[size_t(i)]);
     });
+    std::vector<float>().swap(f.img.z);  // the CoC stands for it from here on
     f.data   = f.img.roi;
     f.border = o.border;
     f.up     = o.supersample;
