@@ -1,5 +1,5 @@
 // exr_deflate.h — internal to the library: ZIP/ZIPS compression of a single-part scanline
-// OpenEXR file that was written uncompressed (core/io/exr_deflate.cpp; io.cpp's write_image
+// OpenEXR file that was written uncompressed (core/io/exr_deflate.cpp; io_write.cpp's write_image
 // uses it).
 #pragma once
 
