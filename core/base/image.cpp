@@ -243,8 +243,7 @@ bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads, st
     return true;
 }
 
-// Depth channels take "no depth" (+inf) for NaN and -inf; everything else takes 0.
-static bool is_depth_channel(const std::string& name)
+bool is_depth_channel(const std::string& name)
 {
     return name == "Z" || name == "ZBack" || OIIO::Strutil::ends_with(name, ".Z")
            || OIIO::Strutil::ends_with(name, ".ZBack");

@@ -15,6 +15,7 @@
 // the lateral colour is one magnification per channel, not a spectrum.
 
 #include <bokeh/distortion.h>
+#include <bokeh/image.h>
 #include <bokeh/parallel.h>
 
 #include "base/plane.h"
@@ -79,12 +80,6 @@ struct Normalise {
     {
     }
 };
-
-bool is_depth(const std::string& name)
-{
-    return name == "Z" || name == "ZBack" || OIIO::Strutil::ends_with(name, ".Z")
-           || OIIO::Strutil::ends_with(name, ".ZBack");
-}
 
 // The source position (continuous pixel coordinates, centres at i + 0.5) of output
 // position (X, Y) for a channel magnified by `m`; false where the mapping has no inverse.
@@ -213,7 +208,7 @@ bool lens_distort(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const LensDist
     }
     std::vector<bool> nearest(static_cast<size_t>(nc), false);
     for (int c = 0; c < nc; ++c)
-        nearest[size_t(c)] = is_depth(spec.channel_name(c)) || c == spec.z_channel;
+        nearest[size_t(c)] = is_depth_channel(spec.channel_name(c)) || c == spec.z_channel;
     const Normalise n(spec, lens);
     auto at = [&](int x, int y, int c) -> float {
         if (x < data.xbegin || x >= data.xend || y < data.ybegin || y >= data.yend)

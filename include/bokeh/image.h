@@ -23,6 +23,10 @@ struct ChannelMap {
 /// and z_channel are used first when set.
 ChannelMap find_channels(const OIIO::ImageSpec& spec);
 
+/// A depth channel by its name: Z, ZBack, or a layer's (*.Z, *.ZBack). Non-finite depths
+/// become "no depth" (+inf) where colour becomes 0; resampling takes the nearest depth.
+bool is_depth_channel(const std::string& name);
+
 /// "the image has no depth channel (Z)", naming the channels that look like a depth (last
 /// component Z, depth or zdepth, any case: "left.Z", "right.depth.Z") when it has some,
 /// and how to pick one.
