@@ -17,7 +17,7 @@ root = pathlib.Path(sys.argv[1] if len(sys.argv) > 1 else ".").resolve()
 
 # Lowest first. Each family may include those before it.
 ORDER = ["base", "plugin", "io", "metrics", "aperture", "resample", "blur", "optics", "deep", "defocus",
-         "truth", "scene"]
+         "truth", "scene", "fit"]
 PUBLIC = {
     "base": ["base.h", "parallel.h", "image.h"],
     "plugin": ["plugin.h"],
@@ -31,6 +31,7 @@ PUBLIC = {
     "defocus": ["defocus.h"],
     "truth": ["truth.h"],
     "scene": ["scene.h"],
+    "fit": ["lens_fit.h"],
 }
 rank = {f: i for i, f in enumerate(ORDER)}
 public_family = {h: f for f, hs in PUBLIC.items() for h in hs}

@@ -12,7 +12,7 @@ set -euo pipefail
 packages=(
   build-essential cmake pkg-config ccache
   libopenimageio-dev openimageio-tools libopenexr-dev libopencolorio-dev libtbb-dev libglm-dev
-  libfftw3-dev libdeflate-dev
+  libfftw3-dev libdeflate-dev libnlopt-dev
 )
 case "${1:-all}" in
   tool) ;;

@@ -2,13 +2,16 @@
 // field position (bokeh::lens_psf, core/optics/lens_psf.cpp), or a contact sheet of them across
 // defocus and field (`:sheet=1`, bokeh::bokeh_sheet_image); `:map=1` the light-beam map
 // (bokeh::beam_map_image). The PSF's data window is centred on (0, 0), so the result
-// serves as `--blur:kernel=image` or `--convolve`'s kernel.
+// serves as `--blur:kernel=image` or `--convolve`'s kernel. `--fitlens`: the lens fitted to
+// crops of photographed bokeh (bokeh::fit_lens, core/fit/), printed as the options
+// `--defocus` and `--bokeh` take, its comparison sheet pushed.
 
 #include <aperture_options.h>
 #include <lens_options.h>
 
 #include <bokeh/color.h>
 #include <bokeh/lens.h>
+#include <bokeh/lens_fit.h>
 #include <bokeh/optics.h>
 #include <bokeh/plugin.h>
 
@@ -99,6 +102,65 @@ bool bokeh_command(CommandContext& c)
     return true;
 }
 
+bool fitlens_command(CommandContext& c)
+{
+    const auto& v = c.options;
+    bokeh::LensFitOptions o;
+    o.camera.fstop    = v.get_float("fstop");
+    o.camera.focal_mm = v.get_float("focal");
+    double sensor_mm;
+    const std::string& sensor = v.get_string("sensor");
+    if (!bokeh::film_back_width(sensor, sensor_mm) && !bokeh::parse_number(sensor, sensor_mm))
+        return c.fail(format("sensor '{}' is neither a width in mm nor a film back", sensor));
+    // The frame's width: given, else the first crop's display window when it is a frame
+    // (a crop that kept its origin), else 1920.
+    const OIIO::ImageSpec& first = c.inputs.front().buf->spec();
+    int width = v.get_int("width");
+    if (width == 0)
+        width = first.full_width != first.width || first.full_height != first.height ? first.full_width : 1920;
+    o.camera.pixel_pitch_mm = sensor_mm / width;
+    o.clip_level = v.get_float("clip");
+    o.front      = v.get_bool("front");
+    o.fit_field  = v.get_bool("field");
+    std::vector<bokeh::LensFitCrop> crops;
+    for (const bokeh::StackImage& in : c.inputs) {
+        bokeh::LensFitCrop crop;
+        crop.image = *in.buf;
+        crops.push_back(std::move(crop));
+    }
+    bokeh::LensFit fit;
+    std::string err;
+    if (!bokeh::fit_lens(fit, crops, o, err, c.nthreads))
+        return c.fail(err);
+    c.message(format("fitlens: lens {}", fit.options.empty() ? "kernel=disk (round, no aberration shown)" : fit.options));
+    for (size_t i = 0; i < fit.crops.size(); ++i) {
+        const bokeh::LensFitCropResult& r = fit.crops[i];
+        c.message(format("fitlens: crop {} ({}): CoC {:.2f} +- {:.2f} px at ({:.1f}, {:.1f}), fit {:.1f} dB{}{}", i + 1,
+                         c.inputs[i].origin, r.coc_px, r.coc_sigma_px, r.centre_x, r.centre_y, r.psnr_db,
+                         r.clipped_px ? format(", {} clipped px left out", r.clipped_px) : std::string(),
+                         r.nonfinite_px ? format(", {} non-finite px left out", r.nonfinite_px) : std::string()));
+    }
+    if (c.verbosity > 1) {
+        for (const bokeh::LensFitParameter& p : fit.parameters)
+            c.message(p.status == bokeh::LensFitParameter::Status::Fitted
+                          ? format("fitlens:   {} = {:.4g} +- {:.2g}", p.name, p.value, p.sigma)
+                          : format("fitlens:   {} left at its default: {}", p.name, p.why));
+        for (const std::string& st : fit.stages)
+            c.message("fitlens:   " + st);
+        c.message(format("fitlens:   noise: read {:.3g}, photon {:.3g} x signal; {} PSF evaluations, {:.2f} s",
+                         fit.noise_read, fit.noise_photon, fit.evaluations, fit.seconds));
+    }
+    bokeh::StackImage out;
+    out.colorspace = c.colors->scene_linear();
+    out.origin     = "--fitlens";
+    out.buf        = std::make_shared<OIIO::ImageBuf>();
+    if (!bokeh::lens_fit_sheet(*out.buf, fit, crops, c.nthreads))
+        return c.fail(out.buf->geterror());
+    out.buf->specmod().attribute("bokeh:fitted_lens", fit.options);
+    c.outputs.push_back(std::move(out));
+    return true;
+}
+
 }  // namespace
 
 BOKEH_PLUGIN_EXPORT int bokeh_plugin_abi_version() { return BOKEH_PLUGIN_ABI_VERSION; }
@@ -133,4 +195,24 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
     c.inputs_for = [](const bokeh::OptionValues& v) { return v.get_string("kernel") == "image" ? 1 : 0; };
     c.needs_scene_linear = true;  // a picture aperture's transmission, decoded to linear
     r.add(c);
+
+    std::vector<OptionSpec> fit_options = {
+        OptionSpec::Int("crops", 1, 1, 64, "how many crops to take from the stack (the top ones)"),
+        OptionSpec::Int("width", 0, 0, 65536,
+                        "the plate's width in px (0: the crop's display window when it is the frame, else 1920)"),
+        OptionSpec::Float("clip", 0.0, 0.0, 1e30, "pixels at or above this are clipped (0: found per crop)"),
+        OptionSpec::Bool("front", false, "the highlights are in front of focus (their CoC negative)"),
+        OptionSpec::Bool("field", false,
+                         "also fit cat's eye and astigmatism from crops off the axis (experimental: see the docs)"),
+    };
+    for (OptionSpec& o : bokeh::camera_option_specs(false))
+        fit_options.push_back(std::move(o));
+    bokeh::Command fit = bokeh::make_command(
+        "--fitlens", "", 1,
+        "Fit the lens model to crops of defocused highlights from a plate: prints the lens as "
+        "--defocus/--bokeh options, pushes a sheet of crop | fit | difference x 4 | fitted light",
+        fitlens_command, std::move(fit_options));
+    fit.inputs_for         = [](const bokeh::OptionValues& v) { return v.get_int("crops"); };
+    fit.needs_scene_linear = true;  // a plate's light, linear
+    r.add(fit);
 }

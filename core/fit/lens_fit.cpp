@@ -1,0 +1,630 @@
+// lens_fit.cpp — fit optics.h's lens model to crops of photographed bokeh (lens_fit.h has
+// the model; docs/methods/lens-fit.md the method, its checks and its limits; the model's
+// pieces are fit/fit_model.cpp's).
+//
+// The stages, coarse to fine; each one's parameters start from the best of a small grid
+// of values, then BOBYQA [Powell, "The BOBYQA algorithm for bound constrained
+// optimization without derivatives", 2009; NLopt's LN_BOBYQA] polishes them with every
+// crop's CoC free:
+//   1. size and place: each crop's CoC and centre under a round, aberration-free lens,
+//      from the highlight's moments (the noise model is estimated from the pixels first);
+//   2. aperture: blades 5..9 against round (rotation from a grid over one blade period);
+//   3. hole; 4. spherical aberration (monochromatic, signed); 5. axial colour (chromatic,
+//      signed; RGB crops only); 6. onion-ring contrast; 7. cat's eye and astigmatism
+//      (crops off the axis only); 8. everything kept, together, then each crop's centre.
+// A stage is kept when it lowers the cost (a negative log-likelihood under the Cauchy
+// loss) by more than the Bayesian information criterion's price, k ln(N) / 2 for k
+// parameters over N residuals [Schwarz, "Estimating the dimension of a model", 1978].
+// The uncertainty of a fitted parameter is the square root of the diagonal of
+// s^2 (J^T J)^-1 at the optimum (J the Jacobian of the weighted residuals by forward
+// differences, s^2 their reduced chi-square).
+//
+// Known limits: a crop's sub-pixel centre moves the PSF by bilinear interpolation (a blur
+// of at most half a pixel at the rim); one crop cannot tell a front bokeh from a back
+// one with the aberrations' signs reversed (LensFitOptions::front says which); spherical
+// aberration is fitted as third order (correction 0) on the `uncorrected` design, axial
+// colour as that design's BK7 dispersion scaled (an achromat's secondary spectrum is
+// approximated by it); diffraction, the onion rings' frequency and surface noise are not
+// fitted (left at the camera's values).
+
+#include <bokeh/base.h>
+#include <bokeh/lens_fit.h>
+
+#include "fit/fit_model.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/strutil.h>
+
+namespace bokeh {
+
+using OIIO::Strutil::fmt::format;
+using namespace fit;
+
+namespace {
+
+// The noise floor a stage searches under (graduated non-convexity: fit_model.h), a
+// fraction of each crop's light level.
+constexpr double kSearchFloorOfLevel = 0.02;
+
+// BIC's price of a parameter, k ln(N) / 2, times this: the PSF's 0.5 px radial bins make
+// the cost rough at the 0.1 %-of-light level, and at the plain price the round trips of
+// tests/fit/lens_fit_test.cpp (which print each stage's costs) kept holes and onion rings
+// their crops do not have. At 4 they keep fewer; not none (a 9-blade aperture of
+// curvature 0.74 on a round front bokeh with spherical aberration).
+constexpr double kPriceFactor = 4.0;
+
+// A CoC's bounds about its first estimate from the highlight's moments: spherical
+// aberration moves the rim by up to the CoC itself before rays cross (a bright centre
+// reads as a small highlight, a bright rim as a large one).
+constexpr double kCocLow = 0.25, kCocHigh = 3.0;
+
+// A stage's shared parameter: where it lives in the State, its bounds, grid of starts.
+struct StageParam {
+    const char* name;
+    double State::*field;
+    double lo, hi, step;
+    std::vector<double> starts;
+};
+
+class Fitter {
+public:
+    Fitter(std::vector<CropData>& crops, const LensFitOptions& opts, int nthreads)
+        : m_crops(crops), m_opts(opts), m_model(crops, opts, nthreads)
+    {
+        for (const CropData& d : crops) {
+            m_s.coc.push_back(d.coc0);
+            m_s.cx.push_back(d.cx0);
+            m_s.cy.push_back(d.cy0);
+            m_residuals += double(d.channels) * std::count(d.use.begin(), d.use.end(), uint8_t(1));
+        }
+    }
+
+    State& state() { return m_s; }
+    const Model& model() const { return m_model; }
+    std::vector<std::string>& log() { return m_log; }
+    double price(int k) const { return kPriceFactor * 0.5 * k * std::log(std::max(m_residuals, 2.0)); }
+    int left() const { return std::max(0, m_opts.max_evaluations - m_model.evaluations()); }
+    double cost() const { return m_model.cost(m_s, true); }
+
+    // Each crop's CoC and centre, the lens held.
+    double refine_crops(int evaluations_each, bool search = false)
+    {
+        if (search) {
+            m_model.set_floor(kSearchFloorOfLevel);
+            refine_crops(evaluations_each);
+            m_model.set_floor(0.0);
+        }
+        double total = 0.0;
+        for (size_t i = 0; i < m_crops.size(); ++i) {
+            const double c0 = m_crops[i].coc0;
+            std::vector<Free> f = { { &m_s.coc[i], kCocLow * c0, kCocHigh * c0 + 4.0, 0.05 * c0 + 0.2 },
+                                    { &m_s.cx[i], m_s.cx[i] - 3.0, m_s.cx[i] + 3.0, 0.5 },
+                                    { &m_s.cy[i], m_s.cy[i] - 3.0, m_s.cy[i] + 3.0, 0.5 } };
+            total += minimise(f, [&] { return m_model.cost(m_s, true, { i }); },
+                              std::min(evaluations_each, std::max(10, left())));
+        }
+        return total;
+    }
+
+    // Free the shared `params` (from their current values), those kept by earlier stages
+    // and every CoC; the best cost.
+    double polish(const std::vector<StageParam>& params, int evaluations)
+    {
+        std::vector<Free> f;
+        for (const StageParam& p : params)
+            f.push_back({ &(m_s.*p.field), p.lo, p.hi, p.step });
+        for (const StageParam& p : m_kept)
+            f.push_back({ &(m_s.*p.field), std::min(p.lo, m_s.*p.field), std::max(p.hi, m_s.*p.field), p.step });
+        for (size_t i = 0; i < m_crops.size(); ++i) {
+            const double c0 = m_crops[i].coc0;
+            f.push_back({ &m_s.coc[i], kCocLow * c0, kCocHigh * c0 + 4.0, 0.03 * c0 + 0.2 });
+        }
+        add_centres(f);
+        const int n = int(f.size());
+        return minimise(f, [&] { return cost(); }, std::min(evaluations + 12 * n, std::max(10, left())));
+    }
+
+    // A stage: the cost with what is kept polished; the best grid start (each parameter's
+    // starts tried in turn, the others at their best); the polish; kept when the cost
+    // falls by more than the parameters' price.
+    bool stage(const char* name, const std::vector<StageParam>& params)
+    {
+        const double c0    = polish({}, 20);
+        const State before = m_s;
+        m_model.set_floor(kSearchFloorOfLevel);
+        for (const StageParam& p : params) {
+            double best = c0, best_v = m_s.*p.field;  // the current value is a start too
+            State best_state = m_s;
+            for (double v : p.starts) {
+                m_s            = before;
+                m_s.*p.field   = v;
+                // An aberration moves the rim: each start with its CoCs refitted.
+                const double c = polish_cocs(m_free_centres ? 30 : 12);
+                if (c < best)
+                    best = c, best_v = v, best_state = m_s;
+            }
+            m_s          = best_state;
+            m_s.*p.field = best_v;
+        }
+        polish(params, 40);
+        m_model.set_floor(0.0);
+        const double c1   = polish(params, 30);
+        const int k       = int(params.size());
+        // A parameter left at its "none" value (0) buys nothing, whatever the CoCs' polish
+        // gained beside it.
+        const bool moved = std::any_of(params.begin(), params.end(), [&](const StageParam& p) {
+            return std::abs(m_s.*p.field) > 1e-3 * (p.hi - p.lo);
+        });
+        const bool keep   = moved && c0 - c1 > price(k);
+        m_log.push_back(format("{}: cost {:.1f} -> {:.1f} (price of {} parameter{} {:.1f}): {}", name, c0, c1, k,
+                               k == 1 ? "" : "s", price(k), keep ? "kept" : "not shown by the crops"));
+        if (!keep)
+            m_s = before;
+        else
+            m_kept.insert(m_kept.end(), params.begin(), params.end());
+        return keep;
+    }
+
+    const std::vector<StageParam>& kept() const { return m_kept; }
+
+    // The crops' centres, free while a field effect is fitted (a cut pupil's light is
+    // not centred where a round one's is), within 4 px of the crop's first estimate.
+    void add_centres(std::vector<Free>& f)
+    {
+        if (!m_free_centres)
+            return;
+        for (size_t i = 0; i < m_crops.size(); ++i) {
+            f.push_back({ &m_s.cx[i], m_crops[i].cx0 - 4.0, m_crops[i].cx0 + 4.0, 0.3 });
+            f.push_back({ &m_s.cy[i], m_crops[i].cy0 - 4.0, m_crops[i].cy0 + 4.0, 0.3 });
+        }
+    }
+    void free_centres(bool on) { m_free_centres = on; }
+
+    // Only the CoCs free, a few evaluations a crop; the best cost.
+    double polish_cocs(int evaluations_each)
+    {
+        std::vector<Free> f;
+        for (size_t i = 0; i < m_crops.size(); ++i) {
+            const double c0 = m_crops[i].coc0;
+            f.push_back({ &m_s.coc[i], kCocLow * c0, kCocHigh * c0 + 4.0, 0.05 * c0 + 0.2 });
+        }
+        add_centres(f);
+        return minimise(f, [&] { return cost(); },
+                        std::min(evaluations_each * int(f.size()) + 4, std::max(10, left())));
+    }
+
+    // The aperture: each blade count's best rotation on a grid, the two best counts
+    // polished, the better kept against round.
+    bool aperture_stage()
+    {
+        const double c0    = polish({}, 20);
+        const State before = m_s;
+        m_model.set_floor(kSearchFloorOfLevel);
+        struct Try {
+            int blades;
+            double rotation, cost;
+        };
+        std::vector<Try> tries;
+        for (int n = 5; n <= 9; ++n) {
+            const double period = 360.0 / n;
+            Try best { n, 0.0, 1e300 };
+            m_s = before;
+            // The CoC is the polygon's circumscribed diameter: start each at the area of
+            // the round fit, (n / 2) R^2 sin(2 pi / n) = pi r^2.
+            const double grow = std::sqrt(kPi / (0.5 * n * std::sin(2.0 * kPi / n)));
+            for (double& c : m_s.coc)
+                c *= grow;
+            for (int k = 0; k < 8; ++k) {
+                m_s.blades    = n;
+                m_s.rotation  = period * k / 8.0;
+                m_s.curvature = 0.15;
+                const double c = cost();
+                if (c < best.cost)
+                    best = { n, m_s.rotation, c };
+            }
+            tries.push_back(best);
+        }
+        std::sort(tries.begin(), tries.end(), [](const Try& a, const Try& b) { return a.cost < b.cost; });
+        State best_state = before;
+        double best_cost = 1e300;
+        for (size_t t = 0; t < std::min<size_t>(3, tries.size()); ++t) {
+            m_s           = before;
+            const double grow = std::sqrt(kPi / (0.5 * tries[t].blades * std::sin(2.0 * kPi / tries[t].blades)));
+            for (double& c : m_s.coc)
+                c *= grow;
+            m_s.blades    = tries[t].blades;
+            m_s.rotation  = tries[t].rotation;
+            m_s.curvature = 0.15;
+            const double period = 360.0 / m_s.blades;
+            const std::vector<StageParam> p = {
+                { "rotation", &State::rotation, m_s.rotation - 0.5 * period, m_s.rotation + 0.5 * period,
+                  period / 12.0, {} },
+                { "curvature", &State::curvature, 0.0, 1.0, 0.1, {} },
+            };
+            polish(p, 60);
+            m_model.set_floor(0.0);
+            const double c = polish(p, 30);
+            m_model.set_floor(kSearchFloorOfLevel);
+            if (c < best_cost)
+                best_cost = c, best_state = m_s;
+        }
+        m_model.set_floor(0.0);
+        const bool keep = c0 - best_cost > price(3);
+        m_log.push_back(format("aperture: round {:.1f}, {} blades {:.1f} (price {:.1f}): {}", c0, best_state.blades,
+                               best_cost, price(3), keep ? format("{} blades kept", best_state.blades) : "round kept"));
+        m_s = keep ? best_state : before;
+        if (keep) {
+            const double period = 360.0 / m_s.blades;
+            m_s.rotation        = std::fmod(std::fmod(m_s.rotation, period) + period, period);
+            m_kept.push_back({ "rotation", &State::rotation, m_s.rotation - 0.25 * period,
+                               m_s.rotation + 0.25 * period, period / 24.0, {} });
+            m_kept.push_back({ "curvature", &State::curvature, 0.0, 1.0, 0.05, {} });
+        }
+        return keep;
+    }
+
+private:
+    std::vector<CropData>& m_crops;
+    const LensFitOptions& m_opts;
+    Model m_model;
+    State m_s;
+    double m_residuals = 0.0;
+    std::vector<std::string> m_log;
+    std::vector<StageParam> m_kept;  // continuous shared parameters of the stages kept
+    bool m_free_centres = false;
+};
+
+// The weighted residuals of every crop (fine spectrum), for the Jacobian.
+std::vector<double> residuals(const Model& model, const State& s)
+{
+    std::vector<double> r;
+    for (size_t i = 0; i < model.crops().size(); ++i) {
+        Psf p;
+        if (!model.psf(p, s, i, false, 0))
+            continue;
+        std::vector<float> smp;
+        Model::sample(smp, p, model.crops()[i], s.cx[i], s.cy[i]);
+        Linear lin;
+        Model::fit_linear(model.crops()[i], smp, lin, &r);
+    }
+    return r;
+}
+
+// One-sigma uncertainties of `fields` (and every CoC) from s^2 (J^T J)^-1.
+std::vector<double> uncertainties(const Model& model, State s, const std::vector<double State::*>& fields,
+                                  std::vector<double>& coc_sigma)
+{
+    const std::vector<double> r0 = residuals(model, s);
+    const size_t n = r0.size(), nc = s.coc.size(), p = fields.size() + nc;
+    std::vector<std::vector<double>> J(p);
+    for (size_t k = 0; k < p; ++k) {
+        double& v      = k < fields.size() ? s.*fields[k] : s.coc[k - fields.size()];
+        const double h = std::max(1e-3, 1e-3 * std::abs(v));
+        const double v0 = v;
+        v += h;
+        std::vector<double> r1 = residuals(model, s);
+        v = v0;
+        J[k].resize(n);
+        for (size_t i = 0; i < n && i < r1.size(); ++i)
+            J[k][i] = (r1[i] - r0[i]) / h;
+    }
+    double chi2 = 0.0;
+    for (double r : r0)
+        chi2 += r * r;
+    const double s2 = chi2 / std::max<double>(1.0, double(n) - double(p));
+    std::vector<double> a(p * p, 0.0), inv(p * p, 0.0);
+    for (size_t i = 0; i < p; ++i)
+        for (size_t j = 0; j < p; ++j) {
+            double acc = 0.0;
+            for (size_t m = 0; m < n; ++m)
+                acc += J[i][m] * J[j][m];
+            a[i * p + j] = acc;
+        }
+    std::vector<double> sigma(p, 0.0);
+    for (size_t c = 0; c < p; ++c) {  // column c of the inverse
+        std::vector<double> m = a, b(p, 0.0), x(p, 0.0);
+        b[c] = 1.0;
+        if (solve_linear(int(p), m.data(), b.data(), x.data()))
+            sigma[c] = std::sqrt(std::max(0.0, s2 * x[c]));
+    }
+    coc_sigma.assign(sigma.begin() + long(fields.size()), sigma.end());
+    sigma.resize(fields.size());
+    return sigma;
+}
+
+std::string number(double v) { return format("{:.4g}", std::abs(v) < 1e-9 ? 0.0 : v); }
+
+}  // namespace
+
+bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFitOptions& opts, std::string& err,
+              int nthreads)
+{
+    const auto t0 = std::chrono::steady_clock::now();
+    fit = LensFit();
+    if (crops.empty())
+        return err = "fit_lens: no crop given", false;
+    if (crops.size() > 64)
+        return err = format("fit_lens: {} crops (at most 64)", crops.size()), false;
+    if (!(opts.clip_level >= 0.0) || !std::isfinite(opts.clip_level))
+        return err = format("fit_lens: clip level {:g} is not a value >= 0", opts.clip_level), false;
+    if (opts.max_evaluations < 50 || opts.max_evaluations > 1000000)
+        return err = format("fit_lens: max_evaluations {} is outside 50..1000000", opts.max_evaluations), false;
+    if (!validate_lens(opts.camera, err))
+        return err = "fit_lens: " + err, false;
+    std::vector<CropData> data(crops.size());
+    for (size_t i = 0; i < crops.size(); ++i)
+        if (!prepare_crop(data[i], crops[i], i, opts.clip_level, err))
+            return false;
+
+    Fitter f(data, opts, nthreads);
+    State& s = f.state();
+    // 1. the noise model from the pixels; size and place.
+    double read2 = 0.0, photon = 0.0;
+    estimate_noise(data, read2, photon);
+    f.refine_crops(150, true);
+    f.log().push_back(format("size and place: cost {:.1f}; noise: read {:.3g}, photon {:.3g} x signal", f.cost(),
+                             std::sqrt(read2), photon));
+
+    const bool colour = std::all_of(data.begin(), data.end(), [](const CropData& d) { return d.channels == 3; });
+    double max_h = 0.0, min_h = 1e9;
+    bool field_known = true;
+    for (const CropData& d : data) {
+        max_h = std::max(max_h, std::hypot(d.fx, d.fy));
+        min_h = std::min(min_h, std::hypot(d.fx, d.fy));
+        field_known = field_known && d.field_known;
+    }
+    double mean_coc = 0.0;
+    for (double c : s.coc)
+        mean_coc += c / double(s.coc.size());
+
+    bool kept_aperture = false, kept_hole = false, kept_sa = false, kept_colour = false, kept_onion = false;
+    bool kept_cats = false, kept_astig = false;
+    if (opts.fit_spherical)
+        kept_sa = f.stage("spherical aberration",
+                          { { "monochromatic", &State::mono, -8.0, 8.0, 0.2, { -2.0, -0.7, -0.2, 0.2, 0.7, 2.0 } } });
+    if (opts.fit_hole)
+        kept_hole = f.stage("hole", { { "hole", &State::hole, 0.0, 0.9, 0.05, { 0.2, 0.4, 0.6 } } });
+    if (opts.fit_aperture)
+        kept_aperture = f.aperture_stage();
+    if (opts.fit_colour && colour)
+        kept_colour = f.stage("axial colour",
+                              { { "chromatic", &State::chroma, -8.0, 8.0, 0.2, { -3.0, -1.0, -0.3, 0.3, 1.0, 3.0 } } });
+    if (opts.fit_onion)
+        kept_onion = f.stage("onion rings", { { "onion", &State::onion, 0.0, 1.0, 0.05, { 0.15, 0.4, 0.8 } } });
+    const bool off_axis = field_known && max_h >= 0.3;
+    if (opts.fit_field && off_axis) {
+        f.free_centres(true);
+        kept_cats = f.stage("cat's eye", { { "catseye", &State::catseye, 0.0, 1.5, 0.1, { 0.3, 0.7, 1.1 } } });
+        const double a = std::max(4.0, mean_coc);
+        kept_astig = f.stage("astigmatism",
+                             { { "astigmatism", &State::astig, -a, a, 0.05 * a, { -0.3 * a, 0.3 * a } } });
+    }
+
+    // 8. everything kept, together; then each crop's centre.
+    std::vector<double State::*> fields;
+    std::vector<const char*> names;
+    for (const StageParam& p : f.kept()) {
+        fields.push_back(p.field);
+        names.push_back(p.name);
+    }
+    // BOBYQA's trust region can close before a valley of correlated parameters (CoC,
+    // spherical aberration, curvature) is followed to its end: restarted until a round
+    // gains under a tenth of one parameter's price, at most 4 rounds.
+    for (int round = 0; round < 4 && !f.kept().empty(); ++round) {
+        const double before = f.cost();
+        const double after  = f.polish({}, 80);
+        f.log().push_back(format("all together: cost {:.1f}", after));
+        if (before - after < 0.1 * f.price(1))
+            break;
+    }
+    f.refine_crops(60);
+    const double period = s.blades > 0 ? 360.0 / s.blades : 360.0;
+    if (s.blades > 0)
+        s.rotation = std::fmod(std::fmod(s.rotation, period) + period, period);
+
+    // Uncertainties, the report.
+    std::vector<double> coc_sigma;
+    const std::vector<double> sigma = uncertainties(f.model(), s, fields, coc_sigma);
+    fit.lens = f.model().lens_of(s, false);
+    if (!kept_sa && !kept_colour) {
+        fit.lens.preset        = opts.camera.preset;
+        fit.lens.monochromatic = opts.camera.monochromatic;
+        fit.lens.chromatic     = opts.camera.chromatic;
+        fit.lens.correction    = opts.camera.correction;
+        fit.lens.spherochromatism = opts.camera.spherochromatism;
+    }
+    using Status = LensFitParameter::Status;
+    auto sigma_of = [&](const char* name) {
+        for (size_t k = 0; k < names.size(); ++k)
+            if (std::string(names[k]) == name)
+                return sigma[k];
+        return 0.0;
+    };
+    auto param = [&](const char* name, double value, bool asked, bool on, const char* not_asked_why) {
+        LensFitParameter p;
+        p.name   = name;
+        p.value  = value;
+        p.status = !asked ? Status::Off : on ? Status::Fitted : Status::Undetermined;
+        p.sigma  = on ? sigma_of(name) : 0.0;
+        if (!asked)
+            p.why = not_asked_why;
+        else if (!on)
+            p.why = "the crops do not show it (its stage did not pay its price)";
+        fit.parameters.push_back(p);
+    };
+    param("blades", s.blades, opts.fit_aperture, kept_aperture, "not asked for");
+    param("rotation", s.rotation, opts.fit_aperture, kept_aperture, "not asked for");
+    param("curvature", s.curvature, opts.fit_aperture, kept_aperture, "not asked for");
+    param("hole", s.hole, opts.fit_hole, kept_hole, "not asked for");
+    param("monochromatic", s.mono, opts.fit_spherical, kept_sa, "not asked for");
+    param("chromatic", s.chroma, opts.fit_colour && colour, kept_colour,
+          colour ? "not asked for" : "a crop has one channel");
+    param("onion", s.onion, opts.fit_onion, kept_onion, "not asked for");
+    const char* field_why = !field_known ? "a crop's field position is unknown"
+                            : max_h < 0.3 ? "every crop is within 0.3 of the centre"
+                                          : "not asked for";
+    param("catseye", s.catseye, opts.fit_field && off_axis, kept_cats, field_why);
+    param("astigmatism", s.astig, opts.fit_field && off_axis, kept_astig, field_why);
+    if (kept_aperture)
+        fit.parameters[0].sigma = 0.0;  // a count: chosen, not estimated
+
+    // The options string.
+    std::vector<std::string> o;
+    if (kept_aperture)
+        o.push_back(format("kernel=polygon:blades={}:rotation={}:curvature={}", s.blades, number(s.rotation),
+                           number(s.curvature)));
+    if (kept_hole)
+        o.push_back("hole=" + number(s.hole));
+    if (kept_sa || kept_colour)
+        o.push_back(format("lens=uncorrected:correction=0:monochromatic={}:chromatic={}", number(s.mono),
+                           number(s.chroma)));
+    if (kept_onion)
+        o.push_back("onion=" + number(s.onion));
+    if (kept_cats)
+        o.push_back("catseye=" + number(s.catseye));
+    if (kept_astig)
+        o.push_back("astigmatism=" + number(s.astig));
+    fit.options = OIIO::Strutil::join(o, ":");
+
+    // Per crop.
+    for (size_t i = 0; i < data.size(); ++i) {
+        const CropData& d = data[i];
+        LensFitCropResult r;
+        r.coc_px = f.model().signed_coc(s, i);
+        r.centre_x = s.cx[i], r.centre_y = s.cy[i];
+        r.field_x = d.fx, r.field_y = d.fy, r.field_known = d.field_known;
+        r.clipped_px = d.clipped, r.nonfinite_px = d.nonfinite;
+        Psf p;
+        if (f.model().psf(p, s, i, false, nthreads)) {
+            std::vector<float> smp;
+            Model::sample(smp, p, d, s.cx[i], s.cy[i]);
+            Linear lin;
+            Model::fit_linear(d, smp, lin, nullptr, &r.outlier_px);
+            r.outlier_px += d.others;
+            const size_t n = size_t(d.w) * d.h;
+            double peak = 0.0, se = 0.0;
+            size_t cnt = 0;
+            for (int ch = 0; ch < d.channels; ++ch) {
+                double sum2 = 0.0;
+                size_t m    = 0;
+                for (int j = 0; j < d.h; ++j)
+                    for (int x = 0; x < d.w; ++x) {
+                        const size_t k = size_t(j) * d.w + x;
+                        const double mod = lin.a[ch] * smp[ch * n + k];
+                        peak = std::max(peak, mod);
+                        if (!d.use[k])
+                            continue;
+                        const double e = d.px[k * d.channels + ch]
+                                         - (mod + lin.b0[ch] + lin.bx[ch] * plane_x(d, x) + lin.by[ch] * plane_y(d, j));
+                        sum2 += e * e, ++m;
+                    }
+                r.amplitude[ch]    = lin.a[ch];
+                r.background[ch]   = lin.b0[ch];
+                r.background_dx[ch] = lin.bx[ch];
+                r.background_dy[ch] = lin.by[ch];
+                r.residual_rms[ch] = std::sqrt(sum2 / std::max<size_t>(m, 1));
+                se += sum2, cnt += m;
+            }
+            for (int ch = d.channels; ch < 3; ++ch) {
+                r.amplitude[ch]    = r.amplitude[0];
+                r.background[ch]   = r.background[0];
+                r.background_dx[ch] = r.background_dx[0];
+                r.background_dy[ch] = r.background_dy[0];
+                r.residual_rms[ch] = r.residual_rms[0];
+            }
+            r.psnr_db = 10.0 * std::log10(peak * peak / std::max(se / std::max<size_t>(cnt, 1), 1e-30));
+        }
+        r.coc_sigma_px = i < coc_sigma.size() ? coc_sigma[i] : 0.0;
+        fit.crops.push_back(r);
+    }
+    fit.noise_read   = std::sqrt(read2);
+    fit.noise_photon = photon;
+    fit.evaluations  = f.model().evaluations();
+    fit.stages       = f.log();
+    fit.seconds      = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    return true;
+}
+
+bool lens_fit_model_image(OIIO::ImageBuf& dst, const LensFit& fit, const std::vector<LensFitCrop>& crops, int index,
+                          int nthreads)
+{
+    if (index < 0 || size_t(index) >= crops.size() || size_t(index) >= fit.crops.size())
+        return dst.errorfmt("lens_fit_model_image: crop {} of {}", index + 1, crops.size()), false;
+    const OIIO::ImageSpec& cs = crops[size_t(index)].image.spec();
+    const LensFitCropResult& r = fit.crops[size_t(index)];
+    PsfRequest req;
+    req.coc_px = r.coc_px, req.field_x = r.field_x, req.field_y = r.field_y;
+    Psf p;
+    std::string err;
+    if (!lens_psf(p, fit.lens, req, err, nthreads))
+        return dst.errorfmt("lens_fit_model_image: {}", err), false;
+    CropData d;
+    d.w = cs.width, d.h = cs.height;
+    std::vector<float> smp;
+    Model::sample(smp, p, d, r.centre_x, r.centre_y);
+    OIIO::ImageSpec spec(cs.width, cs.height, 3, OIIO::TypeDesc::FLOAT);
+    spec.x = cs.x, spec.y = cs.y, spec.full_x = cs.full_x, spec.full_y = cs.full_y;
+    spec.full_width = cs.full_width, spec.full_height = cs.full_height;
+    dst.reset(spec);
+    const size_t n = size_t(d.w) * d.h;
+    std::vector<float> rgb(n * 3);
+    for (int j = 0; j < d.h; ++j)
+        for (int i = 0; i < d.w; ++i)
+            for (int c = 0; c < 3; ++c) {
+                const size_t k = size_t(j) * d.w + i;
+                rgb[k * 3 + c] = float(r.amplitude[c] * smp[c * n + k] + r.background[c]
+                                       + r.background_dx[c] * plane_x(d, i) + r.background_dy[c] * plane_y(d, j));
+            }
+    dst.set_pixels(dst.roi(), OIIO::TypeDesc::FLOAT, rgb.data());
+    return true;
+}
+
+bool lens_fit_sheet(OIIO::ImageBuf& dst, const LensFit& fit, const std::vector<LensFitCrop>& crops, int nthreads)
+{
+    if (crops.empty() || fit.crops.size() != crops.size())
+        return dst.errorfmt("lens_fit_sheet: {} crops for a fit of {}", crops.size(), fit.crops.size()), false;
+    constexpr int kGutter = 2;
+    int cell_w = 0, height = kGutter;
+    for (const LensFitCrop& c : crops) {
+        cell_w = std::max(cell_w, c.image.spec().width);
+        height += c.image.spec().height + kGutter;
+    }
+    const int width = 4 * cell_w + 5 * kGutter;
+    dst.reset(OIIO::ImageSpec(width, height, 3, OIIO::TypeDesc::FLOAT));
+    OIIO::ImageBufAlgo::zero(dst);
+    int y = kGutter;
+    for (size_t i = 0; i < crops.size(); ++i) {
+        const OIIO::ImageSpec& cs = crops[i].image.spec();
+        OIIO::ImageBuf model;
+        if (!lens_fit_model_image(model, fit, crops, int(i), nthreads))
+            return dst.errorfmt("{}", model.geterror()), false;
+        const int channels = std::min(cs.nchannels, 3);
+        const LensFitCropResult& r = fit.crops[i];
+        for (int j = 0; j < cs.height; ++j)
+            for (int x = 0; x < cs.width; ++x) {
+                float crop[3], fitted[3], cells[4][3];
+                crops[i].image.getpixel(cs.x + x, cs.y + j, crop, channels);
+                model.getpixel(cs.x + x, cs.y + j, fitted, 3);
+                const double px = (x + 0.5 - 0.5 * cs.width) / (0.5 * cs.width);
+                const double py = (j + 0.5 - 0.5 * cs.height) / (0.5 * cs.height);
+                for (int c = 0; c < 3; ++c) {
+                    const float v = crop[channels == 3 ? c : 0];
+                    cells[0][c]   = v;
+                    cells[1][c]   = fitted[c];
+                    cells[2][c]   = 4.0f * std::abs(v - fitted[c]);
+                    cells[3][c]   = float(fitted[c] - r.background[c] - r.background_dx[c] * px
+                                          - r.background_dy[c] * py);
+                }
+                for (int k = 0; k < 4; ++k)
+                    dst.setpixel(kGutter + k * (cell_w + kGutter) + x, y + j, 0, cells[k], 3);
+            }
+        y += cs.height + kGutter;
+    }
+    return true;
+}
+
+}  // namespace bokeh
