@@ -71,7 +71,7 @@ constexpr double kFitWaveStepNm = 31.0;
 // level): the model's own precision (the PSF's 0.5 px radial bins, bilinear sub-pixel
 // shifts, the fit's spectral step), so that a noise-free crop does not weigh a rounding
 // difference as a feature.
-constexpr double kModelFloorOfLevel = 1e-3;
+constexpr double kModelFloorOfLevel = 1e-2;
 
 double median_of(std::vector<double> v)
 {
@@ -86,7 +86,7 @@ double median_of(std::vector<double> v)
 
 // Fit a plane to the crop's outermost two rows and columns per channel (least squares),
 // and estimate the noise.
-void border_background(const CropData& d, double plane[3][3], double& sigma)
+void border_background(const CropData& d, double plane[3][3], double& sigma, double& texture)
 {
     // Least squares, reweighted three times (Cauchy at 3 MADs of the residuals) so that a
     // neighbour highlight across part of the border does not tilt the plane.
@@ -126,6 +126,18 @@ void border_background(const CropData& d, double plane[3][3], double& sigma)
         }
         std::copy(x, x + 3, plane[ch]);
     }
+    // The background's own texture: the luminance's MAD about the plane along the border,
+    // as a normal's sigma (a textured wall behind the light is not noise, but no more a
+    // highlight than noise is).
+    std::vector<double> dev;
+    for (size_t k : ring) {
+        const int i = int(k % size_t(d.w)), j = int(k / size_t(d.w));
+        float bg[3];
+        for (int c = 0; c < 3; ++c)
+            bg[c] = float(plane[c][0] + plane[c][1] * plane_x(d, i) + plane[c][2] * plane_y(d, j));
+        dev.push_back(std::abs(luminance(&d.px[k * d.channels], d.channels) - luminance(bg, d.channels)));
+    }
+    texture = 1.4826 * median_of(dev);
     // The noise: the median of |v - (n + s + e + w) / 4| of the luminance over the crop
     // (sqrt(1.25) sigma where the signal is locally linear; the median passes over the rim,
     // a neighbour and blocking), as a normal's sigma.
@@ -410,8 +422,8 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
     // a highlight's plateau shares its maximum exactly only where the plate clipped it, or
     // where there is no noise at all, as in a render).
     double plane[3][3];
-    double sigma = 0.0;
-    border_background(d, plane, sigma);
+    double sigma = 0.0, texture = 0.0;
+    border_background(d, plane, sigma, texture);
     double clip = clip_level;
     if (clip <= 0.0 && std::isfinite(vmax) && vmax > 0.0f && sigma > 1e-7 * vmax) {
         int at_max = 0;
@@ -449,8 +461,8 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
         if (!d.use[k] && d.nonfinite == 0 && sig[k] > 0.0)
             clip_sig = std::max(clip_sig, sig[k]);
     // The highlight: above 2 % of its peak (a bright-centred bokeh's halo is a tenth of
-    // its peak or less) and 6 noise levels.
-    const double level = std::max(0.02 * std::max(peak, clip_sig), 6.0 * noise);
+    // its peak or less), 6 noise levels and 4 of the background's texture.
+    const double level = std::max({ 0.02 * std::max(peak, clip_sig), 6.0 * noise, 4.0 * texture });
     // The highlight is the largest 4-connected region above the level; the others (a
     // neighbour across the crop's edge) are left out of the fit.
     std::vector<int> label(sig.size(), -1);

@@ -17,6 +17,7 @@
 
 #include <cmath>
 
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
 
 namespace {
@@ -122,11 +123,44 @@ bool fitlens_command(CommandContext& c)
     o.clip_level = v.get_float("clip");
     o.front      = v.get_bool("front");
     o.fit_field  = v.get_bool("field");
+    // The crops: the images on the stack, or boxes cut from one plate around the
+    // highlights `at` names (their origin kept, so each knows its field position).
     std::vector<bokeh::LensFitCrop> crops;
-    for (const bokeh::StackImage& in : c.inputs) {
-        bokeh::LensFitCrop crop;
-        crop.image = *in.buf;
-        crops.push_back(std::move(crop));
+    std::vector<std::string> names;
+    const std::string& at = v.get_string("at");
+    if (at.empty()) {
+        for (const bokeh::StackImage& in : c.inputs) {
+            bokeh::LensFitCrop crop;
+            crop.image = *in.buf;
+            crops.push_back(std::move(crop));
+            names.push_back(in.origin);
+        }
+    } else {
+        const OIIO::ImageBuf& plate = *c.inputs.front().buf;
+        const int box = v.get_int("box");
+        for (const std::string& xy_text : OIIO::Strutil::splits(at, "/")) {
+            std::vector<std::string> xy = OIIO::Strutil::splits(xy_text, ",");
+            double x = 0.0, y = 0.0;
+            if (xy.size() != 2 || !bokeh::parse_number(xy[0], x) || !bokeh::parse_number(xy[1], y))
+                return c.fail(format("at '{}' is not a list of pixel positions x,y/x,y/... ('{}' is not x,y)", at,
+                                     xy_text));
+            const OIIO::ROI data = plate.roi();
+            if (x < data.xbegin || x >= data.xend || y < data.ybegin || y >= data.yend)
+                return c.fail(format("at {:g},{:g} is outside {}'s pixels ({}..{} x {}..{})", x, y,
+                                     c.inputs.front().origin, data.xbegin, data.xend - 1, data.ybegin,
+                                     data.yend - 1));
+            OIIO::ROI roi(int(std::floor(x)) - box / 2, int(std::floor(x)) - box / 2 + box, int(std::floor(y)) - box / 2,
+                          int(std::floor(y)) - box / 2 + box);
+            roi = OIIO::roi_intersection(roi, data);
+            roi.chbegin = 0, roi.chend = plate.nchannels();
+            bokeh::LensFitCrop crop;
+            if (!OIIO::ImageBufAlgo::crop(crop.image, plate, roi))
+                return c.fail(crop.image.geterror());
+            crops.push_back(std::move(crop));
+            names.push_back(format("{},{}", xy[0], xy[1]));
+        }
+        if (crops.size() > 64)
+            return c.fail(format("at names {} highlights (at most 64)", crops.size()));
     }
     bokeh::LensFit fit;
     std::string err;
@@ -136,7 +170,7 @@ bool fitlens_command(CommandContext& c)
     for (size_t i = 0; i < fit.crops.size(); ++i) {
         const bokeh::LensFitCropResult& r = fit.crops[i];
         c.message(format("fitlens: crop {} ({}): CoC {:.2f} +- {:.2f} px at ({:.1f}, {:.1f}), fit {:.1f} dB{}{}", i + 1,
-                         c.inputs[i].origin, r.coc_px, r.coc_sigma_px, r.centre_x, r.centre_y, r.psnr_db,
+                         names[i], r.coc_px, r.coc_sigma_px, r.centre_x, r.centre_y, r.psnr_db,
                          r.clipped_px ? format(", {} clipped px left out", r.clipped_px) : std::string(),
                          r.nonfinite_px ? format(", {} non-finite px left out", r.nonfinite_px) : std::string()));
     }
@@ -198,6 +232,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
 
     std::vector<OptionSpec> fit_options = {
         OptionSpec::Int("crops", 1, 1, 64, "how many crops to take from the stack (the top ones)"),
+        OptionSpec::String("at", "", "cut the crops from one plate around these pixels: x,y/x,y/..."),
+        OptionSpec::Int("box", 128, 16, 4096, "at: the crops' side in px"),
         OptionSpec::Int("width", 0, 0, 65536,
                         "the plate's width in px (0: the crop's display window when it is the frame, else 1920)"),
         OptionSpec::Float("clip", 0.0, 0.0, 1e30, "pixels at or above this are clipped (0: found per crop)"),
@@ -212,7 +248,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         "Fit the lens model to crops of defocused highlights from a plate: prints the lens as "
         "--defocus/--bokeh options, pushes a sheet of crop | fit | difference x 4 | fitted light",
         fitlens_command, std::move(fit_options));
-    fit.inputs_for         = [](const bokeh::OptionValues& v) { return v.get_int("crops"); };
+    fit.inputs_for = [](const bokeh::OptionValues& v) { return v.get_string("at").empty() ? v.get_int("crops") : 1; };
     fit.needs_scene_linear = true;  // a plate's light, linear
     r.add(fit);
 }
