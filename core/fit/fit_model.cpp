@@ -223,71 +223,111 @@ void Model::sample(std::vector<float>& dst, const Psf& p, const CropData& d, dou
     }
 }
 
-namespace {
-// The inverse variance of value k with `floor2` added to its variance.
-inline double inv_var(const CropData& d, size_t k, double floor2)
+void prepare_fit_arrays(CropData& d)
 {
-    return floor2 > 0.0 ? 1.0 / (1.0 / d.inv_var[k] + floor2) : d.inv_var[k];
+    d.fit_k.clear(), d.fit_x.clear(), d.fit_y.clear();
+    for (int j = 0; j < d.h; ++j)
+        for (int i = 0; i < d.w; ++i)
+            if (d.use[size_t(j) * d.w + i]) {
+                d.fit_k.push_back(uint32_t(size_t(j) * d.w + i));
+                d.fit_x.push_back(float(plane_x(d, i)));
+                d.fit_y.push_back(float(plane_y(d, j)));
+            }
+    const size_t m = d.fit_k.size();
+    d.fit_v.resize(m * size_t(d.channels));
+    for (int ch = 0; ch < d.channels; ++ch)
+        for (size_t n = 0; n < m; ++n)
+            d.fit_v[size_t(ch) * m + n] = d.px[size_t(d.fit_k[n]) * d.channels + ch];
+    d.cached_floor2 = -1.0;
 }
+
+namespace {
+
+// The weights with `floor2` added to each variance, and the sums of the linear part's
+// normal equations that do not depend on the PSF (the plane's columns against
+// themselves and the data), for the first pass; kept until the floor or noise changes.
+void ensure_weights(const CropData& d, double floor2)
+{
+    if (d.cached_floor2 == floor2)
+        return;
+    const size_t m = d.fit_k.size();
+    d.fit_iv.resize(m * size_t(d.channels));
+    for (int ch = 0; ch < d.channels; ++ch) {
+        double* b = d.base[ch];
+        std::fill(b, b + 9, 0.0);
+        for (size_t n = 0; n < m; ++n) {
+            const double iv0 = d.inv_var[size_t(d.fit_k[n]) * d.channels + ch];
+            const double iv  = floor2 > 0.0 ? 1.0 / (1.0 / iv0 + floor2) : iv0;
+            d.fit_iv[size_t(ch) * m + n] = float(iv);
+            const double x = d.fit_x[n], y = d.fit_y[n], v = d.fit_v[size_t(ch) * m + n];
+            b[0] += iv, b[1] += iv * x, b[2] += iv * y, b[3] += iv * x * x, b[4] += iv * x * y, b[5] += iv * y * y;
+            b[6] += iv * v, b[7] += iv * x * v, b[8] += iv * y * v;
+        }
+    }
+    d.cached_floor2 = floor2;
+}
+
+// Solve the 4 x 4 normal equations of columns (P, 1, x, y) from their sums: `pp`, `p1`,
+// `px`, `py`, `pv` those with the PSF, `b` the plane's (ensure_weights' order).
+void solve_normal(const double b[9], double pp, double p1, double px, double py, double pv, double x[4])
+{
+    double a[16] = { pp + 1e-12, p1, px, py,  // 1e-12: a PSF wholly outside the crop, the plane alone
+                     p1, b[0], b[1], b[2],
+                     px, b[1], b[3], b[4],
+                     py, b[2], b[4], b[5] };
+    double r[4] = { pv, b[6], b[7], b[8] };
+    if (!solve_linear(4, a, r, x))
+        x[0] = x[1] = x[2] = x[3] = 0.0;
+}
+
 }  // namespace
 
 double Model::fit_linear(const CropData& d, const std::vector<float>& s, Linear& lin,
                          std::vector<double>* residuals, int* outliers, double floor_of_level)
 {
-    double cost = 0.0;
-    const size_t n = size_t(d.w) * d.h;
-    std::vector<double> w(n);
     const double floor2 = floor_of_level * floor_of_level * d.level * d.level;
+    ensure_weights(d, floor2);
+    const size_t m = d.fit_k.size(), npix = size_t(d.w) * d.h;
+    constexpr double inv_c2 = 1.0 / (kCauchyScale * kCauchyScale);
+    std::vector<double> p(m);
+    double cost = 0.0;
     for (int ch = 0; ch < d.channels; ++ch) {
-        const float* sp = &s[size_t(ch) * n];
-        // Two passes: inverse-variance weights, then Cauchy weights of those residuals.
-        for (int pass = 0; pass < 2; ++pass) {
-            double ata[16] = {}, atb[4] = {};
-            for (int j = 0; j < d.h; ++j)
-                for (int i = 0; i < d.w; ++i) {
-                    const size_t k = size_t(j) * d.w + i;
-                    if (!d.use[k])
-                        continue;
-                    const double iv = inv_var(d, k * d.channels + ch, floor2);
-                    double wk       = iv;
-                    if (pass == 1) {
-                        const double r = d.px[k * d.channels + ch]
-                                         - (lin.a[ch] * sp[k] + lin.b0[ch] + lin.bx[ch] * plane_x(d, i)
-                                            + lin.by[ch] * plane_y(d, j));
-                        const double u = r * std::sqrt(iv) / kCauchyScale;
-                        wk             = iv / (1.0 + u * u);
-                    }
-                    w[k]             = wk;
-                    const double col[4] = { sp[k], 1.0, plane_x(d, i), plane_y(d, j) };
-                    const double v   = d.px[k * d.channels + ch];
-                    for (int r = 0; r < 4; ++r) {
-                        for (int c = 0; c < 4; ++c)
-                            ata[r * 4 + c] += wk * col[r] * col[c];
-                        atb[r] += wk * col[r] * v;
-                    }
-                }
-            ata[0] += 1e-12;  // a PSF wholly outside the crop: the plane alone
-            double x[4] = { 0, 0, 0, 0 };
-            if (!solve_linear(4, ata, atb, x))
-                x[0] = x[1] = x[2] = x[3] = 0.0;
-            lin.a[ch] = x[0], lin.b0[ch] = x[1], lin.bx[ch] = x[2], lin.by[ch] = x[3];
+        const float* v  = &d.fit_v[size_t(ch) * m];
+        const float* iv = &d.fit_iv[size_t(ch) * m];
+        const float* sp = &s[size_t(ch) * npix];
+        // Pass 1: inverse-variance weights (the plane's sums precomputed).
+        double pp = 0, p1 = 0, px = 0, py = 0, pv = 0;
+        for (size_t n = 0; n < m; ++n) {
+            p[n]            = sp[d.fit_k[n]];
+            const double wp = iv[n] * p[n];
+            pp += wp * p[n], p1 += wp, px += wp * d.fit_x[n], py += wp * d.fit_y[n], pv += wp * v[n];
         }
-        for (int j = 0; j < d.h; ++j)
-            for (int i = 0; i < d.w; ++i) {
-                const size_t k = size_t(j) * d.w + i;
-                if (!d.use[k])
-                    continue;
-                const double iv = inv_var(d, k * d.channels + ch, floor2);
-                const double r  = d.px[k * d.channels + ch]
-                                 - (lin.a[ch] * sp[k] + lin.b0[ch] + lin.bx[ch] * plane_x(d, i)
-                                    + lin.by[ch] * plane_y(d, j));
-                const double u = r * std::sqrt(iv) / kCauchyScale;
-                cost += 0.5 * kCauchyScale * kCauchyScale * std::log1p(u * u);
-                if (residuals)
-                    residuals->push_back(r * std::sqrt(iv / (1.0 + u * u)));
-                if (outliers && std::abs(u) > 1.0 && ch == 0)
-                    ++*outliers;
-            }
+        double x[4];
+        solve_normal(d.base[ch], pp, p1, px, py, pv, x);
+        // Pass 2: the Cauchy weights of pass 1's residuals.
+        double b[9] = {};
+        pp = p1 = px = py = pv = 0;
+        for (size_t n = 0; n < m; ++n) {
+            const double xx = d.fit_x[n], yy = d.fit_y[n];
+            const double r  = v[n] - (x[0] * p[n] + x[1] + x[2] * xx + x[3] * yy);
+            const double w  = iv[n] / (1.0 + r * r * iv[n] * inv_c2);
+            const double wp = w * p[n];
+            pp += wp * p[n], p1 += wp, px += wp * xx, py += wp * yy, pv += wp * v[n];
+            b[0] += w, b[1] += w * xx, b[2] += w * yy, b[3] += w * xx * xx, b[4] += w * xx * yy, b[5] += w * yy * yy;
+            b[6] += w * v[n], b[7] += w * xx * v[n], b[8] += w * yy * v[n];
+        }
+        solve_normal(b, pp, p1, px, py, pv, x);
+        lin.a[ch] = x[0], lin.b0[ch] = x[1], lin.bx[ch] = x[2], lin.by[ch] = x[3];
+        // The cost: the Cauchy loss of pass 2's residuals.
+        for (size_t n = 0; n < m; ++n) {
+            const double r  = v[n] - (x[0] * p[n] + x[1] + x[2] * d.fit_x[n] + x[3] * d.fit_y[n]);
+            const double u2 = r * r * iv[n] * inv_c2;
+            cost += 0.5 * kCauchyScale * kCauchyScale * std::log1p(u2);
+            if (residuals)
+                residuals->push_back(r * std::sqrt(iv[n] / (1.0 + u2)));
+            if (outliers && u2 > 1.0 && ch == 0)
+                ++*outliers;
+        }
     }
     return cost;
 }
@@ -587,6 +627,7 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
                             d.fy),
                false;
     d.inv_var.assign(d.px.size(), float(1.0 / (noise * noise)));  // estimate_noise sets the model
+    prepare_fit_arrays(d);
     return true;
 }
 
@@ -649,6 +690,8 @@ void estimate_noise(std::vector<CropData>& crops, double& read2, double& photon)
             const double v = d.px[k];
             d.inv_var[k]   = std::isfinite(v) ? float(1.0 / (read2 + photon * std::max(v, 0.0))) : 0.0f;
         }
+    for (CropData& d : crops)
+        d.cached_floor2 = -1.0;
 }
 
 }  // namespace fit

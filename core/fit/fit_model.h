@@ -27,7 +27,17 @@ struct CropData {
     double coc0 = 0, cx0 = 0, cy0 = 0;
     int clipped = 0, nonfinite = 0;
     int others = 0;              // pixels of other highlights (a neighbour), left out
+    // The fitted pixels, compact (prepare_fit_arrays): index, plane coordinates, values
+    // channel-major; the weights and the plane's normal sums for a noise floor, cached.
+    std::vector<uint32_t> fit_k;
+    std::vector<float> fit_x, fit_y, fit_v;
+    mutable std::vector<float> fit_iv;
+    mutable double base[3][9] = {};
+    mutable double cached_floor2 = -1.0;
 };
+
+/// Fill a crop's compact arrays from its `use` mask (after the mask changes).
+void prepare_fit_arrays(CropData& d);
 
 /// The nonlinear parameters.
 struct State {

@@ -327,12 +327,12 @@ private:
 };
 
 // The weighted residuals of every crop (fine spectrum), for the Jacobian.
-std::vector<double> residuals(const Model& model, const State& s)
+std::vector<double> residuals(const Model& model, const State& s, bool coarse = false)
 {
     std::vector<double> r;
     for (size_t i = 0; i < model.crops().size(); ++i) {
         Psf p;
-        if (!model.psf(p, s, i, false, 0))
+        if (!model.psf(p, s, i, coarse, 0))
             continue;
         std::vector<float> smp;
         Model::sample(smp, p, model.crops()[i], s.cx[i], s.cy[i]);
@@ -340,6 +340,91 @@ std::vector<double> residuals(const Model& model, const State& s)
         Model::fit_linear(model.crops()[i], smp, lin, &r);
     }
     return r;
+}
+
+// Levenberg-Marquardt on the weighted residuals [Marquardt, "An algorithm for least-squares
+// estimation of nonlinear parameters", 1963]: `fields` (within `lo`..`hi`), every CoC and
+// centre. BOBYQA's quadratic models stall in the narrow curved valley the CoC, the
+// spherical aberration and the blades' curvature make together; steps along J^T J's
+// own directions follow it. Forward-difference Jacobians; at most `iterations` steps.
+void levenberg_marquardt(const Model& model, State& s, const std::vector<double State::*>& fields,
+                         const std::vector<double>& lo, const std::vector<double>& hi, int iterations)
+{
+    const size_t nc = s.coc.size(), p = fields.size() + 3 * nc;
+    auto value = [&](State& st, size_t k) -> double& {
+        if (k < fields.size())
+            return st.*fields[k];
+        k -= fields.size();
+        return k < nc ? st.coc[k] : k < 2 * nc ? st.cx[k - nc] : st.cy[k - 2 * nc];
+    };
+    auto chi2 = [](const std::vector<double>& r) {
+        double c = 0.0;
+        for (double x : r)
+            c += x * x;
+        return c;
+    };
+    std::vector<double> r0 = residuals(model, s, true);
+    double c0 = chi2(r0), lambda = 1e-3;
+    for (int it = 0; it < iterations; ++it) {
+        const size_t n = r0.size();
+        std::vector<std::vector<double>> J(p, std::vector<double>(n, 0.0));
+        for (size_t k = 0; k < p; ++k) {
+            State t        = s;
+            double& v      = value(t, k);
+            const double h = std::max(1e-4, 1e-4 * std::abs(v));
+            v += h;
+            const std::vector<double> r1 = residuals(model, t, true);
+            for (size_t i = 0; i < n && i < r1.size(); ++i)
+                J[k][i] = (r1[i] - r0[i]) / h;
+        }
+        std::vector<double> jtj(p * p, 0.0), jtr(p, 0.0);
+        for (size_t a = 0; a < p; ++a) {
+            for (size_t b = a; b < p; ++b) {
+                double acc = 0.0;
+                for (size_t i = 0; i < n; ++i)
+                    acc += J[a][i] * J[b][i];
+                jtj[a * p + b] = jtj[b * p + a] = acc;
+            }
+            for (size_t i = 0; i < n; ++i)
+                jtr[a] += J[a][i] * r0[i];
+        }
+        bool improved = false;
+        for (int tries = 0; tries < 6 && !improved; ++tries) {
+            std::vector<double> m = jtj, b(p), dx(p, 0.0);
+            for (size_t a = 0; a < p; ++a) {
+                m[a * p + a] += lambda * std::max(jtj[a * p + a], 1e-12);
+                b[a] = -jtr[a];
+            }
+            if (!solve_linear(int(p), m.data(), b.data(), dx.data())) {
+                lambda *= 10.0;
+                continue;
+            }
+            State t = s;
+            for (size_t k = 0; k < p; ++k) {
+                double& v = value(t, k);
+                v += dx[k];
+                if (k < fields.size())
+                    v = std::clamp(v, lo[k], hi[k]);
+                else if (k < fields.size() + nc)
+                    v = std::max(v, 0.5);
+            }
+            std::vector<double> r1 = residuals(model, t, true);
+            const double c1 = chi2(r1);
+            if (r1.size() == r0.size() && c1 < c0) {
+                s = t, r0 = std::move(r1);
+                improved = c0 - c1 > 1e-6 * c0 || true;
+                const bool small = c0 - c1 < 1e-5 * c0;
+                c0 = c1;
+                lambda = std::max(lambda / 3.0, 1e-7);
+                if (small)
+                    return;
+            } else {
+                lambda *= 4.0;
+            }
+        }
+        if (!improved)
+            return;
+    }
 }
 
 // One-sigma uncertainties of `fields` (and every CoC) from s^2 (J^T J)^-1.
@@ -476,6 +561,13 @@ bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFit
         f.refine_crops(60, true, true);
         if (!f.kept().empty())
             f.log().push_back(format("all together, every crop: cost {:.1f}", f.polish({}, 40)));
+    }
+    if (!f.kept().empty()) {
+        std::vector<double> lo, hi;
+        for (const StageParam& p : f.kept())
+            lo.push_back(p.lo), hi.push_back(p.hi);
+        levenberg_marquardt(f.model(), s, fields, lo, hi, 10);
+        f.log().push_back(format("Levenberg-Marquardt: cost {:.1f}", f.cost()));
     }
     f.refine_crops(60);
     const double period = s.blades > 0 ? 360.0 / s.blades : 360.0;

@@ -114,4 +114,23 @@ bool lens_fit_model_image(OIIO::ImageBuf& dst, const LensFit& fit, const std::ve
 bool lens_fit_sheet(OIIO::ImageBuf& dst, const LensFit& fit, const std::vector<LensFitCrop>& crops,
                     int nthreads = 0);
 
+/// A crop of a known lens's highlight as a plate would hold it, for round trips and
+/// demos: energy x PSF at an integer offset from the crop's centre, over a background
+/// plane, with photon noise (sigma^2 = g v, g set by the SNR at the light's peak) and read
+/// noise (1 % of the peak's noise), clipped at `clip`.
+struct SyntheticCrop {
+    double coc_px  = 40.0;  ///< signed
+    int size_px    = 97;    ///< the crop's side (odd)
+    int offset_x = 0, offset_y = 0;  ///< the light's centre from the crop's centre, px
+    double energy[3]     = { 4000.0, 3600.0, 3000.0 };  ///< the light's, per channel
+    double background[3] = { 0.05, 0.06, 0.08 };
+    double gradient_x = 0.0, gradient_y = 0.0;  ///< background change per px
+    double peak_snr = 0.0;   ///< 0: no noise
+    double clip     = 0.0;   ///< 0: none
+    double field_x = 0.0, field_y = 0.0;  ///< also set on the crop
+    unsigned seed  = 1;
+};
+bool synthetic_crop(LensFitCrop& dst, const LensCharacter& lens, const SyntheticCrop& spec, std::string& err,
+                    int nthreads = 0);
+
 }  // namespace bokeh

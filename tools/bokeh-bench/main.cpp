@@ -19,7 +19,9 @@
 // (diffraction_task.cpp; its own CSV columns, one thread); --task optics the lens PSFs
 // (optics_task.cpp); --task lens lens character's highlight sprites against the plain
 // defocus (lens_task.cpp); --task truth-chain every step from the built-in scenes' geometric
-// thin-lens truth to the fast methods (truth_chain_task.cpp; its own CSV columns).
+// thin-lens truth to the fast methods (truth_chain_task.cpp; its own CSV columns); --task
+// lensfit round trips of the lens fit, 8 x --reps random lenses (lens_fit_task.cpp; its
+// own columns).
 //
 //   bokeh-bench [--task blur|defocus|resample|iris|deep|lens|truth-chain] [--threads N] [--reps N] [--csv FILE] [--quick]
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
@@ -28,6 +30,7 @@
 #include "deep_task.h"
 #include "defocus_task.h"
 #include "diffraction_task.h"
+#include "lens_fit_task.h"
 #include "lens_task.h"
 #include "gegl_peer.h"
 #include "iris_task.h"
@@ -102,7 +105,7 @@ int main(int argc, char* argv[])
     std::string csv, task = "blur";
     bokeh_bench::BenchArgs args;
     std::vector<std::string> image_files;  // the blur task's frames from files
-    const char* usage = "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens|truth-chain] "
+    const char* usage = "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens|lensfit|truth-chain] "
                         "[--threads N] [--reps N] [--csv FILE] [--quick] [--size WxH] [--data DIR] "
                         "[--images DIR] [--scenes a,b] [--image FILE]...\n";
     for (int i = 1; i < argc; ++i) {
@@ -124,6 +127,7 @@ int main(int argc, char* argv[])
                                                    || std::string(argv[i + 1]) == "optics"
                                                    || std::string(argv[i + 1]) == "diffraction"
                                                    || std::string(argv[i + 1]) == "lens"
+                                                   || std::string(argv[i + 1]) == "lensfit"
                                                    || std::string(argv[i + 1]) == "truth-chain"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
@@ -170,6 +174,12 @@ int main(int argc, char* argv[])
     if (task == "diffraction") {  // radial profiles, one thread: its own columns
         rows.push_back(bokeh_bench::kDiffractionCsvHeader);
         if (!bokeh_bench::run_diffraction_task(reps, quick, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "lensfit") {  // round trips of the lens fit: its own columns
+        rows.push_back(bokeh_bench::kLensFitCsvHeader);
+        if (!bokeh_bench::run_lens_fit_task(quick ? 3 : 8 * reps, threads, rows))
             return 1;
         return write_csv(csv, rows);
     }
