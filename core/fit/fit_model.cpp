@@ -566,7 +566,12 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
         }
     std::sort(ring.begin(), ring.end());
     const double spread = ring.empty() ? 0.0 : ring[ring.size() * 9 / 10] - ring[ring.size() / 10];
-    if (!(peak > 10.0 * noise) && spread > 10.0 * noise)
+    // Or the border's plane is the bokeh's plateau itself: pixels (its outside) lie far
+    // below it.
+    int below = 0;
+    for (size_t k = 0; k < sig.size(); ++k)
+        below += d.use[k] && sig[k] < -10.0 * noise;
+    if ((!(peak > 10.0 * noise) && spread > 10.0 * noise) || below > int(sig.size() / 100))
         return err = format("{} ({}x{} px) is smaller than its bokeh: light crosses its border; cut it wider "
                             "than the bokeh",
                             name, d.w, d.h),
@@ -685,13 +690,56 @@ void estimate_noise(std::vector<CropData>& crops, double& read2, double& photon)
     }
     read2  = std::max(a, kModelFloorOfLevel * kModelFloorOfLevel * peak * peak);
     photon = b;
-    for (CropData& d : crops)
+    set_noise(crops, read2, photon);
+}
+
+void set_noise(std::vector<CropData>& crops, double read2, double photon)
+{
+    for (CropData& d : crops) {
         for (size_t k = 0; k < d.inv_var.size(); ++k) {
             const double v = d.px[k];
             d.inv_var[k]   = std::isfinite(v) ? float(1.0 / (read2 + photon * std::max(v, 0.0))) : 0.0f;
         }
-    for (CropData& d : crops)
         d.cached_floor2 = -1.0;
+    }
+}
+
+void residual_noise(const std::vector<CropData>& crops, const Model& model, const State& s, double& read2,
+                    double& photon)
+{
+    double s11 = 0, s1m = 0, smm = 0, s1r = 0, smr = 0, peak = 0;
+    for (size_t i = 0; i < crops.size(); ++i) {
+        const CropData& d = crops[i];
+        peak = std::max(peak, d.level);
+        Psf p;
+        if (!model.psf(p, s, i, true, 0))
+            continue;
+        std::vector<float> smp;
+        Model::sample(smp, p, d, s.cx[i], s.cy[i]);
+        Linear lin;
+        Model::fit_linear(d, smp, lin);
+        const size_t m = d.fit_k.size(), npix = size_t(d.w) * d.h;
+        for (int ch = 0; ch < d.channels; ++ch)
+            for (size_t n = 0; n < m; ++n) {
+                const double mod = lin.a[ch] * smp[size_t(ch) * npix + d.fit_k[n]] + lin.b0[ch]
+                                   + lin.bx[ch] * d.fit_x[n] + lin.by[ch] * d.fit_y[n];
+                const double r  = d.fit_v[size_t(ch) * m + n] - mod;
+                const double iv = d.inv_var[size_t(d.fit_k[n]) * d.channels + ch];
+                if (r * r * iv > 25.0)  // past 5 sigma of the current model: not noise
+                    continue;
+                const double mm = std::max(mod, 0.0);
+                s11 += 1, s1m += mm, smm += mm * mm, s1r += r * r, smr += mm * r * r;
+            }
+    }
+    const double det = s11 * smm - s1m * s1m;
+    double a = s1r / std::max(s11, 1.0), b = 0.0;
+    if (det > 1e-12 * s11 * smm) {
+        const double a2 = (smm * s1r - s1m * smr) / det, b2 = (s11 * smr - s1m * s1r) / det;
+        if (a2 >= 0.0 && b2 >= 0.0)
+            a = a2, b = b2;
+    }
+    read2  = std::max(a, kModelFloorOfLevel * kModelFloorOfLevel * peak * peak);
+    photon = b;
 }
 
 }  // namespace fit

@@ -112,12 +112,19 @@ private:
 /// The noise model sigma^2 = read2 + photon * max(value, 0), estimated from the crops'
 /// pixels alone (no model); each crop's inverse variances are set from it.
 void estimate_noise(std::vector<CropData>& crops, double& read2, double& photon);
+/// Set each crop's inverse variances from the noise model (read2, photon).
+void set_noise(std::vector<CropData>& crops, double read2, double photon);
 
 /// A parameter free in a minimisation: where it lives, its bounds, its first step.
 struct Free {
     double* value;
     double lo, hi, step;
 };
+
+/// The noise model the residuals of `s` show (least squares of r^2 on (1, model), those
+/// past 5 sigma of the current model left out); sets nothing.
+void residual_noise(const std::vector<CropData>& crops, const Model& model, const State& s, double& read2,
+                    double& photon);
 
 /// Minimise `cost` over `free` from their current values (BOBYQA; Subplex for one
 /// parameter), at most `max_evaluations` calls; leaves the best values set and returns

@@ -218,6 +218,32 @@ public:
 
     const std::vector<StageParam>& kept() const { return m_kept; }
 
+    // A kept parameter searched again from its grid with everything kept since (the
+    // spherical aberration found before the axial colour took a rim's colour for its
+    // profile); the better of the two states is kept.
+    void revisit(const char* name, const StageParam& p)
+    {
+        const double c0    = polish({}, 20);
+        const State before = m_s;
+        m_model.set_floor(kSearchFloorOfLevel);
+        double best = 1e300;
+        State best_state = m_s;
+        for (double v : p.starts) {
+            m_s          = before;
+            m_s.*p.field = v;
+            const double c = polish_cocs(6);
+            if (c < best)
+                best = c, best_state = m_s;
+        }
+        m_s = best_state;
+        polish({}, 40);
+        m_model.set_floor(0.0);
+        const double c1 = polish({}, 30);
+        m_log.push_back(format("{} again: cost {:.1f} -> {:.1f}: {}", name, c0, c1, c1 < c0 ? "taken" : "not taken"));
+        if (!(c1 < c0))
+            m_s = before;
+    }
+
     // The crops' centres, free while a field effect is fitted (a cut pupil's light is
     // not centred where a round one's is), within 4 px of the crop's first estimate.
     void add_centres(std::vector<Free>& f)
@@ -518,25 +544,59 @@ bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFit
 
     bool kept_aperture = false, kept_hole = false, kept_sa = false, kept_colour = false, kept_onion = false;
     bool kept_cats = false, kept_astig = false;
-    if (opts.fit_spherical)
-        kept_sa = f.stage("spherical aberration",
-                          { { "monochromatic", &State::mono, -8.0, 8.0, 0.2, { -2.0, -0.7, -0.2, 0.2, 0.7, 2.0 } } });
-    if (opts.fit_hole)
-        kept_hole = f.stage("hole", { { "hole", &State::hole, 0.0, 0.9, 0.05, { 0.2, 0.4, 0.6 } } });
-    if (opts.fit_aperture)
-        kept_aperture = f.aperture_stage();
-    if (opts.fit_colour && colour)
-        kept_colour = f.stage("axial colour",
-                              { { "chromatic", &State::chroma, -8.0, 8.0, 0.2, { -3.0, -1.0, -0.3, 0.3, 1.0, 3.0 } } });
-    if (opts.fit_onion)
-        kept_onion = f.stage("onion rings", { { "onion", &State::onion, 0.0, 1.0, 0.05, { 0.15, 0.4, 0.8 } } });
     const bool off_axis = field_known && max_h >= 0.3;
-    if (opts.fit_field && off_axis) {
-        f.free_centres(true);
-        kept_cats = f.stage("cat's eye", { { "catseye", &State::catseye, 0.0, 1.5, 0.1, { 0.3, 0.7, 1.1 } } });
-        const double a = std::max(4.0, mean_coc);
-        kept_astig = f.stage("astigmatism",
-                             { { "astigmatism", &State::astig, -a, a, 0.05 * a, { -0.3 * a, 0.3 * a } } });
+    // The stages not kept yet.
+    auto stages = [&] {
+        if (opts.fit_spherical && !kept_sa)
+            kept_sa = f.stage("spherical aberration",
+                              { { "monochromatic", &State::mono, -8.0, 8.0, 0.2,
+                                  { -1.5, -0.8, -0.4, -0.15, 0.15, 0.4, 0.8, 1.2, 2.0 } } });
+        if (opts.fit_hole && !kept_hole)
+            kept_hole = f.stage("hole", { { "hole", &State::hole, 0.0, 0.9, 0.05, { 0.2, 0.4, 0.6 } } });
+        if (opts.fit_aperture && !kept_aperture)
+            kept_aperture = f.aperture_stage();
+        if (opts.fit_colour && colour && !kept_colour)
+            kept_colour = f.stage("axial colour",
+                                  { { "chromatic", &State::chroma, -8.0, 8.0, 0.2, { -3.0, -1.0, -0.3, 0.3, 1.0, 3.0 } } });
+        if (opts.fit_onion && !kept_onion)
+            kept_onion = f.stage("onion rings", { { "onion", &State::onion, 0.0, 1.0, 0.05, { 0.15, 0.4, 0.8 } } });
+        if (opts.fit_field && off_axis) {
+            f.free_centres(true);
+            const double a = std::max(4.0, mean_coc);
+            if (!kept_cats)
+                kept_cats = f.stage("cat's eye", { { "catseye", &State::catseye, 0.0, 1.5, 0.1, { 0.3, 0.7, 1.1 } } });
+            if (!kept_astig)
+                kept_astig = f.stage("astigmatism",
+                                     { { "astigmatism", &State::astig, -a, a, 0.05 * a, { -0.3 * a, 0.3 * a } } });
+        }
+    };
+    stages();
+    // Axial colour blurs the rim a spherical aberration draws: with the colour in the
+    // model, the spherical aberration is searched again (from scratch when it was not kept).
+    if (kept_colour && !kept_sa && opts.fit_spherical)
+        kept_sa = f.stage("spherical aberration (with the colour)",
+                          { { "monochromatic", &State::mono, -8.0, 8.0, 0.2,
+                              { -1.5, -0.8, -0.4, -0.15, 0.15, 0.4, 0.8, 1.2, 2.0 } } });
+    else if (kept_sa && kept_colour)
+        f.revisit("spherical aberration", { "monochromatic", &State::mono, -8.0, 8.0, 0.2,
+                                            { -1.5, -0.8, -0.4, -0.15, 0.15, 0.4, 0.8, 1.2, 2.0 } });
+    // The pixels' noise estimate counts fine structure (onion rings, coloured rims) as
+    // noise; once the model holds some of it, the residuals may show less. When they show
+    // under half the variance at the light's level, the stages not kept run again under it.
+    {
+        double r2 = 0.0, ph = 0.0, level = 0.0;
+        residual_noise(data, f.model(), s, r2, ph);
+        for (const CropData& d : data)
+            level = std::max(level, d.level);
+        if (r2 + ph * level < 0.5 * (read2 + photon * level)) {
+            read2 = std::min(read2, r2), photon = std::min(photon, ph);
+            set_noise(data, read2, photon);
+            f.count_residuals();
+            f.log().push_back(format("noise from the residuals: read {:.3g}, photon {:.3g} x signal; the stages "
+                                     "not kept again",
+                                     std::sqrt(read2), photon));
+            stages();
+        }
     }
 
     // 8. everything kept, together, on the crops searched; then every crop joins.
@@ -566,7 +626,7 @@ bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFit
         std::vector<double> lo, hi;
         for (const StageParam& p : f.kept())
             lo.push_back(p.lo), hi.push_back(p.hi);
-        levenberg_marquardt(f.model(), s, fields, lo, hi, 10);
+        levenberg_marquardt(f.model(), s, fields, lo, hi, 15);
         f.log().push_back(format("Levenberg-Marquardt: cost {:.1f}", f.cost()));
     }
     f.refine_crops(60);

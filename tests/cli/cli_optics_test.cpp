@@ -6,7 +6,10 @@
 #include <cmath>
 
 #include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
+
+#include <bokeh/lens_fit.h>
 
 #include "test_util.h"
 
@@ -115,4 +118,114 @@ TEST(CliBokeh, BadLensValuesFailCleanly)
         SCOPED_TRACE(args);
         expect_clean_failure(bokehtool(format("{} -o {}", args, out)), what, out);
     }
+}
+
+namespace {
+
+// A 480 x 270 plate (display window 1920 x 1080 at (600, 300), as a crop of a frame
+// keeps it) holding three highlights of one lens, rendered by bokeh::synthetic_crop at a
+// peak SNR of 60 and pasted at (120, 100), (300, 90), (380, 200) of the plate.
+std::string write_fit_plate(const std::string& dir, const bokeh::LensCharacter& lens)
+{
+    OIIO::ImageSpec spec(480, 270, 3, OIIO::TypeFloat);
+    spec.x = 600, spec.y = 300, spec.full_x = 0, spec.full_y = 0, spec.full_width = 1920, spec.full_height = 1080;
+    OIIO::ImageBuf plate(spec);
+    const float bg[3] = { 0.05f, 0.06f, 0.08f };
+    OIIO::ImageBufAlgo::fill(plate, { bg[0], bg[1], bg[2] });
+    const int at[3][2] = { { 120, 100 }, { 300, 90 }, { 380, 200 } };
+    for (int i = 0; i < 3; ++i) {
+        bokeh::SyntheticCrop c;
+        c.size_px  = 81;
+        c.coc_px   = 34.0 + 4.0 * i;
+        c.peak_snr = 60.0;
+        c.seed     = unsigned(7 + i);
+        bokeh::LensFitCrop crop;
+        std::string err;
+        EXPECT_TRUE(bokeh::synthetic_crop(crop, lens, c, err)) << err;
+        for (int y = 0; y < 81; ++y)
+            for (int x = 0; x < 81; ++x) {
+                float v[3];
+                crop.image.getpixel(x, y, v);
+                plate.setpixel(600 + at[i][0] - 40 + x, 300 + at[i][1] - 40 + y, v);
+            }
+    }
+    const std::string path = dir + "/plate.exr";
+    EXPECT_TRUE(plate.write(path)) << plate.geterror();
+    return path;
+}
+
+}  // namespace
+
+TEST(CliFitlens, PrintsTheLensTheBokehCameFromAndItsSheet)
+{
+    // The printed options, given back to --bokeh, draw the true lens's PSF: an
+    // independent check of the round trip through the command line (the fit's own
+    // parameter checks are tests/fit/'s).
+    const std::string dir = fresh_dir("cli_fitlens");
+    bokeh::LensCharacter lens;
+    lens.fstop = 2.0, lens.focal_mm = 50.0, lens.pixel_pitch_mm = 36.0 / 1920.0;
+    lens.preset = bokeh::LensPreset::Uncorrected, lens.correction = 0.0;
+    lens.monochromatic = 0.5, lens.chromatic = 0.7;
+    bokeh::Kernel k;
+    k.shape = bokeh::KernelShape::Polygon, k.blades = 6, k.rotation_deg = 20.0f, k.curvature = 0.25f;
+    std::string err;
+    ASSERT_TRUE(bokeh::Aperture::from_kernel(k, lens.aperture, err)) << err;
+    const std::string plate = write_fit_plate(dir, lens);
+    const RunResult r = bokehtool(format("{} --fitlens:at=720,400/900,390/980,500:box=96:fstop=2 -o {}/sheet.exr", plate, dir));
+    ASSERT_EQ(r.status, 0) << r.err;
+    const size_t at = r.out.find("fitlens: lens ");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    const std::string options = r.out.substr(at + 14, r.out.find('\n', at) - at - 14);
+    EXPECT_NE(options.find("kernel=polygon:blades=6"), std::string::npos) << options;
+    const size_t c3 = r.out.find("crop 3 (980,500): CoC ");
+    ASSERT_NE(c3, std::string::npos) << r.out;
+    EXPECT_NEAR(std::atof(r.out.c_str() + c3 + 22), 42.0, 0.3) << r.out;
+
+    const RunResult truth = bokehtool(format(
+        "--bokeh:kernel=polygon:blades=6:rotation=20:curvature=0.25:lens=uncorrected:correction=0:monochromatic=0.5:"
+        "chromatic=0.7:fstop=2:size=61 40 -o {}/truth.exr",
+        dir));
+    ASSERT_EQ(truth.status, 0) << truth.err;
+    const RunResult fitted = bokehtool(format("--bokeh:{}:fstop=2:size=61 40 -o {}/fitted.exr", options, dir));
+    ASSERT_EQ(fitted.status, 0) << fitted.err;
+    OIIO::ImageBuf a(dir + "/truth.exr"), b(dir + "/fitted.exr");
+    double peak = 0.0, se = 0.0;
+    int n = 0;
+    for (int y = -30; y <= 30; ++y)
+        for (int x = -30; x <= 30; ++x) {
+            float pa[3], pb[3];
+            a.getpixel(x, y, pa);
+            b.getpixel(x, y, pb);
+            for (int c = 0; c < 3; ++c, ++n) {
+                peak = std::max(peak, double(pa[c]));
+                se += (pa[c] - pb[c]) * double(pa[c] - pb[c]);
+            }
+        }
+    const double psnr = 10.0 * std::log10(peak * peak / (se / n));
+    EXPECT_GT(psnr, 40.0) << options;
+
+    // The sheet: three rows of four cells, the lens in its metadata.
+    OIIO::ImageBuf sheet(dir + "/sheet.exr");
+    ASSERT_TRUE(sheet.read(0, 0, true, OIIO::TypeFloat)) << sheet.geterror();
+    EXPECT_EQ(sheet.spec().width, 4 * 96 + 5 * 2);
+    EXPECT_EQ(sheet.spec().height, 3 * 96 + 4 * 2);
+    EXPECT_EQ(sheet.spec().get_string_attribute("bokeh:fitted_lens"), options);
+}
+
+TEST(CliFitlens, UnusableCropsAndPositionsFailCleanly)
+{
+    const std::string dir = fresh_dir("cli_fitlens_bad");
+    bokeh::LensCharacter lens;
+    const std::string plate = write_fit_plate(dir, lens);
+    const std::string out   = dir + "/out.exr";
+    expect_clean_failure(bokehtool(format("{} --fitlens:at=100,100 -o {}", plate, out)), "is outside", out);
+    expect_clean_failure(bokehtool(format("{} --fitlens:at=720:400 -o {}", plate, out)), "at", out);
+    expect_clean_failure(bokehtool(format("{} '--fitlens:at=720;400' -o {}", plate, out)), "is not x,y", out);
+    // An empty part of the plate: no highlight.
+    expect_clean_failure(bokehtool(format("{} --fitlens:at=620,560:box=64 -o {}", plate, out)), "holds no highlight",
+                         out);
+    // A crop cut smaller than its bokeh.
+    for (int box : { 32, 40 })
+        expect_clean_failure(bokehtool(format("{} --fitlens:at=980,500:box={} -o {}", plate, box, out)),
+                             "smaller than its bokeh", out);
 }
