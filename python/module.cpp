@@ -13,6 +13,8 @@
 
 #include <bokeh/defocus.h>
 #include <bokeh/io.h>
+#include <bokeh/lens.h>
+#include <bokeh/lens_fit.h>
 #include <bokeh/metrics.h>
 #include <bokeh/scene.h>
 
@@ -446,6 +448,81 @@ PYBIND11_MODULE(openbokeh, m)
                "draws defocus columns by field rows, map=True the beam map. Returns an "
                "OpenImageIO.ImageBuf (to_array() makes it an array).")
             .c_str());
+
+    m.def(
+        "fit_lens",
+        [](const py::list& crops, double fstop, double focal, const py::object& sensor, int width, double clip,
+           bool front, bool field, int threads) {
+            bokeh::LensFitOptions o;
+            o.camera.fstop    = fstop;
+            o.camera.focal_mm = focal;
+            double sensor_mm  = 36.0;
+            if (py::isinstance<py::str>(sensor)) {
+                if (!bokeh::film_back_width(sensor.cast<std::string>(), sensor_mm))
+                    throw py::value_error(format("fit_lens: sensor '{}' is not a film back", sensor.cast<std::string>()));
+            } else {
+                sensor_mm = sensor.cast<double>();
+            }
+            if (width < 16)
+                throw py::value_error(format("fit_lens: width {} px is under 16", width));
+            o.camera.pixel_pitch_mm = sensor_mm / width;
+            o.clip_level = clip;
+            o.front      = front;
+            o.fit_field  = field;
+            std::vector<ImageArg> args;
+            std::vector<bokeh::LensFitCrop> in;
+            for (size_t i = 0; i < crops.size(); ++i) {
+                const std::string name = format("crops[{}]", i);
+                args.push_back(image_arg("fit_lens", crops[i], name.c_str(), py::none()));
+                bokeh::LensFitCrop c;
+                c.image = *args.back().buf;
+                in.push_back(std::move(c));
+            }
+            bokeh::LensFit fit;
+            auto sheet = std::make_shared<OIIO::ImageBuf>();
+            std::string err;
+            bool ok;
+            {
+                py::gil_scoped_release release;
+                ok = bokeh::fit_lens(fit, in, o, err, threads);
+                if (ok && !bokeh::lens_fit_sheet(*sheet, fit, in, threads))
+                    err = sheet->geterror(), ok = false;
+            }
+            if (!ok)
+                throw py::value_error(error_text("fit_lens", err));
+            py::dict params;
+            for (const bokeh::LensFitParameter& p : fit.parameters) {
+                const char* status = p.status == bokeh::LensFitParameter::Status::Fitted         ? "fitted"
+                                     : p.status == bokeh::LensFitParameter::Status::Undetermined ? "undetermined"
+                                                                                                 : "off";
+                params[py::str(p.name)] = py::dict(py::arg("value") = p.value, py::arg("sigma") = p.sigma,
+                                                   py::arg("status") = status, py::arg("why") = p.why);
+            }
+            py::list per_crop;
+            for (const bokeh::LensFitCropResult& c : fit.crops)
+                per_crop.append(py::dict(
+                    py::arg("coc_px") = c.coc_px, py::arg("coc_sigma_px") = c.coc_sigma_px,
+                    py::arg("centre") = py::make_tuple(c.centre_x, c.centre_y),
+                    py::arg("field") = py::make_tuple(c.field_x, c.field_y), py::arg("field_known") = c.field_known,
+                    py::arg("amplitude") = py::make_tuple(c.amplitude[0], c.amplitude[1], c.amplitude[2]),
+                    py::arg("background") = py::make_tuple(c.background[0], c.background[1], c.background[2]),
+                    py::arg("psnr_db") = c.psnr_db, py::arg("clipped_px") = c.clipped_px,
+                    py::arg("nonfinite_px") = c.nonfinite_px, py::arg("outlier_px") = c.outlier_px));
+            return py::dict(py::arg("options") = fit.options, py::arg("parameters") = params,
+                            py::arg("crops") = per_crop, py::arg("stages") = fit.stages,
+                            py::arg("noise") = py::make_tuple(fit.noise_read, fit.noise_photon),
+                            py::arg("evaluations") = fit.evaluations, py::arg("seconds") = fit.seconds,
+                            py::arg("sheet") = result_of(sheet, args));
+        },
+        py::arg("crops"), py::kw_only(), py::arg("fstop") = 2.8, py::arg("focal") = 50.0,
+        py::arg("sensor") = py::float_(36.0), py::arg("width") = 1920, py::arg("clip") = 0.0,
+        py::arg("front") = false, py::arg("field") = false, py::arg("threads") = 0,
+        "fit_lens(crops, *, fstop=2.8, focal=50, sensor=36, width=1920, clip=0, front=False, field=False) -> "
+        "dict: the lens model fitted to crops of defocused highlights (a list of arrays or ImageBufs; an "
+        "ImageBuf cut from a frame with its origin kept knows its field position), as bokehtool --fitlens. "
+        "'options' is the lens as --defocus/--bokeh options; 'parameters' each one's value, sigma and status; "
+        "'crops' each crop's CoC and fit; 'sheet' crop | fit | difference x 4 | fitted light. ValueError "
+        "naming the crop for one with no highlight, all clipped or smaller than its bokeh.");
 
     // --- metrics (metrics.h) -----------------------------------------------------------
     m.def(

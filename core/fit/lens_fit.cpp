@@ -270,8 +270,8 @@ public:
                         std::min(evaluations_each * int(f.size()) + 4, std::max(10, left())));
     }
 
-    // The aperture: each blade count's best rotation on a grid, the two best counts
-    // polished, the better kept against round.
+    // The aperture: each blade count's best rotation on a grid, briefly polished; the two
+    // best counts polished fully, the better kept against round.
     bool aperture_stage()
     {
         const double c0    = polish({}, 20);
@@ -299,12 +299,23 @@ public:
                 if (c < best.cost)
                     best = { n, m_s.rotation, c };
             }
+            // Ranked after a short polish: a grid point's cost says little while the
+            // spherical aberration and the CoC were fitted to a round stop.
+            m_s.rotation  = best.rotation;
+            m_s.curvature = 0.15;
+            const std::vector<StageParam> p = {
+                { "rotation", &State::rotation, best.rotation - 0.5 * period, best.rotation + 0.5 * period,
+                  period / 12.0, {} },
+                { "curvature", &State::curvature, 0.0, 1.0, 0.1, {} },
+            };
+            best.cost     = polish(p, 10);
+            best.rotation = m_s.rotation;
             tries.push_back(best);
         }
         std::sort(tries.begin(), tries.end(), [](const Try& a, const Try& b) { return a.cost < b.cost; });
         State best_state = before;
         double best_cost = 1e300;
-        for (size_t t = 0; t < std::min<size_t>(3, tries.size()); ++t) {
+        for (size_t t = 0; t < std::min<size_t>(2, tries.size()); ++t) {
             m_s           = before;
             const double grow = std::sqrt(kPi / (0.5 * tries[t].blades * std::sin(2.0 * kPi / tries[t].blades)));
             for (double& c : m_s.coc)

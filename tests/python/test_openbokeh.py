@@ -628,3 +628,41 @@ def test_deep_defocus_matches_bokehtool(tmp, scene_file):
     result, report = ob.defocus(ob.deepen(ob.read_image(scene_file)), focus=6, fstop=2)
     assert report is not None and report.max_coc_px > 0
     assert np.array_equal(ob.to_array(result), pixels(path))
+
+
+def test_fit_lens_gives_back_the_lens_a_crop_was_drawn_with(tmp):
+    # A 6-blade bokeh with spherical aberration drawn by bokeh(), scaled to a light, over a
+    # background, with Gaussian noise of the photon-noise variance (peak SNR 50); the fit
+    # names the blades, the rotation within a degree and the CoC within 0.3 px, and
+    # bokehtool --fitlens on the same crop prints the same lens.
+    psf = ob.to_array(ob.bokeh(40, kernel="polygon", blades=6, rotation=20, curvature=0.2, lens="uncorrected",
+                               correction=0, monochromatic=0.5, chromatic=0, fstop=2, size=97))
+    rng = np.random.default_rng(3)
+    light = 3000.0 * psf + 0.05
+    peak = float(light.max())
+    crop = (light + np.sqrt(light * peak / 2500.0) * rng.standard_normal(light.shape)).astype(np.float32)
+    fit = ob.fit_lens([crop], fstop=2)
+    assert "kernel=polygon:blades=6" in fit["options"]
+    assert fit["parameters"]["blades"]["value"] == 6
+    assert abs(((fit["parameters"]["rotation"]["value"] - 20 + 30) % 60) - 30) < 1.0
+    assert abs(fit["parameters"]["monochromatic"]["value"] - 0.5) < 0.02
+    assert abs(fit["crops"][0]["coc_px"] - 40.0) < 0.3
+    assert fit["parameters"]["catseye"]["status"] == "off"
+    sheet = fit["sheet"]
+    assert sheet.shape == (97 + 4, 4 * 97 + 10, 3)
+    path = os.path.join(tmp, "crop.exr")
+    buf = oiio.ImageBuf(oiio.ImageSpec(97, 97, 3, oiio.FLOAT))
+    buf.set_pixels(oiio.ROI(), crop)
+    assert buf.write(path)
+    out = subprocess.run([BOKEHTOOL, path, "--fitlens:fstop=2", "-o", os.path.join(tmp, "sheet.exr")],
+                         capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert f"fitlens: lens {fit['options']}" in out.stdout
+
+
+def test_fit_lens_refusals():
+    with pytest.raises(ValueError, match="fit_lens: crop 1 holds no highlight"):
+        ob.fit_lens([np.full((64, 64, 3), 0.1, np.float32) + np.random.default_rng(1).normal(
+            0, 0.01, (64, 64, 3)).astype(np.float32)])
+    with pytest.raises(ValueError, match="fit_lens: no crop given"):
+        ob.fit_lens([])
