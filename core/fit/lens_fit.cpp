@@ -29,12 +29,14 @@
 
 #include <bokeh/base.h>
 #include <bokeh/lens_fit.h>
+#include <bokeh/parallel.h>
 
 #include "fit/fit_model.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <numeric>
 
 #include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/strutil.h>
@@ -270,8 +272,8 @@ public:
                         std::min(evaluations_each * int(f.size()) + 4, std::max(10, left())));
     }
 
-    // The aperture: each blade count's best rotation on a grid, briefly polished; the two
-    // best counts polished fully, the better kept against round.
+    // The aperture: each blade count's best rotation on a grid, briefly polished; the best
+    // counts polished fully, the best kept against round.
     bool aperture_stage()
     {
         const double c0    = polish({}, 20);
@@ -279,12 +281,13 @@ public:
         m_model.set_floor(kSearchFloorOfLevel);
         struct Try {
             int blades;
-            double rotation, cost;
+            double rotation, grid_cost, cost;
+            State state;  // after the short polish
         };
         std::vector<Try> tries;
         for (int n = 5; n <= 9; ++n) {
             const double period = 360.0 / n;
-            Try best { n, 0.0, 1e300 };
+            Try best { n, 0.0, 1e300, 1e300, before };
             m_s = before;
             // The CoC is the polygon's circumscribed diameter: start each at the area of
             // the round fit, (n / 2) R^2 sin(2 pi / n) = pi r^2.
@@ -296,11 +299,11 @@ public:
                 m_s.rotation  = period * k / 8.0;
                 m_s.curvature = 0.15;
                 const double c = cost();
-                if (c < best.cost)
-                    best = { n, m_s.rotation, c };
+                if (c < best.grid_cost)
+                    best.grid_cost = c, best.rotation = m_s.rotation;
             }
-            // Ranked after a short polish: a grid point's cost says little while the
-            // spherical aberration and the CoC were fitted to a round stop.
+            // A short polish: a grid point's cost says little while the spherical
+            // aberration and the CoC were fitted to a round stop.
             m_s.rotation  = best.rotation;
             m_s.curvature = 0.15;
             const std::vector<StageParam> p = {
@@ -308,21 +311,25 @@ public:
                   period / 12.0, {} },
                 { "curvature", &State::curvature, 0.0, 1.0, 0.1, {} },
             };
-            best.cost     = polish(p, 10);
-            best.rotation = m_s.rotation;
+            best.cost  = polish(p, 10);
+            best.state = m_s;
             tries.push_back(best);
         }
-        std::sort(tries.begin(), tries.end(), [](const Try& a, const Try& b) { return a.cost < b.cost; });
+        // Polished fully: the two best by the grid and the two best after the short
+        // polish (each ranking alone missed blade counts on the round trips).
+        std::vector<size_t> by_grid(tries.size()), by_cost(tries.size()), chosen;
+        std::iota(by_grid.begin(), by_grid.end(), size_t(0));
+        by_cost = by_grid;
+        std::sort(by_grid.begin(), by_grid.end(), [&](size_t a, size_t b) { return tries[a].grid_cost < tries[b].grid_cost; });
+        std::sort(by_cost.begin(), by_cost.end(), [&](size_t a, size_t b) { return tries[a].cost < tries[b].cost; });
+        for (size_t k = 0; k < 2; ++k)
+            for (size_t t : { by_cost[k], by_grid[k] })
+                if (std::find(chosen.begin(), chosen.end(), t) == chosen.end())
+                    chosen.push_back(t);
         State best_state = before;
         double best_cost = 1e300;
-        for (size_t t = 0; t < std::min<size_t>(2, tries.size()); ++t) {
-            m_s           = before;
-            const double grow = std::sqrt(kPi / (0.5 * tries[t].blades * std::sin(2.0 * kPi / tries[t].blades)));
-            for (double& c : m_s.coc)
-                c *= grow;
-            m_s.blades    = tries[t].blades;
-            m_s.rotation  = tries[t].rotation;
-            m_s.curvature = 0.15;
+        for (size_t t : chosen) {
+            m_s                 = tries[t].state;
             const double period = 360.0 / m_s.blades;
             const std::vector<StageParam> p = {
                 { "rotation", &State::rotation, m_s.rotation - 0.5 * period, m_s.rotation + 0.5 * period,
@@ -364,18 +371,36 @@ private:
 };
 
 // The weighted residuals of every crop (fine spectrum), for the Jacobian.
-std::vector<double> residuals(const Model& model, const State& s, bool coarse = false)
+// Crop i's weighted residuals (empty when its PSF is refused).
+std::vector<double> crop_residuals(const Model& model, const State& s, size_t i, bool coarse)
 {
     std::vector<double> r;
-    for (size_t i = 0; i < model.crops().size(); ++i) {
-        Psf p;
-        if (!model.psf(p, s, i, coarse, 0))
-            continue;
-        std::vector<float> smp;
-        Model::sample(smp, p, model.crops()[i], s.cx[i], s.cy[i]);
-        Linear lin;
-        Model::fit_linear(model.crops()[i], smp, lin, &r);
-    }
+    Psf p;
+    if (!model.psf(p, s, i, coarse, 1))
+        return r;
+    std::vector<float> smp;
+    Model::sample(smp, p, model.crops()[i], s.cx[i], s.cy[i]);
+    Linear lin;
+    Model::fit_linear(model.crops()[i], smp, lin, &r);
+    return r;
+}
+
+// Every crop's weighted residuals, a block a crop (the crops in parallel).
+std::vector<std::vector<double>> residual_blocks(const Model& model, const State& s, bool coarse, int nthreads)
+{
+    std::vector<std::vector<double>> blocks(model.crops().size());
+    parallel_for_chunks(0, int64_t(blocks.size()), 1, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i)
+            blocks[size_t(i)] = crop_residuals(model, s, size_t(i), coarse);
+    });
+    return blocks;
+}
+
+std::vector<double> residuals(const Model& model, const State& s, bool coarse = false, int nthreads = 0)
+{
+    std::vector<double> r;
+    for (const std::vector<double>& b : residual_blocks(model, s, coarse, nthreads))
+        r.insert(r.end(), b.begin(), b.end());
     return r;
 }
 
@@ -385,7 +410,7 @@ std::vector<double> residuals(const Model& model, const State& s, bool coarse = 
 // spherical aberration and the blades' curvature make together; steps along J^T J's
 // own directions follow it. Forward-difference Jacobians; at most `iterations` steps.
 void levenberg_marquardt(const Model& model, State& s, const std::vector<double State::*>& fields,
-                         const std::vector<double>& lo, const std::vector<double>& hi, int iterations)
+                         const std::vector<double>& lo, const std::vector<double>& hi, int iterations, int nthreads)
 {
     const size_t nc = s.coc.size(), p = fields.size() + 3 * nc;
     auto value = [&](State& st, size_t k) -> double& {
@@ -400,20 +425,38 @@ void levenberg_marquardt(const Model& model, State& s, const std::vector<double 
             c += x * x;
         return c;
     };
-    std::vector<double> r0 = residuals(model, s, true);
+    // A crop's own parameters (CoC, centre) move only its block of the residuals: their
+    // Jacobian columns render that crop alone.
+    std::vector<std::vector<double>> blocks = residual_blocks(model, s, true, nthreads);
+    std::vector<size_t> offset(nc + 1, 0);
+    for (size_t i = 0; i < nc; ++i)
+        offset[i + 1] = offset[i] + blocks[i].size();
+    std::vector<double> r0;
+    for (const std::vector<double>& b : blocks)
+        r0.insert(r0.end(), b.begin(), b.end());
     double c0 = chi2(r0), lambda = 1e-3;
     for (int it = 0; it < iterations; ++it) {
         const size_t n = r0.size();
         std::vector<std::vector<double>> J(p, std::vector<double>(n, 0.0));
-        for (size_t k = 0; k < p; ++k) {
-            State t        = s;
-            double& v      = value(t, k);
-            const double h = std::max(1e-4, 1e-4 * std::abs(v));
-            v += h;
-            const std::vector<double> r1 = residuals(model, t, true);
-            for (size_t i = 0; i < n && i < r1.size(); ++i)
-                J[k][i] = (r1[i] - r0[i]) / h;
-        }
+        parallel_for_chunks(0, int64_t(p), 1, nthreads, [&](int64_t kb, int64_t ke) {
+            for (int64_t kk = kb; kk < ke; ++kk) {
+                const size_t k = size_t(kk);
+                State t        = s;
+                double& v      = value(t, k);
+                const double h = std::max(1e-4, 1e-4 * std::abs(v));
+                v += h;
+                if (k < fields.size()) {
+                    const std::vector<double> r1 = residuals(model, t, true, 1);
+                    for (size_t i = 0; i < n && i < r1.size(); ++i)
+                        J[k][i] = (r1[i] - r0[i]) / h;
+                } else {
+                    const size_t crop = (k - fields.size()) % nc;
+                    const std::vector<double> r1 = crop_residuals(model, t, crop, true);
+                    for (size_t i = 0; i < r1.size() && offset[crop] + i < offset[crop + 1]; ++i)
+                        J[k][offset[crop] + i] = (r1[i] - r0[offset[crop] + i]) / h;
+                }
+            }
+        });
         std::vector<double> jtj(p * p, 0.0), jtr(p, 0.0);
         for (size_t a = 0; a < p; ++a) {
             for (size_t b = a; b < p; ++b) {
@@ -445,7 +488,7 @@ void levenberg_marquardt(const Model& model, State& s, const std::vector<double 
                 else if (k < fields.size() + nc)
                     v = std::max(v, 0.5);
             }
-            std::vector<double> r1 = residuals(model, t, true);
+            std::vector<double> r1 = residuals(model, t, true, nthreads);
             const double c1 = chi2(r1);
             if (r1.size() == r0.size() && c1 < c0) {
                 s = t, r0 = std::move(r1);
@@ -465,23 +508,38 @@ void levenberg_marquardt(const Model& model, State& s, const std::vector<double 
 }
 
 // One-sigma uncertainties of `fields` (and every CoC) from s^2 (J^T J)^-1.
-std::vector<double> uncertainties(const Model& model, State s, const std::vector<double State::*>& fields,
-                                  std::vector<double>& coc_sigma)
+std::vector<double> uncertainties(const Model& model, const State& s, const std::vector<double State::*>& fields,
+                                  std::vector<double>& coc_sigma, int nthreads)
 {
-    const std::vector<double> r0 = residuals(model, s);
-    const size_t n = r0.size(), nc = s.coc.size(), p = fields.size() + nc;
-    std::vector<std::vector<double>> J(p);
-    for (size_t k = 0; k < p; ++k) {
-        double& v      = k < fields.size() ? s.*fields[k] : s.coc[k - fields.size()];
-        const double h = std::max(1e-3, 1e-3 * std::abs(v));
-        const double v0 = v;
-        v += h;
-        std::vector<double> r1 = residuals(model, s);
-        v = v0;
-        J[k].resize(n);
-        for (size_t i = 0; i < n && i < r1.size(); ++i)
-            J[k][i] = (r1[i] - r0[i]) / h;
+    const std::vector<std::vector<double>> blocks = residual_blocks(model, s, false, nthreads);
+    const size_t nc = s.coc.size(), p = fields.size() + nc;
+    std::vector<size_t> offset(nc + 1, 0);
+    std::vector<double> r0;
+    for (size_t i = 0; i < nc; ++i) {
+        offset[i + 1] = offset[i] + blocks[i].size();
+        r0.insert(r0.end(), blocks[i].begin(), blocks[i].end());
     }
+    const size_t n = r0.size();
+    std::vector<std::vector<double>> J(p, std::vector<double>(n, 0.0));
+    parallel_for_chunks(0, int64_t(p), 1, nthreads, [&](int64_t kb, int64_t ke) {
+        for (int64_t kk = kb; kk < ke; ++kk) {
+            const size_t k = size_t(kk);
+            State t        = s;
+            double& v      = k < fields.size() ? t.*fields[k] : t.coc[k - fields.size()];
+            const double h = std::max(1e-3, 1e-3 * std::abs(v));
+            v += h;
+            if (k < fields.size()) {  // a lens parameter moves every crop
+                const std::vector<double> r1 = residuals(model, t, false, 1);
+                for (size_t i = 0; i < n && i < r1.size(); ++i)
+                    J[k][i] = (r1[i] - r0[i]) / h;
+            } else {  // a CoC only its own
+                const size_t crop            = k - fields.size();
+                const std::vector<double> r1 = crop_residuals(model, t, crop, false);
+                for (size_t i = 0; i < r1.size() && offset[crop] + i < offset[crop + 1]; ++i)
+                    J[k][offset[crop] + i] = (r1[i] - r0[offset[crop] + i]) / h;
+            }
+        }
+    });
     double chi2 = 0.0;
     for (double r : r0)
         chi2 += r * r;
@@ -637,7 +695,7 @@ bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFit
         std::vector<double> lo, hi;
         for (const StageParam& p : f.kept())
             lo.push_back(p.lo), hi.push_back(p.hi);
-        levenberg_marquardt(f.model(), s, fields, lo, hi, 15);
+        levenberg_marquardt(f.model(), s, fields, lo, hi, 15, nthreads);
         f.log().push_back(format("Levenberg-Marquardt: cost {:.1f}", f.cost()));
     }
     f.refine_crops(60);
@@ -661,7 +719,7 @@ bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFit
 
     // Uncertainties, the report.
     std::vector<double> coc_sigma;
-    const std::vector<double> sigma = uncertainties(f.model(), s, fields, coc_sigma);
+    const std::vector<double> sigma = uncertainties(f.model(), s, fields, coc_sigma, nthreads);
     fit.lens = f.model().lens_of(s, false);
     if (!kept_sa && !kept_colour) {
         fit.lens.preset        = opts.camera.preset;

@@ -175,6 +175,14 @@ bool fitlens_command(CommandContext& c)
                          r.nonfinite_px ? format(", {} non-finite px left out", r.nonfinite_px) : std::string()));
     }
     if (c.verbosity > 1) {
+        for (size_t i = 0; i < fit.crops.size(); ++i) {
+            const bokeh::LensFitCropResult& r = fit.crops[i];
+            c.message(format("fitlens:   crop {}: residual rms R {:.3g} G {:.3g} B {:.3g}; light {:.4g} {:.4g} {:.4g}; "
+                             "background {:.4g} {:.4g} {:.4g}; {} px of other lights or past the loss's scale",
+                             i + 1, r.residual_rms[0], r.residual_rms[1], r.residual_rms[2], r.amplitude[0],
+                             r.amplitude[1], r.amplitude[2], r.background[0], r.background[1], r.background[2],
+                             r.outlier_px));
+        }
         for (const bokeh::LensFitParameter& p : fit.parameters)
             c.message(p.status == bokeh::LensFitParameter::Status::Fitted
                           ? format("fitlens:   {} = {:.4g} +- {:.2g}", p.name, p.value, p.sigma)
