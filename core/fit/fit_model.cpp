@@ -500,9 +500,11 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
     for (size_t k = 0; k < sig.size(); ++k)
         if (!d.use[k] && d.nonfinite == 0 && sig[k] > 0.0)
             clip_sig = std::max(clip_sig, sig[k]);
-    // The highlight: above 2 % of its peak (a bright-centred bokeh's halo is a tenth of
-    // its peak or less), 6 noise levels and 4 of the background's texture.
-    const double level = std::max({ 0.02 * std::max(peak, clip_sig), 6.0 * noise, 4.0 * texture });
+    // The highlight: above a tenth of its peak (on a plate, the glow of other lights and
+    // the background's large-scale shading reach past a few percent; a bright-centred
+    // bokeh's halo below a tenth is then left to the stages, whose CoC may go to 3 times
+    // this first estimate), 6 noise levels and 4 of the background's texture.
+    const double level = std::max({ 0.1 * std::max(peak, clip_sig), 6.0 * noise, 4.0 * texture });
     // The highlight is the largest 4-connected region above the level; the others (a
     // neighbour across the crop's edge) are left out of the fit.
     std::vector<int> label(sig.size(), -1);
@@ -566,14 +568,19 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
         }
     std::sort(ring.begin(), ring.end());
     const double spread = ring.empty() ? 0.0 : ring[ring.size() * 9 / 10] - ring[ring.size() / 10];
-    // Or the border's plane is the bokeh's plateau itself: pixels (its outside) lie far
-    // below it.
+    // Or the border's plane is the bokeh's plateau itself: a twentieth of the crop (its
+    // outside) lies far below it, past the noise and the background's texture.
     int below = 0;
     for (size_t k = 0; k < sig.size(); ++k)
-        below += d.use[k] && sig[k] < -10.0 * noise;
-    if ((!(peak > 10.0 * noise) && spread > 10.0 * noise) || below > int(sig.size() / 100))
+        below += d.use[k] && sig[k] < -std::max(10.0 * noise, 6.0 * texture);
+    if ((!(peak > 10.0 * noise) && spread > 10.0 * noise) || below > int(sig.size() / 20))
         return err = format("{} ({}x{} px) is smaller than its bokeh: light crosses its border; cut it wider "
                             "than the bokeh",
+                            name, d.w, d.h),
+               false;
+    if (peak > 10.0 * noise && m0 <= 0.0)  // light, but none above the border's own spread
+        return err = format("{} ({}x{} px) is smaller than its bokeh: its border holds light as bright as "
+                            "its inside; cut it wider than the bokeh",
                             name, d.w, d.h),
                false;
     if (!(peak > 10.0 * noise) || m0 <= 0.0)
@@ -607,13 +614,16 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
                             name, d.w, d.h, d.coc0, d.coc0 + 8.0),
                false;
     d.peak = std::max(peak, clip_sig);
-    // The light's mean level over a disk of the first CoC: the scale the noise floors
-    // are set in (a bright-centred bokeh's peak can be many times its plateau).
-    double energy = 0.0;
+    // The light's level: its plateau, the 90th percentile over the highlight (clipped
+    // pixels at the peak), the scale the noise floors are set in (a bright-centred
+    // bokeh's peak can be many times its plateau; the percentile does not lean on the
+    // first CoC's estimate, nor on how much of a plate's glow the highlight's region took).
+    std::vector<double> lit_values;
     for (size_t k = 0; k < sig.size(); ++k)
         if (label[k] == best_label && best_label >= 0)
-            energy += d.use[k] ? sig[k] : d.peak;
-    d.level = std::min(d.peak, energy / (0.25 * kPi * d.coc0 * d.coc0));
+            lit_values.push_back(d.use[k] ? sig[k] : d.peak);
+    std::sort(lit_values.begin(), lit_values.end());
+    d.level = lit_values.empty() ? d.peak : std::min(d.peak, lit_values[lit_values.size() * 9 / 10]);
 
     // Field position: the highlight's centre in the display window.
     const bool windowed = spec.full_width > 0 && spec.full_height > 0
