@@ -423,11 +423,13 @@ double minimise(std::vector<Free>& free, const std::function<double()>& cost, in
     return o.best;
 }
 
-bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double clip_level, std::string& err)
+namespace {
+
+// A crop's pixels as floats (its first three channels, or one), the non-finite ones left
+// out; `vmax` its largest finite value. False + `err` for an unusable image.
+bool read_crop(CropData& d, const OIIO::ImageBuf& img, const std::string& name, float& vmax, std::string& err)
 {
-    const OIIO::ImageBuf& img = crop.image;
     const OIIO::ImageSpec& spec = img.spec();
-    const std::string name = format("crop {}", index + 1);
     if (img.has_error() || spec.nchannels < 1 || spec.deep)
         return err = format("{}: not a flat image with channels", name), false;
     d.w = spec.width, d.h = spec.height;
@@ -443,8 +445,8 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
                    OIIO::TypeDesc::FLOAT, d.px.data());
     d.use.assign(size_t(d.w) * d.h, 1);
 
-    // Left out: non-finite pixels, and clipped ones.
-    float vmax = -std::numeric_limits<float>::infinity();
+    // Left out: non-finite pixels.
+    vmax = -std::numeric_limits<float>::infinity();
     for (size_t k = 0; k < d.use.size(); ++k)
         for (int c = 0; c < d.channels; ++c) {
             const float v = d.px[k * d.channels + c];
@@ -457,6 +459,92 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
         d.nonfinite += !u;
     if (size_t(d.nonfinite) == d.use.size())
         return err = format("{} holds no finite pixel", name), false;
+
+    return true;
+}
+
+// Label the 4-connected regions of the pixels `lit` says are lit; the largest's label
+// (-1: none). `label` holds each pixel's region (-1: not lit).
+int largest_region(const CropData& d, const std::function<bool(size_t)>& lit, std::vector<int>& label)
+{
+    label.assign(size_t(d.w) * d.h, -1);
+    int best_label = -1;
+    size_t best_size = 0;
+    std::vector<size_t> stack;
+    for (size_t start = 0; start < label.size(); ++start) {
+        if (label[start] >= 0 || !lit(start))
+            continue;
+        const int id = int(start);
+        size_t size  = 0;
+        stack.assign(1, start);
+        label[start] = id;
+        while (!stack.empty()) {
+            const size_t k = stack.back();
+            stack.pop_back();
+            ++size;
+            const int i = int(k % size_t(d.w)), j = int(k / size_t(d.w));
+            const size_t nb[4] = { i > 0 ? k - 1 : k, i + 1 < d.w ? k + 1 : k, j > 0 ? k - size_t(d.w) : k,
+                                   j + 1 < d.h ? k + size_t(d.w) : k };
+            for (size_t n : nb)
+                if (label[n] < 0 && lit(n)) {
+                    label[n] = id;
+                    stack.push_back(n);
+                }
+        }
+        if (size > best_size)
+            best_size = size, best_label = id;
+    }
+    return best_label;
+}
+
+// Whether a crop was cut inside its bokeh: no highlight stands above the plane the border
+// gave, but the border itself holds light (its brightest tenth 10 noise levels above its
+// darkest, as where the bokeh's edge crosses it); or the plane is the bokeh's plateau
+// itself, a twentieth of the crop (its outside) far below it, past the noise and the
+// background's texture.
+bool cut_inside_bokeh(const CropData& d, const std::vector<double>& sig, double peak, double noise, double texture)
+{
+    std::vector<double> ring;
+    for (int j = 0; j < d.h; ++j)
+        for (int i = 0; i < d.w; ++i) {
+            const size_t k = size_t(j) * d.w + i;
+            if ((i == 0 || j == 0 || i == d.w - 1 || j == d.h - 1) && d.use[k])
+                ring.push_back(luminance(&d.px[k * d.channels], d.channels));
+        }
+    std::sort(ring.begin(), ring.end());
+    const double spread = ring.empty() ? 0.0 : ring[ring.size() * 9 / 10] - ring[ring.size() / 10];
+    int below = 0;
+    for (size_t k = 0; k < sig.size(); ++k)
+        below += d.use[k] && sig[k] < -std::max(10.0 * noise, 6.0 * texture);
+    return (!(peak > 10.0 * noise) && spread > 10.0 * noise) || below > int(sig.size() / 20);
+}
+
+// The field position of the highlight's centre: given, else from the crop's data window
+// in its display window (a crop cut from a frame with its origin kept).
+void set_field_position(CropData& d, const LensFitCrop& crop)
+{
+    const OIIO::ImageSpec& spec = crop.image.spec();
+    const bool windowed = spec.full_width > 0 && spec.full_height > 0
+                          && (spec.full_x != spec.x || spec.full_y != spec.y || spec.full_width != spec.width
+                              || spec.full_height != spec.height);
+    if (std::isfinite(crop.field_x) && std::isfinite(crop.field_y)) {
+        d.fx = crop.field_x, d.fy = crop.field_y, d.field_known = true;
+    } else if (windowed) {
+        const double half_diag = 0.5 * std::hypot(double(spec.full_width), double(spec.full_height));
+        d.fx = (spec.x + d.cx0 - (spec.full_x + 0.5 * spec.full_width)) / half_diag;
+        d.fy = -(spec.y + d.cy0 - (spec.full_y + 0.5 * spec.full_height)) / half_diag;
+        d.field_known = true;
+    }
+}
+
+}  // namespace
+
+bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double clip_level, std::string& err)
+{
+    const std::string name = format("crop {}", index + 1);
+    float vmax             = 0.0f;
+    if (!read_crop(d, crop.image, name, vmax, err))
+        return false;
 
     // The background plane and read noise from the border (before clipping is decided:
     // a highlight's plateau shares its maximum exactly only where the plate clipped it, or
@@ -507,36 +595,9 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
     const double level = std::max({ 0.1 * std::max(peak, clip_sig), 6.0 * noise, 4.0 * texture });
     // The highlight is the largest 4-connected region above the level; the others (a
     // neighbour across the crop's edge) are left out of the fit.
-    std::vector<int> label(sig.size(), -1);
-    auto lit = [&](size_t k) {
-        return sig[k] > level || (!d.use[k] && std::isfinite(sig[k]) && d.clipped > 0);
-    };
-    int best_label = -1;
-    size_t best_size = 0;
-    std::vector<size_t> stack;
-    for (size_t start = 0; start < sig.size(); ++start) {
-        if (label[start] >= 0 || !lit(start))
-            continue;
-        const int id = int(start);
-        size_t size  = 0;
-        stack.assign(1, start);
-        label[start] = id;
-        while (!stack.empty()) {
-            const size_t k = stack.back();
-            stack.pop_back();
-            ++size;
-            const int i = int(k % size_t(d.w)), j = int(k / size_t(d.w));
-            const size_t nb[4] = { i > 0 ? k - 1 : k, i + 1 < d.w ? k + 1 : k, j > 0 ? k - size_t(d.w) : k,
-                                   j + 1 < d.h ? k + size_t(d.w) : k };
-            for (size_t n : nb)
-                if (label[n] < 0 && lit(n)) {
-                    label[n] = id;
-                    stack.push_back(n);
-                }
-        }
-        if (size > best_size)
-            best_size = size, best_label = id;
-    }
+    std::vector<int> label;
+    const int best_label = largest_region(
+        d, [&](size_t k) { return sig[k] > level || (!d.use[k] && std::isfinite(sig[k]) && d.clipped > 0); }, label);
     for (size_t k = 0; k < sig.size(); ++k)
         if (label[k] >= 0 && label[k] != best_label && d.use[k]) {
             d.use[k] = 0;
@@ -556,24 +617,7 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
             m0 += wgt, mx += wgt * (i + 0.5), my += wgt * (j + 0.5);
             touches[0] += i == 0, touches[1] += i == d.w - 1, touches[2] += j == 0, touches[3] += j == d.h - 1;
         }
-    // A crop cut inside its bokeh: no highlight stands above the plane the border gave,
-    // but the border itself holds light (its brightest tenth 10 noise levels above its
-    // darkest), as where the bokeh's edge crosses it.
-    std::vector<double> ring;
-    for (int j = 0; j < d.h; ++j)
-        for (int i = 0; i < d.w; ++i) {
-            const size_t k = size_t(j) * d.w + i;
-            if ((i == 0 || j == 0 || i == d.w - 1 || j == d.h - 1) && d.use[k])
-                ring.push_back(luminance(&d.px[k * d.channels], d.channels));
-        }
-    std::sort(ring.begin(), ring.end());
-    const double spread = ring.empty() ? 0.0 : ring[ring.size() * 9 / 10] - ring[ring.size() / 10];
-    // Or the border's plane is the bokeh's plateau itself: a twentieth of the crop (its
-    // outside) lies far below it, past the noise and the background's texture.
-    int below = 0;
-    for (size_t k = 0; k < sig.size(); ++k)
-        below += d.use[k] && sig[k] < -std::max(10.0 * noise, 6.0 * texture);
-    if ((!(peak > 10.0 * noise) && spread > 10.0 * noise) || below > int(sig.size() / 20))
+    if (cut_inside_bokeh(d, sig, peak, noise, texture))
         return err = format("{} ({}x{} px) is smaller than its bokeh: light crosses its border; cut it wider "
                             "than the bokeh",
                             name, d.w, d.h),
@@ -625,18 +669,7 @@ bool prepare_crop(CropData& d, const LensFitCrop& crop, size_t index, double cli
     std::sort(lit_values.begin(), lit_values.end());
     d.level = lit_values.empty() ? d.peak : std::min(d.peak, lit_values[lit_values.size() * 9 / 10]);
 
-    // Field position: the highlight's centre in the display window.
-    const bool windowed = spec.full_width > 0 && spec.full_height > 0
-                          && (spec.full_x != spec.x || spec.full_y != spec.y || spec.full_width != spec.width
-                              || spec.full_height != spec.height);
-    if (std::isfinite(crop.field_x) && std::isfinite(crop.field_y)) {
-        d.fx = crop.field_x, d.fy = crop.field_y, d.field_known = true;
-    } else if (windowed) {
-        const double half_diag = 0.5 * std::hypot(double(spec.full_width), double(spec.full_height));
-        d.fx = (spec.x + d.cx0 - (spec.full_x + 0.5 * spec.full_width)) / half_diag;
-        d.fy = -(spec.y + d.cy0 - (spec.full_y + 0.5 * spec.full_height)) / half_diag;
-        d.field_known = true;
-    }
+    set_field_position(d, crop);
     if (std::hypot(d.fx, d.fy) > 1.5)
         return err = format("{}: field position ({:g}, {:g}) is outside the frame (half-diagonals)", name, d.fx,
                             d.fy),
