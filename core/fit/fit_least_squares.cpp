@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 
 namespace bokeh {
 namespace fit {
@@ -44,6 +45,61 @@ std::vector<double> residuals(const Model& model, const State& s, bool coarse, i
     return r;
 }
 
+namespace {
+
+// A parameter of the least-squares steps: the k-th of a State, and the crop it moves alone
+// (kEvery: it moves every crop).
+constexpr size_t kEvery = size_t(-1);
+using ParameterOf = std::function<double&(State&, size_t)>;
+using CropOf      = std::function<size_t(size_t)>;
+
+// The forward-difference Jacobian of the weighted residuals `r0` (crop i's block from
+// offset[i]) in `p` parameters, steps max(step, step |v|); columns in parallel. A crop's
+// own parameter renders that crop alone: the other blocks of its column are zero.
+std::vector<std::vector<double>> jacobian(const Model& model, const State& s, size_t p, const ParameterOf& value,
+                                          const CropOf& crop_of, double step, const std::vector<double>& r0,
+                                          const std::vector<size_t>& offset, bool coarse, int nthreads)
+{
+    const size_t n = r0.size();
+    std::vector<std::vector<double>> J(p, std::vector<double>(n, 0.0));
+    parallel_for_chunks(0, int64_t(p), 1, nthreads, [&](int64_t kb, int64_t ke) {
+        for (int64_t kk = kb; kk < ke; ++kk) {
+            const size_t k = size_t(kk);
+            State t        = s;
+            double& v      = value(t, k);
+            const double h = std::max(step, step * std::abs(v));
+            v += h;
+            const size_t crop = crop_of(k);
+            if (crop == kEvery) {
+                const std::vector<double> r1 = residuals(model, t, coarse, 1);
+                for (size_t i = 0; i < n && i < r1.size(); ++i)
+                    J[k][i] = (r1[i] - r0[i]) / h;
+            } else {
+                const std::vector<double> r1 = crop_residuals(model, t, crop, coarse);
+                for (size_t i = 0; i < r1.size() && offset[crop] + i < offset[crop + 1]; ++i)
+                    J[k][offset[crop] + i] = (r1[i] - r0[offset[crop] + i]) / h;
+            }
+        }
+    });
+    return J;
+}
+
+// The residuals of every crop one after another, and where each crop's block starts.
+std::vector<double> stacked_residuals(const Model& model, const State& s, bool coarse, int nthreads,
+                                      std::vector<size_t>& offset)
+{
+    const std::vector<std::vector<double>> blocks = residual_blocks(model, s, coarse, nthreads);
+    offset.assign(blocks.size() + 1, 0);
+    std::vector<double> r;
+    for (size_t i = 0; i < blocks.size(); ++i) {
+        offset[i + 1] = offset[i] + blocks[i].size();
+        r.insert(r.end(), blocks[i].begin(), blocks[i].end());
+    }
+    return r;
+}
+
+}  // namespace
+
 // Levenberg-Marquardt on the weighted residuals [Marquardt, "An algorithm for least-squares
 // estimation of nonlinear parameters", 1963]: `fields` (within `lo`..`hi`), every CoC and
 // centre. BOBYQA's quadratic models stall in the narrow curved valley the CoC, the
@@ -53,7 +109,7 @@ void levenberg_marquardt(const Model& model, State& s, const std::vector<double 
                          const std::vector<double>& lo, const std::vector<double>& hi, int iterations, int nthreads)
 {
     const size_t nc = s.coc.size(), p = fields.size() + 3 * nc;
-    auto value = [&](State& st, size_t k) -> double& {
+    const ParameterOf value = [&](State& st, size_t k) -> double& {
         if (k < fields.size())
             return st.*fields[k];
         k -= fields.size();
@@ -65,38 +121,14 @@ void levenberg_marquardt(const Model& model, State& s, const std::vector<double 
             c += x * x;
         return c;
     };
-    // A crop's own parameters (CoC, centre) move only its block of the residuals: their
-    // Jacobian columns render that crop alone.
-    std::vector<std::vector<double>> blocks = residual_blocks(model, s, true, nthreads);
-    std::vector<size_t> offset(nc + 1, 0);
-    for (size_t i = 0; i < nc; ++i)
-        offset[i + 1] = offset[i] + blocks[i].size();
-    std::vector<double> r0;
-    for (const std::vector<double>& b : blocks)
-        r0.insert(r0.end(), b.begin(), b.end());
+    // A crop's own parameters (CoC, centre) move only its block of the residuals.
+    const CropOf crop_of = [&](size_t k) { return k < fields.size() ? kEvery : (k - fields.size()) % nc; };
+    std::vector<size_t> offset;
+    std::vector<double> r0 = stacked_residuals(model, s, true, nthreads, offset);
     double c0 = chi2(r0), lambda = 1e-3;
     for (int it = 0; it < iterations; ++it) {
         const size_t n = r0.size();
-        std::vector<std::vector<double>> J(p, std::vector<double>(n, 0.0));
-        parallel_for_chunks(0, int64_t(p), 1, nthreads, [&](int64_t kb, int64_t ke) {
-            for (int64_t kk = kb; kk < ke; ++kk) {
-                const size_t k = size_t(kk);
-                State t        = s;
-                double& v      = value(t, k);
-                const double h = std::max(1e-4, 1e-4 * std::abs(v));
-                v += h;
-                if (k < fields.size()) {
-                    const std::vector<double> r1 = residuals(model, t, true, 1);
-                    for (size_t i = 0; i < n && i < r1.size(); ++i)
-                        J[k][i] = (r1[i] - r0[i]) / h;
-                } else {
-                    const size_t crop = (k - fields.size()) % nc;
-                    const std::vector<double> r1 = crop_residuals(model, t, crop, true);
-                    for (size_t i = 0; i < r1.size() && offset[crop] + i < offset[crop + 1]; ++i)
-                        J[k][offset[crop] + i] = (r1[i] - r0[offset[crop] + i]) / h;
-                }
-            }
-        });
+        const std::vector<std::vector<double>> J = jacobian(model, s, p, value, crop_of, 1e-4, r0, offset, true, nthreads);
         std::vector<double> jtj(p * p, 0.0), jtr(p, 0.0);
         for (size_t a = 0; a < p; ++a) {
             for (size_t b = a; b < p; ++b) {
@@ -151,40 +183,20 @@ void levenberg_marquardt(const Model& model, State& s, const std::vector<double 
 std::vector<double> uncertainties(const Model& model, const State& s, const std::vector<double State::*>& fields,
                                   std::vector<double>& coc_sigma, int nthreads)
 {
-    const std::vector<std::vector<double>> blocks = residual_blocks(model, s, false, nthreads);
     const size_t nc = s.coc.size(), p = fields.size() + nc;
-    std::vector<size_t> offset(nc + 1, 0);
-    std::vector<double> r0;
-    for (size_t i = 0; i < nc; ++i) {
-        offset[i + 1] = offset[i] + blocks[i].size();
-        r0.insert(r0.end(), blocks[i].begin(), blocks[i].end());
-    }
-    const size_t n = r0.size();
-    std::vector<std::vector<double>> J(p, std::vector<double>(n, 0.0));
-    parallel_for_chunks(0, int64_t(p), 1, nthreads, [&](int64_t kb, int64_t ke) {
-        for (int64_t kk = kb; kk < ke; ++kk) {
-            const size_t k = size_t(kk);
-            State t        = s;
-            double& v      = k < fields.size() ? t.*fields[k] : t.coc[k - fields.size()];
-            const double h = std::max(1e-3, 1e-3 * std::abs(v));
-            v += h;
-            if (k < fields.size()) {  // a lens parameter moves every crop
-                const std::vector<double> r1 = residuals(model, t, false, 1);
-                for (size_t i = 0; i < n && i < r1.size(); ++i)
-                    J[k][i] = (r1[i] - r0[i]) / h;
-            } else {  // a CoC only its own
-                const size_t crop            = k - fields.size();
-                const std::vector<double> r1 = crop_residuals(model, t, crop, false);
-                for (size_t i = 0; i < r1.size() && offset[crop] + i < offset[crop + 1]; ++i)
-                    J[k][offset[crop] + i] = (r1[i] - r0[offset[crop] + i]) / h;
-            }
-        }
-    });
+    std::vector<size_t> offset;
+    const std::vector<double> r0 = stacked_residuals(model, s, false, nthreads, offset);
+    const size_t n               = r0.size();
+    const ParameterOf value      = [&](State& t, size_t k) -> double& {
+        return k < fields.size() ? t.*fields[k] : t.coc[k - fields.size()];
+    };
+    const CropOf crop_of = [&](size_t k) { return k < fields.size() ? kEvery : k - fields.size(); };
+    const std::vector<std::vector<double>> J = jacobian(model, s, p, value, crop_of, 1e-3, r0, offset, false, nthreads);
     double chi2 = 0.0;
     for (double r : r0)
         chi2 += r * r;
     const double s2 = chi2 / std::max<double>(1.0, double(n) - double(p));
-    std::vector<double> a(p * p, 0.0), inv(p * p, 0.0);
+    std::vector<double> a(p * p, 0.0);
     for (size_t i = 0; i < p; ++i)
         for (size_t j = 0; j < p; ++j) {
             double acc = 0.0;

@@ -84,6 +84,23 @@ double median_of(std::vector<double> v)
 
 
 
+// The difference of pixel (i, j) (interior) from the mean of its four neighbours, of
+// channel `ch` (-1: the luminance); false when any of the five is left out. Its variance
+// is (1 + 1/4) sigma^2 where the signal is locally linear.
+bool four_neighbour_difference(const CropData& d, int i, int j, int ch, double& r)
+{
+    const size_t k       = size_t(j) * d.w + i;
+    const size_t nb[4]   = { k - 1, k + 1, k - size_t(d.w), k + size_t(d.w) };
+    if (!d.use[k] || !d.use[nb[0]] || !d.use[nb[1]] || !d.use[nb[2]] || !d.use[nb[3]])
+        return false;
+    auto value = [&](size_t n) { return ch < 0 ? luminance(&d.px[n * d.channels], d.channels) : d.px[n * d.channels + ch]; };
+    double mean = 0.0;
+    for (size_t n : nb)
+        mean += 0.25 * value(n);
+    r = value(k) - mean;
+    return true;
+}
+
 // Fit a plane to the crop's outermost two rows and columns per channel (least squares),
 // and estimate the noise.
 void border_background(const CropData& d, double plane[3][3], double& sigma, double& texture)
@@ -138,20 +155,14 @@ void border_background(const CropData& d, double plane[3][3], double& sigma, dou
         dev.push_back(std::abs(luminance(&d.px[k * d.channels], d.channels) - luminance(bg, d.channels)));
     }
     texture = 1.4826 * median_of(dev);
-    // The noise: the median of |v - (n + s + e + w) / 4| of the luminance over the crop
-    // (sqrt(1.25) sigma where the signal is locally linear; the median passes over the rim,
-    // a neighbour and blocking), as a normal's sigma.
+    // The noise: the median of the luminance's four-neighbour differences over the crop
+    // (the median passes over the rim, a neighbour and blocking), as a normal's sigma.
     std::vector<double> lap;
     for (int j = 1; j + 1 < d.h; ++j)
         for (int i = 1; i + 1 < d.w; ++i) {
-            const size_t k = size_t(j) * d.w + i;
-            const size_t nb[4] = { k - 1, k + 1, k - size_t(d.w), k + size_t(d.w) };
-            if (!d.use[k] || !d.use[nb[0]] || !d.use[nb[1]] || !d.use[nb[2]] || !d.use[nb[3]])
-                continue;
-            double mean = 0.0;
-            for (size_t n : nb)
-                mean += 0.25 * luminance(&d.px[n * d.channels], d.channels);
-            lap.push_back(std::abs(luminance(&d.px[k * d.channels], d.channels) - mean));
+            double r = 0.0;
+            if (four_neighbour_difference(d, i, j, -1, r))
+                lap.push_back(std::abs(r));
         }
     sigma = 1.4826 * median_of(lap) / std::sqrt(1.25);
 }
@@ -694,15 +705,9 @@ void estimate_noise(std::vector<CropData>& crops, double& read2, double& photon)
         for (int ch = 0; ch < d.channels; ++ch)
             for (int j = 1; j + 1 < d.h; ++j)
                 for (int i = 1; i + 1 < d.w; ++i) {
-                    const size_t k = size_t(j) * d.w + i;
-                    const size_t nb[4] = { k - 1, k + 1, k - size_t(d.w), k + size_t(d.w) };
-                    if (!d.use[k] || !d.use[nb[0]] || !d.use[nb[1]] || !d.use[nb[2]] || !d.use[nb[3]])
-                        continue;
-                    double mean = 0.0;
-                    for (size_t n : nb)
-                        mean += 0.25 * d.px[n * d.channels + ch];
-                    const double v = d.px[k * d.channels + ch];
-                    pts.push_back({ v, (v - mean) * (v - mean) / 1.25 });
+                    double r = 0.0;
+                    if (four_neighbour_difference(d, i, j, ch, r))
+                        pts.push_back({ d.px[(size_t(j) * d.w + i) * d.channels + ch], r * r / 1.25 });
                 }
     }
     // In 16 bins of equal count by value: the median of r^2 / 0.4549 (the median of a
