@@ -164,8 +164,15 @@ bool fitlens_command(CommandContext& c)
     }
     bokeh::LensFit fit;
     std::string err;
-    if (!bokeh::fit_lens(fit, crops, o, err, c.nthreads))
+    if (!bokeh::fit_lens(fit, crops, o, err, c.nthreads)) {
+        // The library names a crop by its number; say where it was cut or what it was.
+        double n = 0.0;
+        const size_t end = err.find_first_of(" :", 5);
+        if (OIIO::Strutil::starts_with(err, "crop ") && end != std::string::npos
+            && bokeh::parse_number(std::string_view(err).substr(5, end - 5), n) && n >= 1.0 && n <= double(names.size()))
+            err.insert(end, at.empty() ? format(" ({})", names[size_t(n) - 1]) : " at " + names[size_t(n) - 1]);
         return c.fail(err);
+    }
     c.message(format("fitlens: lens {}", fit.options.empty() ? "kernel=disk (round, no aberration shown)" : fit.options));
     for (size_t i = 0; i < fit.crops.size(); ++i) {
         const bokeh::LensFitCropResult& r = fit.crops[i];
