@@ -1,8 +1,9 @@
 // lens_fit.h — fit the lens model of optics.h to photographed bokeh: crops of defocused
 // highlights from a plate give back the aperture (round or bladed, rotation, curvature,
-// hole), the rim profile (spherical aberration's sign and amount), axial colour, onion
-// rings, and across the field the cat's eye and astigmatism, as the LensCharacter that
-// `--defocus` and `--bokeh` take (docs/methods/lens-fit.md has the method and its checks).
+// hole), the rim profile (spherical aberration's sign and amount), axial colour and onion
+// rings (and, asked for, the cat's eye and astigmatism across the field: not yet reliable),
+// as the LensCharacter that `--defocus` and `--bokeh` take (docs/methods/lens-fit.md has
+// the method, its checks and its limits).
 //
 // Each crop is modelled as
 //     crop_c(x, y) = A_c PSF_c(x - cx, y - cy; lens, CoC, field) + b_c + gx_c x + gy_c y
@@ -11,7 +12,7 @@
 // lens, each crop's CoC and centre are found by NLopt's BOBYQA (Powell 2009), in stages
 // from the coarse to the fine, each stage kept only when it lowers the cost by more than
 // the Bayesian information criterion's price of its parameters ("model no more than the
-// crops show"). Residuals are weighted by a noise model fitted to the crops (read noise
+// crops show"), then refined together by Levenberg-Marquardt. Residuals are weighted by a noise model fitted to the crops (read noise
 // plus photon noise) under a Cauchy loss, so a neighbour highlight or blocking costs
 // little; clipped and non-finite pixels are left out.
 #pragma once
