@@ -219,15 +219,22 @@ void Model::sample(std::vector<float>& dst, const Psf& p, const CropData& d, dou
             const double x = hw + (i + 0.5 - cx);
             const int x0   = int(std::floor(x));
             const double fx = x - x0;
+            // The four taps' weights and places, once for the three channels.
+            double w[4];
+            const float* tap[4];
+            int taps = 0;
+            for (int dy = 0; dy < 2; ++dy)
+                for (int dx = 0; dx < 2; ++dx) {
+                    const int xx = x0 + dx, yy = y0 + dy;
+                    if (xx < 0 || yy < 0 || xx >= p.width || yy >= p.height)
+                        continue;
+                    w[taps]     = (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy);
+                    tap[taps++] = &p.rgb[(size_t(yy) * p.width + xx) * 3];
+                }
             for (int c = 0; c < 3; ++c) {
                 double v = 0.0;
-                for (int dy = 0; dy < 2; ++dy)
-                    for (int dx = 0; dx < 2; ++dx) {
-                        const int xx = x0 + dx, yy = y0 + dy;
-                        if (xx < 0 || yy < 0 || xx >= p.width || yy >= p.height)
-                            continue;
-                        v += (dx ? fx : 1 - fx) * (dy ? fy : 1 - fy) * p.at(xx, yy, c);
-                    }
+                for (int t = 0; t < taps; ++t)
+                    v += w[t] * tap[t][c];
                 dst[(size_t(c) * d.h + j) * d.w + i] = float(v);
             }
         }

@@ -18,12 +18,41 @@ namespace fit {
 using OIIO::Strutil::fmt::format;
 
 
+void wrap_rotation(State& s)
+{
+    if (s.blades <= 0)
+        return;
+    const double period = 360.0 / s.blades;
+    s.rotation          = std::fmod(std::fmod(s.rotation, period) + period, period);
+}
+
+Free Fitter::coc_free(size_t i, double step_of_coc)
+{
+    const double c0 = m_crops[i].coc0;
+    return { &m_s.coc[i], kCocLow * c0, kCocHigh * c0 + 4.0, step_of_coc * c0 + 0.2 };
+}
+
+double Fitter::best_start(const StageParam& p, const State& from, double best, int cocs_evaluations)
+{
+    m_model.set_floor(kSearchFloorOfLevel);
+    State best_state = m_s;
+    for (double v : p.starts) {
+        m_s          = from;
+        m_s.*p.field = v;
+        // An aberration moves the rim: each start with its CoCs refitted.
+        const double c = polish_cocs(cocs_evaluations);
+        if (c < best)
+            best = c, best_state = m_s;
+    }
+    m_s = best_state;
+    return best;
+}
+
 void Fitter::count_residuals()
 {
     m_residuals = 0.0;
     for (size_t i : m_active)
-        m_residuals += double(m_crops[i].channels)
-                       * double(std::count(m_crops[i].use.begin(), m_crops[i].use.end(), uint8_t(1)));
+        m_residuals += double(m_crops[i].channels) * double(m_crops[i].fit_k.size());
 }
 
 // The stages search on the crops that show the most (a large, bright bokeh above its
@@ -64,7 +93,7 @@ double Fitter::refine_crops(int evaluations_each, bool search, bool scan)
     double total = 0.0;
     for (size_t i = 0; i < m_crops.size(); ++i) {
         const double c0 = m_crops[i].coc0;
-        std::vector<Free> f = { { &m_s.coc[i], kCocLow * c0, kCocHigh * c0 + 4.0, 0.05 * c0 + 0.2 },
+        std::vector<Free> f = { coc_free(i, 0.05),
                                 { &m_s.cx[i], m_s.cx[i] - 3.0, m_s.cx[i] + 3.0, 0.5 },
                                 { &m_s.cy[i], m_s.cy[i] - 3.0, m_s.cy[i] + 3.0, 0.5 } };
         if (scan) {  // a crop the stages did not see: its CoC from a scan under the lens found
@@ -92,10 +121,8 @@ double Fitter::polish(const std::vector<StageParam>& params, int evaluations)
         f.push_back({ &(m_s.*p.field), p.lo, p.hi, p.step });
     for (const StageParam& p : m_kept)
         f.push_back({ &(m_s.*p.field), std::min(p.lo, m_s.*p.field), std::max(p.hi, m_s.*p.field), p.step });
-    for (size_t i : m_active) {
-        const double c0 = m_crops[i].coc0;
-        f.push_back({ &m_s.coc[i], kCocLow * c0, kCocHigh * c0 + 4.0, 0.03 * c0 + 0.2 });
-    }
+    for (size_t i : m_active)
+        f.push_back(coc_free(i, 0.03));
     add_centres(f);
     const int n = int(f.size());
     return minimise(f, [&] { return cost(); }, std::min(evaluations + 12 * n, std::max(10, left())));
@@ -108,21 +135,8 @@ bool Fitter::stage(const char* name, const std::vector<StageParam>& params)
 {
     const double c0    = polish({}, 20);
     const State before = m_s;
-    m_model.set_floor(kSearchFloorOfLevel);
-    for (const StageParam& p : params) {
-        double best = c0, best_v = m_s.*p.field;  // the current value is a start too
-        State best_state = m_s;
-        for (double v : p.starts) {
-            m_s            = before;
-            m_s.*p.field   = v;
-            // An aberration moves the rim: each start with its CoCs refitted.
-            const double c = polish_cocs(m_free_centres ? 30 : 6);
-            if (c < best)
-                best = c, best_v = v, best_state = m_s;
-        }
-        m_s          = best_state;
-        m_s.*p.field = best_v;
-    }
+    for (const StageParam& p : params)  // the current value is a start too
+        best_start(p, before, c0, m_free_centres ? 30 : 6);
     polish(params, 40);
     m_model.set_floor(0.0);
     const double c1   = polish(params, 30);
@@ -149,17 +163,7 @@ void Fitter::revisit(const char* name, const StageParam& p)
 {
     const double c0    = polish({}, 20);
     const State before = m_s;
-    m_model.set_floor(kSearchFloorOfLevel);
-    double best = 1e300;
-    State best_state = m_s;
-    for (double v : p.starts) {
-        m_s          = before;
-        m_s.*p.field = v;
-        const double c = polish_cocs(6);
-        if (c < best)
-            best = c, best_state = m_s;
-    }
-    m_s = best_state;
+    best_start(p, before, 1e300, 6);
     polish({}, 40);
     m_model.set_floor(0.0);
     const double c1 = polish({}, 30);
@@ -184,14 +188,24 @@ void Fitter::add_centres(std::vector<Free>& f)
 double Fitter::polish_cocs(int evaluations_each)
 {
     std::vector<Free> f;
-    for (size_t i : m_active) {
-        const double c0 = m_crops[i].coc0;
-        f.push_back({ &m_s.coc[i], kCocLow * c0, kCocHigh * c0 + 4.0, 0.05 * c0 + 0.2 });
-    }
+    for (size_t i : m_active)
+        f.push_back(coc_free(i, 0.05));
     add_centres(f);
     return minimise(f, [&] { return cost(); },
                     std::min(evaluations_each * int(f.size()) + 4, std::max(10, left())));
 }
+
+namespace {
+
+// A polygon's rotation (within half a blade period of the current) and curvature.
+std::vector<StageParam> blade_params(const State& s)
+{
+    const double period = 360.0 / s.blades;
+    return { { "rotation", &State::rotation, s.rotation - 0.5 * period, s.rotation + 0.5 * period, period / 12.0, {} },
+             { "curvature", &State::curvature, 0.0, 1.0, 0.1, {} } };
+}
+
+}  // namespace
 
 // The aperture: each blade count's best rotation on a grid, briefly polished; the best
 // counts polished fully, the best kept against round.
@@ -215,10 +229,10 @@ bool Fitter::aperture_stage()
         const double grow = std::sqrt(kPi / (0.5 * n * std::sin(2.0 * kPi / n)));
         for (double& c : m_s.coc)
             c *= grow;
+        m_s.blades    = n;
+        m_s.curvature = 0.15;
         for (int k = 0; k < 8; ++k) {
-            m_s.blades    = n;
-            m_s.rotation  = period * k / 8.0;
-            m_s.curvature = 0.15;
+            m_s.rotation   = period * k / 8.0;
             const double c = cost();
             if (c < best.grid_cost)
                 best.grid_cost = c, best.rotation = m_s.rotation;
@@ -227,12 +241,7 @@ bool Fitter::aperture_stage()
         // aberration and the CoC were fitted to a round stop.
         m_s.rotation  = best.rotation;
         m_s.curvature = 0.15;
-        const std::vector<StageParam> p = {
-            { "rotation", &State::rotation, best.rotation - 0.5 * period, best.rotation + 0.5 * period,
-              period / 12.0, {} },
-            { "curvature", &State::curvature, 0.0, 1.0, 0.1, {} },
-        };
-        best.cost  = polish(p, 10);
+        best.cost     = polish(blade_params(m_s), 10);
         best.state = m_s;
         tries.push_back(best);
     }
@@ -250,13 +259,8 @@ bool Fitter::aperture_stage()
     State best_state = before;
     double best_cost = 1e300;
     for (size_t t : chosen) {
-        m_s                 = tries[t].state;
-        const double period = 360.0 / m_s.blades;
-        const std::vector<StageParam> p = {
-            { "rotation", &State::rotation, m_s.rotation - 0.5 * period, m_s.rotation + 0.5 * period,
-              period / 12.0, {} },
-            { "curvature", &State::curvature, 0.0, 1.0, 0.1, {} },
-        };
+        m_s = tries[t].state;
+        const std::vector<StageParam> p = blade_params(m_s);
         polish(p, 60);
         m_model.set_floor(0.0);
         const double c = polish(p, 30);
@@ -270,8 +274,8 @@ bool Fitter::aperture_stage()
                            best_cost, price(3), keep ? format("{} blades kept", best_state.blades) : "round kept"));
     m_s = keep ? best_state : before;
     if (keep) {
+        wrap_rotation(m_s);
         const double period = 360.0 / m_s.blades;
-        m_s.rotation        = std::fmod(std::fmod(m_s.rotation, period) + period, period);
         m_kept.push_back({ "rotation", &State::rotation, m_s.rotation - 0.25 * period,
                            m_s.rotation + 0.25 * period, period / 24.0, {} });
         m_kept.push_back({ "curvature", &State::curvature, 0.0, 1.0, 0.05, {} });

@@ -101,6 +101,14 @@ public:
     bool aperture_stage();
 
 private:
+    // Crop i's CoC as a free parameter, bounded about its first estimate, first step
+    // `step_of_coc` of it (+ 0.2 px).
+    Free coc_free(size_t i, double step_of_coc);
+    // Each of `p`'s starts from `from` (the CoCs refitted, `cocs_evaluations` a crop) under
+    // the search floor; the state left at the best of them, or as it was when none costs
+    // under `best`; the best cost.
+    double best_start(const StageParam& p, const State& from, double best, int cocs_evaluations);
+
     std::vector<CropData>& m_crops;
     const LensFitOptions& m_opts;
     Model m_model;
@@ -112,7 +120,8 @@ private:
     std::vector<size_t> m_active;  // the crops the cost sums
 };
 
-// The weighted residuals of every crop (fine spectrum), for the Jacobian.
+/// The rotation brought into one blade period, [0, 360 / blades) (round: untouched).
+void wrap_rotation(State& s);
 
 /// Crop i's weighted residuals sqrt(w) r (empty when its PSF is refused).
 std::vector<double> crop_residuals(const Model& model, const State& s, size_t i, bool coarse);

@@ -157,10 +157,7 @@ void finish(Fitter& f, size_t crops, Kept& kept, int nthreads)
         f.log().push_back(format("Levenberg-Marquardt: cost {:.1f}", f.cost()));
     }
     f.refine_crops(60);
-    if (s.blades > 0) {
-        const double period = 360.0 / s.blades;
-        s.rotation          = std::fmod(std::fmod(s.rotation, period) + period, period);
-    }
+    wrap_rotation(s);
     // A parameter the final polish took back to (nearly) its "none" is not shown by the
     // crops: below what a viewer could see (a hole of 3 % of the radius, 3 % ring
     // contrast, 2 % of the design's aberrations, a 3 % cat's-eye cut, half a pixel).
