@@ -153,8 +153,8 @@ void from_iris_space(Plane& p, const IrisSpace& iris);
 Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
 
 /// The Reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC,
-/// all at full resolution.
-Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step);
+/// all at full resolution; each pixel shared between the two around its CoC.
+Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step, int nthreads);
 
 /// The Reference method (core/defocus/defocus_reference.cpp): one layer a distinct CoC over the
 /// report's CoC range, composited into `out`; the layers into `rep`. False + `err` when
@@ -169,7 +169,8 @@ std::vector<float> layer_rungs(const std::vector<float>& cocs, const DefocusOpti
                                float hi, bool exact_allowed = true);
 
 /// Where CoC `c` falls among ascending `rungs`: share 1 - upper in rung `lower`, `upper` in
-/// the next, keeping the second moment (a disk's spread is proportional to its diameter).
+/// the next, keeping the second moment (a disk's spread is proportional to its diameter);
+/// between two rungs on either side of focus, wholly in the nearer.
 void share_between(float c, const std::vector<float>& rungs, uint16_t& lower, float& upper);
 
 /// Each rung's buffer reduction for the options' budget.

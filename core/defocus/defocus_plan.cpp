@@ -68,35 +68,24 @@ Membership share_between_rungs(const Frame& f, std::vector<float> rungs, int nth
 constexpr float kRungStep_px   = 0.25f;  // CoCs closer than this count as one
 constexpr size_t kMaxExactRungs = 64;
 
-// The frame's CoCs in bins `step` wide: each occupied bin's mean CoC (ascending), and
-// every pixel's bin among them. A bin holding one CoC value has it exactly.
-struct CocBins {
-    std::vector<float> mean_px;
-    std::vector<uint32_t> of_pixel;
-};
-CocBins coc_bins(const std::vector<float>& cocs, float lo, float hi, float step)
+// The frame's CoCs in bins `step` wide: each occupied bin's mean CoC, ascending. A bin
+// holding one CoC value has it exactly.
+std::vector<float> coc_bin_means(const std::vector<float>& cocs, float lo, float hi, float step)
 {
     const int64_t first = int64_t(std::floor(lo / step)), last = int64_t(std::floor(hi / step));
     const size_t n = size_t(last - first + 1);
     std::vector<double> sum(n, 0.0);
     std::vector<int64_t> count(n, 0);
-    auto bin = [&](float c) { return size_t(std::clamp(int64_t(std::floor(c / step)) - first, int64_t(0), int64_t(n) - 1)); };
     for (float c : cocs) {
-        const size_t b = bin(c);
+        const size_t b = size_t(std::clamp(int64_t(std::floor(c / step)) - first, int64_t(0), int64_t(n) - 1));
         sum[b] += c;
         ++count[b];
     }
-    CocBins r;
-    std::vector<uint32_t> index(n, 0);
+    std::vector<float> means;
     for (size_t b = 0; b < n; ++b)
-        if (count[b]) {
-            index[b] = uint32_t(r.mean_px.size());
-            r.mean_px.push_back(float(sum[b] / double(count[b])));
-        }
-    r.of_pixel.resize(cocs.size());
-    for (size_t i = 0; i < cocs.size(); ++i)
-        r.of_pixel[i] = index[bin(cocs[i])];
-    return r;
+        if (count[b])
+            means.push_back(float(sum[b] / double(count[b])));
+    return means;
 }
 
 // Layer settings an accuracy budget asks for: the ladder's ratio r and the smallest reduced
@@ -136,15 +125,14 @@ float min_reduced_coc_px(const DefocusOptions& o)
 }  // namespace
 
 // The reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC
-// (exact when a bin holds one value, as in scenes of few depths).
-Membership detail::one_layer_per_coc(const Frame& f, float lo, float hi, float step)
+// (exact when a bin holds one value, as in scenes of few depths). Each pixel is shared
+// between the two layers around its CoC (share_between), not moved onto its bin's: a
+// surface whose CoC changes smoothly (a focus pull, a dolly) then changes the picture
+// smoothly instead of hopping from bin to bin.
+Membership detail::one_layer_per_coc(const Frame& f, float lo, float hi, float step, int nthreads)
 {
-    CocBins bins = coc_bins(f.coc, lo, hi, step);
-    Membership m;
-    m.coc_px = std::move(bins.mean_px);
+    Membership m = share_between_rungs(f, coc_bin_means(f.coc, lo, hi, step), nthreads);
     m.reduction.assign(m.coc_px.size(), 1);
-    m.lower.assign(bins.of_pixel.begin(), bins.of_pixel.end());
-    m.upper.assign(f.coc.size(), 0.0f);
     return m;
 }
 
@@ -161,9 +149,15 @@ void detail::share_between(float c, const std::vector<float>& r, uint16_t& lower
     size_t j = size_t(std::upper_bound(r.begin(), r.end(), c) - r.begin());
     j        = j == 0 ? 0 : std::min(j - 1, r.size() - 1);
     float u  = 0.0f;
-    if (j + 1 < r.size()) {
-        const double a2 = double(r[j]) * r[j], b2 = double(r[j + 1]) * r[j + 1];
-        u = float(std::clamp((double(c) * c - a2) / (b2 - a2), 0.0, 1.0));
+    if (j + 1 < r.size() && c != r[j]) {
+        if (r[j] < 0.0f && r[j + 1] > 0.0f) {
+            // Rungs on both sides of focus (the reference's bins with none at 0): a mix of
+            // a front and a back disk has no second moment to keep; the nearer rung.
+            u = c - r[j] > r[j + 1] - c ? 1.0f : 0.0f;
+        } else {
+            const double a2 = double(r[j]) * r[j], b2 = double(r[j + 1]) * r[j + 1];
+            u = float(std::clamp((double(c) * c - a2) / (b2 - a2), 0.0, 1.0));
+        }
     }
     lower = uint16_t(j);
     upper = u;
@@ -187,7 +181,7 @@ std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const Def
     std::vector<float> rungs;
     if (o.layers == 0) {
         if (exact_allowed && (hi - lo) / kRungStep_px < 1e6f) {
-            rungs = coc_bins(cocs, lo, hi, kRungStep_px).mean_px;
+            rungs = coc_bin_means(cocs, lo, hi, kRungStep_px);
             if (rungs.size() > kMaxExactRungs)
                 rungs.clear();
         }

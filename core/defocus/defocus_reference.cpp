@@ -252,7 +252,7 @@ bool detail::reference_layers(Plane& out, const Frame& f, const DefocusOptions& 
                      rep.max_coc_px, o.reference_step_px);
         return false;
     }
-    const Membership m = one_layer_per_coc(f, rep.min_coc_px, rep.max_coc_px, o.reference_step_px);
+    const Membership m = one_layer_per_coc(f, rep.min_coc_px, rep.max_coc_px, o.reference_step_px, nthreads);
     if (m.coc_px.size() > 65535) {
         err = format("{} distinct CoC values; raise the reference step", m.coc_px.size());
         return false;
