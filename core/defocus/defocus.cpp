@@ -152,14 +152,14 @@ void release_pixels(Frame& f)
         std::vector<float>().swap(*v);
 }
 
-void write_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Plane& out, int nthreads)
+void write_result(OIIO::ImageBuf& dst, const OIIO::ImageSpec& src_spec, const Frame& f, const Plane& out, int nthreads)
 {
     const int nc = f.img.has_alpha ? 4 : 3;
     const OIIO::ROI region = scaled_roi(f.out, f.up);
-    OIIO::ImageSpec spec   = derived_spec(src.spec(), nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
-                                                              : std::vector<std::string>{ "R", "G", "B" },
+    OIIO::ImageSpec spec   = derived_spec(src_spec, nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
+                                                            : std::vector<std::string>{ "R", "G", "B" },
                                           region);
-    scale_display_window(spec, src.spec(), f.up);
+    scale_display_window(spec, src_spec, f.up);
     record_lens(spec, f.lens);
     reset_uninitialised(dst, spec);
     parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
@@ -191,6 +191,10 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         dst.errorfmt("defocus: a deep result needs a deep image (--deepen makes one)");
         return false;
     }
+    // The frame holds the pixels from here on: the source's spec is all the result needs.
+    const OIIO::ImageSpec src_spec = src.spec();
+    if (opts.source_done)
+        opts.source_done();
     rep.method = opts.method == DefocusMethod::Auto ? DefocusMethod::Layers : opts.method;
     Plane out(f.out.width() * f.up, f.out.height() * f.up, 4);
     std::fill_n(out.px.get(), out.size(), 0.0f);
@@ -229,7 +233,7 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
                                                : std::string(),
                          sprite_summary(rep));
 
-    write_result(dst, src, f, out, nthreads);
+    write_result(dst, src_spec, f, out, nthreads);
     if (report)
         *report = std::move(rep);
     return true;
@@ -259,7 +263,7 @@ bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, c
         return false;
     }
     fill_uncovered(out, f, o, rep, nthreads);  // as the layered method ends
-    write_result(dst, src, f, out, nthreads);
+    write_result(dst, src.spec(), f, out, nthreads);
     return true;
 }
 

@@ -152,8 +152,8 @@ void from_iris_space(Plane& p, const IrisSpace& iris);
 /// shares, each layer's reduction.
 Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
 
-/// The Reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC,
-/// all at full resolution; each pixel shared between the two around its CoC.
+/// The Reference's layers: the points of a grid `step` apart around the frame's CoCs, all
+/// at full resolution; each pixel shared between the two around its CoC.
 Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step, int nthreads);
 
 /// The Reference method (core/defocus/defocus_reference.cpp): one layer a distinct CoC over the

@@ -1,20 +1,28 @@
 // defocus_plan.cpp — which layers a layered defocus draws, and at which reductions: the
-// planner of the Layers method and the Reference's one layer per CoC.
+// planner of the Layers method and the Reference's layers.
 //
-// * Reference: every distinct CoC (quantised to reference_step_px) is its own layer, at
-//   full resolution, with the exact anti-aliased kernel. Exact for the model; slow.
-// * Layers: a scene of at most 64 distinct CoCs (0.25 px bins) gets one rung per CoC,
-//   exact but for the reductions; others get a geometric ladder (0, +-1, +-r, +-r^2, ...),
-//   a pixel between two rungs shared between them with weights that keep its kernel's
-//   second moment (so the mixed kernel has the spread of the true one). A layer whose CoC
-//   allows it is built in a buffer reduced by 2..16 (large bokeh lose little at low
-//   resolution). The accuracy budget sets r and the smallest reduced kernel q
-//   (settings_for_budget, from the defocus chart in docs/benchmarks.md), kernels of at
+// * Reference: a frame of at most 64 distinct CoCs (planes, a handful of lights) gets a
+//   layer per CoC; others a layer per point of a grid reference_step_px apart that their
+//   CoCs fall between, each pixel shared between the two around it; all at full
+//   resolution with the exact anti-aliased kernel. Exact for the model but for the
+//   sharing's second-moment match within one step; slow.
+// * Layers: the reference's rungs when they are at most 64 (0.25 px grid), exact but for
+//   the reductions; others a geometric ladder (0, +-1, +-r, +-r^2, ..., the frame's
+//   extremes). A pixel between two rungs is shared between them with weights that keep
+//   its kernel's second moment (so the mixed kernel has the spread of the true one). A
+//   layer whose CoC allows it is built in a buffer reduced by 2..16 (large bokeh lose
+//   little at low resolution). The accuracy budget sets r and the smallest reduced kernel
+//   q (settings_for_budget, from the defocus chart in docs/benchmarks.md), kernels of at
 //   most 2 q px unless at full resolution.
 //
+// In time: every rung but the outermost is a fixed function of CoC (a grid point or a
+// power of r), and the outermost is the frame's extreme CoC, which moves smoothly; so a
+// surface whose CoC changes smoothly changes the picture smoothly (docs/methods/defocus.md,
+// "In time", measured by tools/bokeh-bench/temporal.py). A frame whose count of distinct
+// CoCs or grid rungs crosses 64 switches between exact rungs and the ladder.
+//
 // Known limits: the budget's settings are steps measured on the synthetic scenes, not a
-// search for the cheapest plan that meets it; the ladder's rungs move with the CoC range,
-// so a focus pull can gain or lose a rung between frames.
+// search for the cheapest plan that meets it.
 
 #include <bokeh/defocus.h>
 #include <bokeh/parallel.h>
@@ -68,24 +76,57 @@ Membership share_between_rungs(const Frame& f, std::vector<float> rungs, int nth
 constexpr float kRungStep_px   = 0.25f;  // CoCs closer than this count as one
 constexpr size_t kMaxExactRungs = 64;
 
-// The frame's CoCs in bins `step` wide: each occupied bin's mean CoC, ascending. A bin
-// holding one CoC value has it exactly.
-std::vector<float> coc_bin_means(const std::vector<float>& cocs, float lo, float hi, float step)
+// The frame's distinct CoC values, ascending, when it holds at most `most` of them (planes,
+// a handful of lights); empty when it holds more (depth that varies continuously).
+std::vector<float> few_distinct_cocs(const std::vector<float>& cocs, size_t most)
 {
-    const int64_t first = int64_t(std::floor(lo / step)), last = int64_t(std::floor(hi / step));
-    const size_t n = size_t(last - first + 1);
-    std::vector<double> sum(n, 0.0);
-    std::vector<int64_t> count(n, 0);
+    std::vector<float> values;
     for (float c : cocs) {
-        const size_t b = size_t(std::clamp(int64_t(std::floor(c / step)) - first, int64_t(0), int64_t(n) - 1));
-        sum[b] += c;
-        ++count[b];
+        const auto at = std::lower_bound(values.begin(), values.end(), c);
+        if (at != values.end() && *at == c)
+            continue;
+        if (values.size() == most)
+            return {};
+        values.insert(at, c);
     }
-    std::vector<float> means;
-    for (size_t b = 0; b < n; ++b)
-        if (count[b])
-            means.push_back(float(sum[b] / double(count[b])));
-    return means;
+    return values;
+}
+
+// The rungs of a fixed grid `step` apart that the frame's CoCs need: for each CoC the grid
+// point at or below it and, unless it lies on one, the next above (ascending). A pixel is
+// then shared between the two grid points around its CoC (share_between): where a rung
+// lies depends on the CoC alone, not on which other CoCs the frame holds, so a surface
+// whose CoC changes smoothly (a focus pull, a dolly) changes the picture smoothly. A CoC on
+// a grid point (planes at whole and quarter pixels), or at either end of the frame's range,
+// has its own kernel exactly.
+std::vector<float> coc_grid_rungs(const std::vector<float>& cocs, float lo, float hi, float step)
+{
+    const int64_t first = int64_t(std::floor(lo / step)), last = int64_t(std::floor(hi / step)) + 1;
+    std::vector<uint8_t> used(size_t(last - first + 1), 0);
+    for (float c : cocs) {
+        const int64_t k = std::clamp(int64_t(std::floor(c / step)), first, last - 1);
+        used[size_t(k - first)] = 1;
+        if (c != float(double(k) * step))
+            used[size_t(k + 1 - first)] = 1;
+    }
+    // The outermost rungs are the frame's extreme CoCs themselves (they move smoothly with
+    // the frame), so no kernel is larger than the largest CoC the output region was grown for.
+    std::vector<float> rungs;
+    for (size_t i = 0; i < used.size(); ++i)
+        if (used[i]) {
+            const float r = std::clamp(float(double(first + int64_t(i)) * step), lo, hi);
+            if (rungs.empty() || r > rungs.back())
+                rungs.push_back(r);
+        }
+    return rungs;
+}
+
+// The exact rungs of a frame: its CoC values when it holds few (each pixel then in one
+// layer, its own), else the grid points `step` apart around them (coc_grid_rungs).
+std::vector<float> exact_rungs(const std::vector<float>& cocs, float lo, float hi, float step)
+{
+    std::vector<float> rungs = few_distinct_cocs(cocs, kMaxExactRungs);
+    return rungs.empty() ? coc_grid_rungs(cocs, lo, hi, step) : rungs;
 }
 
 // Layer settings an accuracy budget asks for: the ladder's ratio r and the smallest reduced
@@ -124,14 +165,11 @@ float min_reduced_coc_px(const DefocusOptions& o)
 
 }  // namespace
 
-// The reference's layers: one per occupied CoC bin `step` wide, at the bin's mean CoC
-// (exact when a bin holds one value, as in scenes of few depths). Each pixel is shared
-// between the two layers around its CoC (share_between), not moved onto its bin's: a
-// surface whose CoC changes smoothly (a focus pull, a dolly) then changes the picture
-// smoothly instead of hopping from bin to bin.
+// The reference's layers: exact_rungs, each pixel shared between the two around its CoC,
+// all at full resolution.
 Membership detail::one_layer_per_coc(const Frame& f, float lo, float hi, float step, int nthreads)
 {
-    Membership m = share_between_rungs(f, coc_bin_means(f.coc, lo, hi, step), nthreads);
+    Membership m = share_between_rungs(f, exact_rungs(f.coc, lo, hi, step), nthreads);
     m.reduction.assign(m.coc_px.size(), 1);
     return m;
 }
@@ -181,7 +219,7 @@ std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const Def
     std::vector<float> rungs;
     if (o.layers == 0) {
         if (exact_allowed && (hi - lo) / kRungStep_px < 1e6f) {
-            rungs = coc_bin_means(cocs, lo, hi, kRungStep_px);
+            rungs = exact_rungs(cocs, lo, hi, kRungStep_px);
             if (rungs.size() > kMaxExactRungs)
                 rungs.clear();
         }

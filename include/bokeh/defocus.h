@@ -123,6 +123,12 @@ struct DefocusOptions {
     /// (0..1) as the layers' tiles are blurred, each weighted by its kernel's size; from
     /// one thread at a time, in rising order. Empty: nothing is counted.
     std::function<void(float)> progress;
+    /// A flat defocus calls this once it holds the source's pixels in its own form and
+    /// reads `src` no more (not even its spec): a caller that owns the only copy of the
+    /// source may free it there, so the source and the result are never both held (a 4K
+    /// RGBA + Z float frame is 166 MB). `src` must not be used by the defocus's caller
+    /// after it either. Empty: nothing is called.
+    std::function<void()> source_done;
 };
 
 /// What a defocus decided and found, for `-v` and for tests.

@@ -89,7 +89,14 @@ bool defocus_command(CommandContext& c)
     else {
         bokeh::DefocusReport report;
         o.progress = c.progress;
-        ok         = bokeh::defocus(*out.buf, *in.buf, o, &report, c.nthreads);
+        // The popped input is this command's alone (a copy kept elsewhere, as --dup makes,
+        // holds its own reference): once the defocus holds its pixels, let it go. Neither
+        // `in.buf` nor the source is read after the call.
+        o.source_done = [&]() {
+            in.buf.reset();
+            c.inputs[0].buf.reset();
+        };
+        ok = bokeh::defocus(*out.buf, *in.buf, o, &report, c.nthreads);
         if (ok && c.verbosity >= 2) {
             c.message("  defocus " + report.summary);
             std::string layers;
@@ -166,7 +173,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Bool("grow", true, "grow the data window to hold the bokeh (within the display window)"),
         OptionSpec::Choice("nonfinite", { "zero", "error" },
                            "NaN/Inf: colour -> 0, depth -> far (counted, warned); or fail"),
-        OptionSpec::Float("step", 0.25, 1.0 / 64.0, 8.0, "reference: CoC quantisation step px"),
+        OptionSpec::Float("step", 0.25, 1.0 / 64.0, 8.0,
+                          "reference: spacing px of the CoC grid its layers lie on (a pixel shared between the two around its CoC)"),
         OptionSpec::Int("views", 1, 1, 8,
                         "layers, reference: the aperture cut into views x views sub-apertures, the layers "
                         "composited for each (a blurred silhouette hides the background along its own rays; "

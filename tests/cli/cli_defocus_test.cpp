@@ -279,7 +279,7 @@ TEST(CliDefocus, CocOptionsDoWhatTheySay)
 
 // More options against what they mean: sensor= scales the CoC in pixels by the film back
 // (CoC px = CoC mm x width px / sensor mm: half the back, twice the CoC); the reference
-// makes a layer for each step=-wide CoC bin a pixel falls in; sprites= caps the highlights
+// makes a layer for each point of a step=-wide grid next to a pixel's CoC; sprites= caps the highlights
 // drawn with the lens's PSF; supersample=2 doubles the output's pixels.
 TEST(CliDefocus, SensorStepSpritesSupersample)
 {
@@ -303,15 +303,26 @@ TEST(CliDefocus, SensorStepSpritesSupersample)
             EXPECT_NEAR(half.getchannel(x, y, 0, 0), 2.0f * c, 1e-5f * (1.0f + std::abs(c))) << x << "," << y;
         }
 
-    // The reference: a layer for each step-wide CoC bin (on the grid of whole steps) that
-    // some pixel's CoC falls in, counted here from the CoC map.
+    // The reference (a frame of more than 64 distinct CoCs): a layer for each point of the
+    // grid of whole steps next to some pixel's CoC (the one at or below it, and the one
+    // above unless the CoC lies on the grid), the outermost moved onto the frame's extreme
+    // CoCs; counted here from the CoC map.
     auto occupied_bins = [&](double step) {
-        std::vector<long> bins;
+        double lo = 1e30, hi = -1e30;
         for (int y = 0; y < 108; ++y)
-            for (int x = 0; x < 192; ++x)
-                bins.push_back(long(std::floor(full.getchannel(x, y, 0, 0) / step)));
-        std::sort(bins.begin(), bins.end());
-        return int(std::unique(bins.begin(), bins.end()) - bins.begin());
+            for (int x = 0; x < 192; ++x) {
+                lo = std::min(lo, double(full.getchannel(x, y, 0, 0)));
+                hi = std::max(hi, double(full.getchannel(x, y, 0, 0)));
+            }
+        std::vector<double> points;
+        for (int y = 0; y < 108; ++y)
+            for (int x = 0; x < 192; ++x) {
+                const double c = full.getchannel(x, y, 0, 0);
+                points.push_back(std::clamp(std::floor(c / step) * step, lo, hi));
+                points.push_back(std::clamp(std::ceil(c / step) * step, lo, hi));
+            }
+        std::sort(points.begin(), points.end());
+        return int(std::unique(points.begin(), points.end()) - points.begin());
     };
     auto layers = [&](const char* step) {
         RunResult v = bokehtool(format("-v {} --defocus:focus=6:fstop=2:method=reference:step={} -o {}/ref.exr", scene,

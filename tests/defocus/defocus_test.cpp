@@ -627,49 +627,72 @@ TEST(DefocusTemporal, FocusPullDoesNotPop)
     }
 }
 
-TEST(DefocusTemporal, FocusPullIsAsSmoothAsTheThinLensTruth)
+TEST(DefocusTemporal, PullAndDollyAreAsSteadyAsTheThinLensTruth)
 {
-    // The slanted plane of FocusPullDoesNotPop through the same pull, against the thin-lens
-    // truth of the same plane (rays through its deep image, 256 a pixel, two seeds: the
-    // figure's cross products cancel the rays' noise; 1024 rays give 0.647 where 256 give
-    // 0.648). Measured: truth 0.648, default 0.635, reference 0.619. The default and the
-    // reference may be no more than 1.5 times as unsteady as the truth.
-    const OIIO::ImageBuf src = slanted_plane();
-    OIIO::ImageBuf deep;
-    ASSERT_TRUE(deep_from_flat(deep, src)) << deep.geterror();
+    // The slanted plane of FocusPullDoesNotPop through two shots: the same focus pull
+    // (1.5 m -> 6 m), and a dolly (the plane moved 0 -> 0.5 m nearer, every depth changing,
+    // focus held at 3 m); each against the thin-lens truth of the same frames (rays through
+    // the plane's deep image, 256 a pixel, two seeds: the figure's cross products cancel
+    // the rays' noise; on the pull 1024 rays give 0.647 where 256 give 0.648). Measured:
+    // pull: truth 0.647, default 0.635, reference 0.643; dolly: truth 0.166, default 0.335,
+    // reference 0.339. On the pull the default and the reference may be no more than 1.5
+    // times as unsteady as the truth. On the dolly they are 2.0 times (a pixel's mix of two
+    // rungs changes slope as its CoC crosses a rung: a reference step of 1/16 px gives 0.272;
+    // docs/methods/defocus.md, "In time"); held within 2.5 times so that a step back shows.
+    const OIIO::ImageBuf plane = slanted_plane();
     CocOptions coc;
     coc.mode                 = DepthMode::Depth;
     coc.lens.focal_mm        = 85.0;
     coc.lens.fstop           = 1.4;
     coc.lens.sensor_width_mm = 36.0;
-    const std::vector<double> pull = focus_pull_m(1.5, 6.0, 24);
-    std::vector<OIIO::ImageBuf> truth[2];
-    for (int seed = 0; seed < 2; ++seed)
-        for (double focus : pull) {
-            TruthOptions t;
-            t.coc                     = coc;
-            t.coc.lens.focus_distance = focus;
-            t.spp                     = 256;
-            t.seed                    = uint32_t(seed + 1);
-            OIIO::ImageBuf out;
-            ASSERT_TRUE(defocus_truth(out, deep, t)) << out.geterror();
-            truth[seed].push_back(std::move(out));
+    for (const bool dolly : { false, true }) {
+        SCOPED_TRACE(dolly ? "dolly" : "pull");
+        const std::vector<double> pull = focus_pull_m(1.5, 6.0, 24);
+        std::vector<OIIO::ImageBuf> sources, deeps;
+        std::vector<double> focus;
+        for (int i = 0; i < 24; ++i) {
+            OIIO::ImageBuf src = plane;
+            if (dolly) {
+                const float nearer_m = 0.5f * float(i) / 23.0f;
+                for (OIIO::ImageBuf::Iterator<float> it(src); !it.done(); ++it)
+                    it[4] = it[4] - nearer_m;
+            }
+            OIIO::ImageBuf deep;
+            ASSERT_TRUE(deep_from_flat(deep, src)) << deep.geterror();
+            sources.push_back(std::move(src));
+            deeps.push_back(std::move(deep));
+            focus.push_back(dolly ? 3.0 : pull[size_t(i)]);
         }
-    const double truth_figure = second_to_first_difference(truth[0], truth[1]);
-    std::printf("[ figures  ] focus pull on the plane, rms second / first difference: truth %.3f\n", truth_figure);
-    EXPECT_GT(truth_figure, 0.3) << "the truth's pull is not steady: the plane's texture moves under the bokeh";
-    for (DefocusMethod m : { DefocusMethod::Auto, DefocusMethod::Reference }) {
-        DefocusOptions o;
-        o.method = m;
-        o.coc    = coc;
-        std::vector<OIIO::ImageBuf> frames;
-        for (double focus : pull) {
-            o.coc.lens.focus_distance = focus;
-            frames.push_back(run_defocus(src, o));
+        std::vector<OIIO::ImageBuf> truth[2];
+        for (int seed = 0; seed < 2; ++seed)
+            for (size_t i = 0; i < deeps.size(); ++i) {
+                TruthOptions t;
+                t.coc                     = coc;
+                t.coc.lens.focus_distance = focus[i];
+                t.spp                     = 256;
+                t.seed                    = uint32_t(seed + 1);
+                OIIO::ImageBuf out;
+                ASSERT_TRUE(defocus_truth(out, deeps[i], t)) << out.geterror();
+                truth[seed].push_back(std::move(out));
+            }
+        const double truth_figure = second_to_first_difference(truth[0], truth[1]);
+        std::printf("[ figures  ] %s on the plane, rms second / first difference: truth %.3f\n",
+                    dolly ? "dolly" : "focus pull", truth_figure);
+        EXPECT_GT(truth_figure, 0.1) << "the truth's shot is not steady: the plane's texture moves under the bokeh";
+        for (DefocusMethod m : { DefocusMethod::Auto, DefocusMethod::Reference }) {
+            DefocusOptions o;
+            o.method = m;
+            o.coc    = coc;
+            std::vector<OIIO::ImageBuf> frames;
+            for (size_t i = 0; i < sources.size(); ++i) {
+                o.coc.lens.focus_distance = focus[i];
+                frames.push_back(run_defocus(sources[i], o));
+            }
+            const double figure = second_to_first_difference(frames, frames);
+            std::printf("[ figures  ]   %-9s %.3f (%.2f of the truth's)\n", method_name(m), figure,
+                        figure / truth_figure);
+            EXPECT_LE(figure, (dolly ? 2.5 : 1.5) * truth_figure) << method_name(m);
         }
-        const double figure = second_to_first_difference(frames, frames);
-        std::printf("[ figures  ]   %-9s %.3f (%.2f of the truth's)\n", method_name(m), figure, figure / truth_figure);
-        EXPECT_LE(figure, 1.5 * truth_figure) << method_name(m);
     }
 }
 
@@ -708,6 +731,36 @@ TEST(DefocusTemporal, TheReferenceDoesNotStepOverLights)
                 figure[0], figure[1]);
     EXPECT_GT(figure[1], 0.1);
     EXPECT_LE(figure[0], 1.5 * figure[1]) << "the reference steps in time";
+}
+
+TEST(DefocusMemory, TheSourceCanBeFreedOnceTheFrameHoldsItsPixels)
+{
+    // source_done is called once, before the result is made; freeing the source there
+    // (as bokehtool does, so that a 4K frame's 166 MB source and its result are never both
+    // held) gives the same result bit for bit, and its metadata still reaches the result.
+    OIIO::ImageBuf plane = slanted_plane();
+    plane.specmod().attribute("Copyright", "a test plate");
+    for (DefocusMethod m : { DefocusMethod::Auto, DefocusMethod::Reference, DefocusMethod::Gather }) {
+        DefocusOptions o;
+        o.method                   = m;
+        o.coc.mode                 = DepthMode::Depth;
+        o.coc.lens.focal_mm        = 85.0;
+        o.coc.lens.fstop           = 1.4;
+        o.coc.lens.focus_distance  = 3.0;
+        const OIIO::ImageBuf kept  = run_defocus(plane, o);
+        auto source                = std::make_shared<OIIO::ImageBuf>(plane);
+        int calls                  = 0;
+        o.source_done              = [&] {
+            ++calls;
+            source.reset();
+        };
+        OIIO::ImageBuf freed;
+        ASSERT_TRUE(defocus(freed, *source, o)) << freed.geterror();
+        EXPECT_EQ(calls, 1) << method_name(m);
+        EXPECT_FALSE(source) << method_name(m);
+        EXPECT_EQ(error_of(freed, kept).max_abs, 0.0) << method_name(m);
+        EXPECT_EQ(freed.spec().get_string_attribute("Copyright"), "a test plate") << method_name(m);
+    }
 }
 
 // --- a CoC of half the frame --------------------------------------------------------------------
