@@ -107,8 +107,8 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
               "method=layers, auto or reference)";
         return false;
     }
-    if (o.aperture_views < 1 || o.aperture_views > 8) {
-        err = format("views {} is outside 1..8", o.aperture_views);
+    if (o.aperture_views < 0 || o.aperture_views > 8) {
+        err = format("views {} is outside 0..8", o.aperture_views);
         return false;
     }
     if (o.aperture_views > 1 && o.aperture.shape != KernelShape::Disk && o.aperture.shape != KernelShape::Polygon

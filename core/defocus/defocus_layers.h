@@ -162,11 +162,11 @@ Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step, int
 bool reference_layers(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads,
                       std::string& err);
 
-/// The rungs of the layered method for CoCs `cocs` spanning [lo, hi]: one per distinct
-/// CoC (0.25 px bins) for scenes of at most 64 (when `exact_allowed`), else the budget's
-/// geometric ladder; a rung at 0 always.
+/// The rungs of the layered method for CoCs `cocs` spanning [lo, hi]: the reference's
+/// (exact) rungs when there are at most 64 (and `exact_allowed`), else the budget's
+/// geometric ladder, its ratio at most `ladder_ratio` when that is > 0; a rung at 0 always.
 std::vector<float> layer_rungs(const std::vector<float>& cocs, const DefocusOptions& o, float lo,
-                               float hi, bool exact_allowed = true);
+                               float hi, bool exact_allowed = true, double ladder_ratio = 0.0);
 
 /// Where CoC `c` falls among ascending `rungs`: share 1 - upper in rung `lower`, `upper` in
 /// the next, keeping the second moment (a disk's spread is proportional to its diameter);

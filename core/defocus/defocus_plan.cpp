@@ -202,10 +202,10 @@ void detail::share_between(float c, const std::vector<float>& r, uint16_t& lower
 }
 
 std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const DefocusOptions& o, float lo, float hi,
-                                       bool exact_allowed)
+                                       bool exact_allowed, double ladder_ratio)
 {
     const LayerSettings set = settings_for_budget(o.budget_db);
-    double ratio            = set.ratio;
+    double ratio            = ladder_ratio > 0.0 ? std::min(ladder_ratio, set.ratio) : set.ratio;
     if (o.layers > 0) {
         // The ratio that puts o.layers rungs (0 and both sides) over the range.
         const double span = std::log(std::max(1.0f, -lo)) + std::log(std::max(1.0f, hi));

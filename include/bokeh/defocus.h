@@ -85,8 +85,12 @@ struct DefocusOptions {
     /// averages, which shows at a defocused silhouette over a defocused background. Cost:
     /// views^2 passes over the layers, each blurring with kernels about 1 / views as tall
     /// (the deep reference on LowResLeftView: 3.4x the time in 4 x 4 views). Disk, polygon
-    /// and box apertures (a pupil with an edge to cut within). 1: off.
-    int aperture_views = 1;
+    /// and box apertures (a pupil with an edge to cut within). 1: off. 0: the planner's
+    /// choice: 1 for a flat image (whose hidden background is invented anyway: nothing
+    /// measurable to gain); for a deep image under method=auto with a flat result, 2 when
+    /// it records surfaces behind its defocused samples (more than 1 % of its pixels hold
+    /// samples whose CoCs differ by more than 1 px), else 1.
+    int aperture_views = 0;
     /// A deep input's result as a deep image: one sample a layer per pixel, each a volume
     /// over its layer's depth range; its flatten is the flat result.
     bool deep_output = false;

@@ -175,10 +175,11 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                            "NaN/Inf: colour -> 0, depth -> far (counted, warned); or fail"),
         OptionSpec::Float("step", 0.25, 1.0 / 64.0, 8.0,
                           "reference: spacing px of the CoC grid its layers lie on (a pixel shared between the two around its CoC)"),
-        OptionSpec::Int("views", 1, 1, 8,
+        OptionSpec::Int("views", 0, 0, 8,
                         "layers, reference: the aperture cut into views x views sub-apertures, the layers "
                         "composited for each (a blurred silhouette hides the background along its own rays; "
-                        "views^2 passes with kernels 1/views as tall: 3.4x the time at views=4)"),
+                        "views^2 passes with kernels 1/views as tall: 3.4x the time at views=4); 0: 1 for a "
+                        "flat image, 2 for a deep one recording surfaces behind its defocused samples (method=auto)"),
         OptionSpec::Int("spp", 64, 1, 1048576, "truth: rays a pixel (the noise falls as 1/sqrt(spp))"),
         OptionSpec::Int("seed", 1, 0, 2147483647, "truth: the sampling sequence's scramble"),
         OptionSpec::Choice("pixel", { "centre", "area" },

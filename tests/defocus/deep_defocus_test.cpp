@@ -640,6 +640,43 @@ TEST(DefocusViews, LightIsKept)
     }
 }
 
+TEST(DefocusViews, ThePlannerCutsTheApertureWhereTheImageRecordsWhatItHides)
+{
+    // views=0 (the default) under method=auto: 2 x 2 views, and the finer ladder, for a deep
+    // image whose pixels record a surface behind a defocused one (the card over the hidden
+    // stripe): the same result, bit for bit, as asking for both; one view for the same
+    // picture deepened from its flatten (a sample a pixel: nothing recorded behind), for a
+    // deep result, and for method=layers.
+    const OIIO::ImageBuf deep = card_over_hidden_stripe(CardScene{});
+    DefocusOptions o = direct_options(DefocusMethod::Auto, Border::Black);
+    ASSERT_EQ(o.aperture_views, 0);
+    DefocusReport chosen;
+    const OIIO::ImageBuf planned = run_defocus(deep, o, &chosen);
+    EXPECT_NE(chosen.summary.find("2 x 2 views"), std::string::npos) << chosen.summary;
+    DefocusOptions asked = o;
+    asked.aperture_views = 2;
+    DefocusReport two;
+    const OIIO::ImageBuf explicit_views = run_defocus(deep, asked, &two);
+    EXPECT_EQ(chosen.layer_coc_px, two.layer_coc_px);
+    EXPECT_EQ(max_difference(planned, explicit_views), 0.0);
+
+    OIIO::ImageBuf flat, single;
+    ASSERT_TRUE(deep_flatten(flat, deep));
+    ASSERT_TRUE(deep_from_flat(single, flat));
+    DefocusReport one;
+    run_defocus(single, o, &one);
+    EXPECT_EQ(one.summary.find("views"), std::string::npos) << one.summary;
+    DefocusOptions layers = o;
+    layers.method         = DefocusMethod::Layers;
+    run_defocus(deep, layers, &one);
+    EXPECT_EQ(one.summary.find("views"), std::string::npos) << one.summary;
+    DefocusOptions deep_out = o;
+    deep_out.deep_output    = true;
+    OIIO::ImageBuf out;
+    ASSERT_TRUE(defocus(out, deep, deep_out, &one)) << out.geterror();
+    EXPECT_EQ(one.summary.find("views"), std::string::npos) << one.summary;
+}
+
 TEST(DefocusViews, BadOptionsAreRefused)
 {
     const OIIO::ImageBuf deep = card_over_hidden_stripe(CardScene{});
@@ -649,10 +686,10 @@ TEST(DefocusViews, BadOptionsAreRefused)
         return out.geterror();
     };
     DefocusOptions o  = direct_options(DefocusMethod::Layers, Border::Black);
-    o.aperture_views = 0;
-    EXPECT_NE(error_of(o).find("views 0 is outside 1..8"), std::string::npos);
+    o.aperture_views = -1;
+    EXPECT_NE(error_of(o).find("views -1 is outside 0..8"), std::string::npos);
     o.aperture_views = 9;
-    EXPECT_NE(error_of(o).find("views 9 is outside 1..8"), std::string::npos);
+    EXPECT_NE(error_of(o).find("views 9 is outside 0..8"), std::string::npos);
     o.aperture_views = 2;
     o.deep_output    = true;
     EXPECT_NE(error_of(o).find("a deep result keeps one sample a layer"), std::string::npos);

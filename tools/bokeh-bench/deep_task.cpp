@@ -151,11 +151,12 @@ bool against_truth(const TruthShot& shot, const BenchArgs& args, std::vector<std
         std::string name;
         const OIIO::ImageBuf* src;
         bokeh::DefocusMethod method;
-        int layers = 0, views = 1;  // DefocusOptions::layers, aperture_views
+        int layers = 0, views = 0;  // DefocusOptions::layers, aperture_views (0: the planner's)
     };
     const std::vector<Method> methods = {
         { "deep reference", shot.deep, bokeh::DefocusMethod::Reference },
         { "deep auto", shot.deep, bokeh::DefocusMethod::Auto },
+        { "deep auto views=1", shot.deep, bokeh::DefocusMethod::Auto, 0, 1 },
         { "deep layers=30 views=2", shot.deep, bokeh::DefocusMethod::Layers, 30, 2 },
         { "deep reference views=4", shot.deep, bokeh::DefocusMethod::Reference, 0, 4 },
         { "flat reference of the flatten", shot.flat, bokeh::DefocusMethod::Reference },
