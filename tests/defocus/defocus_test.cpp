@@ -533,6 +533,18 @@ OIIO::ImageBuf slanted_plane()
     });
 }
 
+// The plane's lens: 85 mm f/1.4 on a 36 mm back, Z in metres (focus to be set).
+DefocusOptions plane_lens(DefocusMethod m)
+{
+    DefocusOptions o;
+    o.method                   = m;
+    o.coc.mode                 = DepthMode::Depth;
+    o.coc.lens.focal_mm        = 85.0;
+    o.coc.lens.fstop           = 1.4;
+    o.coc.lens.sensor_width_mm = 36.0;
+    return o;
+}
+
 // Focus distances of a pull from `near_m` to `far_m` in `n` frames, evenly in 1 / distance
 // (as a focus ring turns).
 std::vector<double> focus_pull_m(double near_m, double far_m, int n)
@@ -595,12 +607,7 @@ TEST(DefocusTemporal, FocusPullDoesNotPop)
     const OIIO::ImageBuf src = slanted_plane();
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         SCOPED_TRACE(method_name(m));
-        DefocusOptions o;
-        o.method                   = m;
-        o.coc.mode                 = DepthMode::Depth;
-        o.coc.lens.focal_mm        = 85.0;
-        o.coc.lens.fstop           = 1.4;
-        o.coc.lens.sensor_width_mm = 36.0;
+        DefocusOptions o = plane_lens(m);
         std::vector<OIIO::ImageBuf> frames;
         for (int i = 0; i < 24; ++i) {
             o.coc.lens.focus_distance = 1.0 / (1.0 / 1.5 + (1.0 / 6.0 - 1.0 / 1.5) * i / 23.0);
@@ -640,11 +647,7 @@ TEST(DefocusTemporal, PullAndDollyAreAsSteadyAsTheThinLensTruth)
     // rungs changes slope as its CoC crosses a rung: a reference step of 1/16 px gives 0.272;
     // docs/methods/defocus.md, "In time"); held within 2.5 times so that a step back shows.
     const OIIO::ImageBuf plane = slanted_plane();
-    CocOptions coc;
-    coc.mode                 = DepthMode::Depth;
-    coc.lens.focal_mm        = 85.0;
-    coc.lens.fstop           = 1.4;
-    coc.lens.sensor_width_mm = 36.0;
+    const CocOptions coc       = plane_lens(DefocusMethod::Auto).coc;
     for (const bool dolly : { false, true }) {
         SCOPED_TRACE(dolly ? "dolly" : "pull");
         const std::vector<double> pull = focus_pull_m(1.5, 6.0, 24);
@@ -741,13 +744,9 @@ TEST(DefocusMemory, TheSourceCanBeFreedOnceTheFrameHoldsItsPixels)
     OIIO::ImageBuf plane = slanted_plane();
     plane.specmod().attribute("Copyright", "a test plate");
     for (DefocusMethod m : { DefocusMethod::Auto, DefocusMethod::Reference, DefocusMethod::Gather }) {
-        DefocusOptions o;
-        o.method                   = m;
-        o.coc.mode                 = DepthMode::Depth;
-        o.coc.lens.focal_mm        = 85.0;
-        o.coc.lens.fstop           = 1.4;
-        o.coc.lens.focus_distance  = 3.0;
-        const OIIO::ImageBuf kept  = run_defocus(plane, o);
+        DefocusOptions o          = plane_lens(m);
+        o.coc.lens.focus_distance = 3.0;
+        const OIIO::ImageBuf kept = run_defocus(plane, o);
         auto source                = std::make_shared<OIIO::ImageBuf>(plane);
         int calls                  = 0;
         o.source_done              = [&] {
