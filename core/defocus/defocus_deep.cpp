@@ -517,6 +517,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     Membership m;
     double zlo, zhi;
     DefocusOptions plan = o;  // the options with the planner's choices (views, ladder) made
+    double layered_share = 0.0;  // of the pixels with samples: those recording one behind another
     {
         const SampleCocs sc       = sample_cocs(dd, ch, coc_of);
         const auto [lo_it, hi_it] = std::minmax_element(sc.cocs.begin(), sc.cocs.end());
@@ -526,7 +527,8 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         // A deep image that records surfaces behind its defocused samples: each sub-aperture
         // sees them past a blurred edge on its own side (views), and point samples get a
         // finer ladder (the constants' measurements above).
-        const bool records_hidden = double(sc.layered_pixels) > kLayeredShare * double(sc.pixels);
+        layered_share             = sc.pixels > 0 ? double(sc.layered_pixels) / double(sc.pixels) : 0.0;
+        const bool records_hidden = layered_share > kLayeredShare;
         const bool pupil = o.aperture.shape == KernelShape::Disk || o.aperture.shape == KernelShape::Polygon
                            || o.aperture.shape == KernelShape::Box;
         const bool planner = o.method == DefocusMethod::Auto;
@@ -602,7 +604,13 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     report_sprites(rep, f.sprites.get());
     rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers{}, output {}x{}{}{}{}", method_name(rep.method),
                          rep.min_coc_px, rep.max_coc_px, K,
-                         plan.aperture_views > 1 ? format(", {0} x {0} views", plan.aperture_views) : std::string(),
+                         plan.aperture_views > 1
+                             ? format(", {0} x {0} views{1}", plan.aperture_views,
+                                      o.aperture_views == 0
+                                          ? format(" ({:.0f} % of the pixels hold samples over 1 px of CoC apart)",
+                                                   100.0 * layered_share)
+                                          : std::string())
+                             : std::string(),
                          f.out.width() * f.up, f.out.height() * f.up,
                          o.deep_output ? ", deep" : "",
                          repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string(),
