@@ -762,6 +762,43 @@ TEST(DefocusMemory, TheSourceCanBeFreedOnceTheFrameHoldsItsPixels)
     }
 }
 
+TEST(DefocusBloom, WhatLiesAboveTheThresholdIsMultipliedByTheGain)
+{
+    // In focus (CoC 0 everywhere: the layers copy each pixel) the result is the bloomed
+    // source itself, so bloom can be read pixel by pixel against its definition: an
+    // unpremultiplied value x above the threshold t becomes t + gain (x - t) (ZDefocus's
+    // bloom), per channel; below or at t it is kept; premultiplied by alpha again after.
+    // t = 1, gain 3: 0.5 -> 0.5, 1 -> 1, 2 -> 4, 10 -> 28; with alpha 0.5, the
+    // premultiplied 1 (x = 2) -> 2.
+    const float xs[4] = { 0.5f, 1.0f, 2.0f, 10.0f };
+    const OIIO::ImageBuf src = make_image(4, 2, [&](int x, int y) {
+        Px p;
+        p.a = y == 0 ? 1.0f : 0.5f;
+        p.r = xs[x] * p.a;
+        p.g = 0.25f * p.a;  // below the threshold: kept
+        p.b = 2.0f * xs[x] * p.a;
+        return p;
+    });
+    for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+        DefocusOptions o         = direct_options(m, Border::Clamp);
+        o.bloom_threshold        = 1.0f;
+        o.bloom_gain             = 3.0f;
+        const OIIO::ImageBuf out = run_defocus(src, o);
+        auto bloomed = [](float x) { return x > 1.0f ? 1.0f + 3.0f * (x - 1.0f) : x; };
+        for (int y = 0; y < 2; ++y)
+            for (int x = 0; x < 4; ++x) {
+                const float a = y == 0 ? 1.0f : 0.5f;
+                EXPECT_NEAR(at(out, x, y, 0), bloomed(xs[x]) * a, 1e-5f) << method_name(m) << " " << x << "," << y;
+                EXPECT_NEAR(at(out, x, y, 1), 0.25f * a, 1e-6f) << method_name(m) << " " << x << "," << y;
+                EXPECT_NEAR(at(out, x, y, 2), bloomed(2.0f * xs[x]) * a, 1e-5f) << method_name(m) << " " << x << "," << y;
+                EXPECT_NEAR(at(out, x, y, 3), a, 1e-6f) << method_name(m) << " " << x << "," << y;
+            }
+        o.bloom_gain = 1.0f;  // off: the source
+        const OIIO::ImageBuf off = run_defocus(src, o);
+        EXPECT_NEAR(at(off, 3, 0, 0), 10.0f, 1e-5f) << method_name(m);
+    }
+}
+
 // --- a CoC of half the frame --------------------------------------------------------------------
 
 namespace {
