@@ -602,16 +602,13 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                         : write_flat_result(dst, src, f, m, plan, kFilledShare, nthreads, err)))
         return fail(err);
     report_sprites(rep, f.sprites.get());
+    std::string views;  // the views, and why when the planner took them
+    if (plan.aperture_views > 1)
+        views = format(", {0} x {0} views", plan.aperture_views);
+    if (plan.aperture_views > 1 && o.aperture_views == 0)
+        views += format(" ({:.0f} % of the pixels hold samples over 1 px of CoC apart)", 100.0 * layered_share);
     rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers{}, output {}x{}{}{}{}", method_name(rep.method),
-                         rep.min_coc_px, rep.max_coc_px, K,
-                         plan.aperture_views > 1
-                             ? format(", {0} x {0} views{1}", plan.aperture_views,
-                                      o.aperture_views == 0
-                                          ? format(" ({:.0f} % of the pixels hold samples over 1 px of CoC apart)",
-                                                   100.0 * layered_share)
-                                          : std::string())
-                             : std::string(),
-                         f.out.width() * f.up, f.out.height() * f.up,
+                         rep.min_coc_px, rep.max_coc_px, K, views, f.out.width() * f.up, f.out.height() * f.up,
                          o.deep_output ? ", deep" : "",
                          repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string(),
                          sprite_summary(rep));
