@@ -68,6 +68,10 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
         err = format("layers {} is outside 0..1024 (0: automatic)", o.layers);
         return false;
     }
+    if (!(o.ladder_ratio == 0.0f || (o.ladder_ratio >= 1.0f && o.ladder_ratio <= 16.0f))) {
+        err = format("ladder ratio {} is outside 1..16 (0: the planner's)", o.ladder_ratio);
+        return false;
+    }
     // Any bound 1..16: the buffers are powers of two, the largest up to it (reduction_for).
     if (o.max_reduction < 1 || o.max_reduction > 16) {
         err = format("max reduction {} is outside 1..16", o.max_reduction);
@@ -210,7 +214,7 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         }
         break;
     default: {
-        const Membership m  = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads);
+        const Membership m  = layer_plan(f, opts, rep.min_coc_px, rep.max_coc_px, nthreads, &rep.plans);
         rep.layer_coc_px    = m.coc_px;
         rep.layer_reduction = m.reduction;
         if (!composite_layers(out, f, m, opts, nthreads, err)) {

@@ -148,9 +148,47 @@ bool prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o,
 /// when iris mode is off).
 void from_iris_space(Plane& p, const IrisSpace& iris);
 
-/// The Layers method's plan over the frame's CoC range [lo, hi]: rungs, each pixel's
-/// shares, each layer's reduction.
-Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads);
+/// A plan of the Layers method: its rungs (ascending CoCs) and each one's buffer reduction.
+struct LayerPlan {
+    std::vector<float> coc_px;
+    std::vector<int> reduction;
+};
+
+/// The flat Layers method's plan over the frame's CoC range [lo, hi]
+/// (core/defocus/defocus_planner.cpp): the options' where they fix it (layers,
+/// ladder_ratio, min_reduced_coc_px), else the budget's steps or, under the predicted
+/// planner, the cheapest it predicts meets the budget; every plan weighed into
+/// `considered`, cheapest first.
+LayerPlan choose_layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads,
+                            std::vector<DefocusPlanEstimate>& considered);
+
+/// The Layers method's plan over the frame's CoC range [lo, hi] (choose_layer_plan), with
+/// each pixel's shares; the plans weighed into `considered` when given.
+Membership layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads,
+                      std::vector<DefocusPlanEstimate>* considered = nullptr);
+
+/// The geometric ladder over [lo, hi]: 0, +-1, +-r, +-r^2 ... on each side, the last rung
+/// moved onto the extreme so it gets its exact kernel.
+std::vector<float> coc_ladder(float lo, float hi, double ratio);
+
+/// The exact rungs of CoCs `cocs` spanning [lo, hi], with a rung at 0: each CoC when the
+/// frame holds at most 64, else the 0.25 px grid points around them; empty when there are
+/// more than `most`.
+std::vector<float> exact_layer_rungs(const std::vector<float>& cocs, float lo, float hi, size_t most);
+
+/// The smallest reduced kernel diameter of the steps: the user's, or the budget's.
+float layer_min_reduced_coc_px(const DefocusOptions& o);
+
+/// The ladder ratio that puts `layers` rungs (0 and both sides) over [lo, hi].
+double ratio_for_count(int layers, float lo, float hi);
+
+/// The smallest reduced kernel the flat planner may choose (the output region leaves room
+/// for the spill of a buffer reduced that far).
+constexpr float kSmallestReducedCocPx = 8.0f;
+
+/// The reduction for a layer of CoC c: the largest power of two s <= max_reduction that
+/// leaves a kernel of at least q reduced pixels.
+int reduction_for(float c, float q, int max_reduction);
 
 /// The Reference's layers: the points of a grid `step` apart around the frame's CoCs, all
 /// at full resolution; each pixel shared between the two around its CoC.

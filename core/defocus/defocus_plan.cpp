@@ -38,27 +38,6 @@ using namespace detail;
 
 namespace {
 
-// The layered method's CoC ladder over [lo, hi]: 0, then +-1, +-r, +-r^2 ... on each side
-// up to the extreme, the last rung moved onto the extreme so it gets its exact kernel.
-std::vector<float> coc_ladder(float lo, float hi, double ratio)
-{
-    std::vector<float> rungs = { 0.0f };
-    for (int side = -1; side <= 1; side += 2) {
-        const float extreme = side < 0 ? -lo : hi;
-        if (extreme <= 0.0f)
-            continue;
-        for (double r = 1.0;; r *= ratio) {
-            if (r >= extreme * 0.999) {
-                rungs.push_back(float(side) * extreme);
-                break;
-            }
-            rungs.push_back(float(side * r));
-        }
-    }
-    std::sort(rungs.begin(), rungs.end());
-    return rungs;
-}
-
 // Shares of every pixel in the ladder `rungs` (share_between).
 Membership share_between_rungs(const Frame& f, std::vector<float> rungs, int nthreads)
 {
@@ -146,22 +125,6 @@ LayerSettings settings_for_budget(float budget_db)
     return { 1.0625, 96.0f };
 }
 
-// The reduction for a layer of CoC c: the largest power of two s <= max_reduction that
-// leaves a kernel of at least q reduced pixels.
-int reduction_for(float c, float q, int max_reduction)
-{
-    int s = 1;
-    while (s * 2 <= max_reduction && std::abs(c) / float(s * 2) >= q)
-        s *= 2;
-    return s;
-}
-
-// The smallest reduced kernel diameter: the user's, or the budget's.
-float min_reduced_coc_px(const DefocusOptions& o)
-{
-    return o.min_reduced_coc_px > 0.0f ? o.min_reduced_coc_px
-                                       : settings_for_budget(o.budget_db).min_reduced_coc_px;
-}
 
 }  // namespace
 
@@ -174,11 +137,71 @@ Membership detail::one_layer_per_coc(const Frame& f, float lo, float hi, float s
     return m;
 }
 
-Membership detail::layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads)
+Membership detail::layer_plan(const Frame& f, const DefocusOptions& o, float lo, float hi, int nthreads,
+                              std::vector<DefocusPlanEstimate>* considered)
 {
-    Membership m = share_between_rungs(f, layer_rungs(f.coc, o, lo, hi), nthreads);
-    m.reduction  = layer_reductions(m.coc_px, o);
+    std::vector<DefocusPlanEstimate> weighed;
+    LayerPlan plan = choose_layer_plan(f, o, lo, hi, nthreads, weighed);
+    if (considered)
+        *considered = std::move(weighed);
+    Membership m = share_between_rungs(f, std::move(plan.coc_px), nthreads);
+    m.reduction  = std::move(plan.reduction);
     return m;
+}
+
+std::vector<float> detail::coc_ladder(float lo, float hi, double ratio)
+{
+    std::vector<float> rungs = { 0.0f };
+    for (int side = -1; side <= 1; side += 2) {
+        const float extreme = side < 0 ? -lo : hi;
+        if (extreme <= 0.0f)
+            continue;
+        for (double r = 1.0;; r *= ratio) {
+            if (r >= extreme * 0.999) {
+                rungs.push_back(float(side) * extreme);
+                break;
+            }
+            rungs.push_back(float(side * r));
+        }
+    }
+    std::sort(rungs.begin(), rungs.end());
+    return rungs;
+}
+
+int detail::reduction_for(float c, float q, int max_reduction)
+{
+    int s = 1;
+    while (s * 2 <= max_reduction && std::abs(c) / float(s * 2) >= q)
+        s *= 2;
+    return s;
+}
+
+float detail::layer_min_reduced_coc_px(const DefocusOptions& o)
+{
+    return o.min_reduced_coc_px > 0.0f ? o.min_reduced_coc_px
+                                       : settings_for_budget(o.budget_db).min_reduced_coc_px;
+}
+
+double detail::ratio_for_count(int layers, float lo, float hi)
+{
+    const double span = std::log(std::max(1.0f, -lo)) + std::log(std::max(1.0f, hi));
+    const int sides   = (lo < -1.0f ? 1 : 0) + (hi > 1.0f ? 1 : 0);
+    const int steps   = std::max(1, layers - 1 - sides);
+    return span > 0.0 ? std::max(std::exp(span / steps), 1.01) : 2.0;
+}
+
+std::vector<float> detail::exact_layer_rungs(const std::vector<float>& cocs, float lo, float hi, size_t most)
+{
+    if (!((hi - lo) / kRungStep_px < 1e6f))
+        return {};
+    std::vector<float> rungs = exact_rungs(cocs, lo, hi, kRungStep_px);
+    if (rungs.size() > most)
+        return {};
+    // A rung at 0, so no two neighbouring rungs lie on opposite sides of focus (the
+    // shares keep the second moment of one side's disks).
+    if (!std::binary_search(rungs.begin(), rungs.end(), 0.0f))
+        rungs.insert(std::upper_bound(rungs.begin(), rungs.end(), 0.0f), 0.0f);
+    return rungs;
 }
 
 void detail::share_between(float c, const std::vector<float>& r, uint16_t& lower, float& upper)
@@ -206,28 +229,13 @@ std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const Def
 {
     const LayerSettings set = settings_for_budget(o.budget_db);
     double ratio            = ladder_ratio > 0.0 ? std::min(ladder_ratio, set.ratio) : set.ratio;
-    if (o.layers > 0) {
-        // The ratio that puts o.layers rungs (0 and both sides) over the range.
-        const double span = std::log(std::max(1.0f, -lo)) + std::log(std::max(1.0f, hi));
-        const int sides   = (lo < -1.0f ? 1 : 0) + (hi > 1.0f ? 1 : 0);
-        const int steps   = std::max(1, o.layers - 1 - sides);
-        ratio             = span > 0.0 ? std::exp(span / steps) : 2.0;
-        ratio             = std::max(ratio, 1.01);
-    }
+    if (o.layers > 0)
+        ratio = ratio_for_count(o.layers, lo, hi);
     // A scene of few depths (planes, a handful of lights) gets one rung per CoC it holds,
     // so its layers are exact but for the reductions; others get the ladder.
     std::vector<float> rungs;
-    if (o.layers == 0) {
-        if (exact_allowed && (hi - lo) / kRungStep_px < 1e6f) {
-            rungs = exact_rungs(cocs, lo, hi, kRungStep_px);
-            if (rungs.size() > kMaxExactRungs)
-                rungs.clear();
-        }
-        // A rung at 0, so no two neighbouring rungs lie on opposite sides of focus (the
-        // shares keep the second moment of one side's disks).
-        if (!rungs.empty() && !std::binary_search(rungs.begin(), rungs.end(), 0.0f))
-            rungs.insert(std::upper_bound(rungs.begin(), rungs.end(), 0.0f), 0.0f);
-    }
+    if (o.layers == 0 && exact_allowed)
+        rungs = exact_layer_rungs(cocs, lo, hi, kMaxExactRungs);
     if (rungs.empty())
         rungs = coc_ladder(lo, hi, ratio);
     return rungs;
@@ -236,7 +244,7 @@ std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const Def
 std::vector<int> detail::layer_reductions(const std::vector<float>& rungs, const DefocusOptions& o)
 {
     std::vector<int> r;
-    const float q = min_reduced_coc_px(o);
+    const float q = layer_min_reduced_coc_px(o);
     for (float c : rungs)
         r.push_back(reduction_for(c, q, o.max_reduction));
     return r;
@@ -254,7 +262,11 @@ OIIO::ROI detail::defocus_output_region(const OIIO::ImageSpec& s, const OIIO::RO
         // enlargement).
         int spill = 0;
         if (o.method == DefocusMethod::Auto || o.method == DefocusMethod::Layers) {
-            const int r = reduction_for(extreme, min_reduced_coc_px(o), o.max_reduction);
+            // The predicted planner may reduce down to kSmallestReducedCocPx.
+            const float q = o.planner == DefocusPlanner::Predicted && o.min_reduced_coc_px == 0.0f
+                                ? kSmallestReducedCocPx
+                                : layer_min_reduced_coc_px(o);
+            const int r   = reduction_for(extreme, q, o.max_reduction);
             spill       = r > 1 ? (3 * r + 1) / 2 : 0;
         }
         const int gx = int(std::ceil(0.5f * extreme)) + spill;

@@ -36,6 +36,12 @@ enum class DisocclusionFill {
     Mirror,      ///< the background's texture mirrored across the silhouette (Smooth where it cannot)
 };
 
+/// How the flat Layers method picks its plan (docs/methods/planner.md).
+enum class DefocusPlanner {
+    Steps,      ///< the budget's measured steps: exact rungs when at most 64, else a ladder
+    Predicted,  ///< the cheapest plan whose predicted PSNR clears the budget (error and cost models)
+};
+
 struct DefocusOptions {
     CocOptions coc;
     /// The aperture: shape, blades, rotation, curvature, hole, edge. Its size is ignored
@@ -45,13 +51,20 @@ struct DefocusOptions {
     DefocusMethod method = DefocusMethod::Auto;
     /// Layers: number of layers (0: from the CoC histogram and the budget).
     int layers = 0;
+    /// Layers: the ratio between neighbouring rungs of the CoC ladder (> 1), or 1 for the
+    /// exact rungs (a layer per CoC the frame holds, or per point of the 0.25 px grid
+    /// around them). 0: the planner's.
+    float ladder_ratio = 0.0f;
+    /// Flat Layers and Auto: how the plan the options leave open is chosen.
+    DefocusPlanner planner = DefocusPlanner::Steps;
     /// Layers: coarsest buffer reduction (1 = all at full resolution; 1, 2, 4, 8, 16).
     int max_reduction = 16;
     /// Layers: smallest kernel diameter, in reduced pixels, before a layer may be reduced
     /// (0: from the budget). Larger keeps more layers at full resolution.
     float min_reduced_coc_px = 0.0f;
     /// Auto: the PSNR (dB, after the bench's tone map) the result should reach against
-    /// the reference; sets the layer spacing and the reductions.
+    /// the reference: the steps' ladder ratio and smallest reduced kernel, or the target of
+    /// the predicted planner (docs/methods/planner.md).
     float budget_db = 40.0f;
     /// Highlights: colour above `bloom_threshold` (unpremultiplied, per channel) is
     /// multiplied by `bloom_gain` before the blur (ZDefocus's bloom). Gain 1 = off.
@@ -135,11 +148,26 @@ struct DefocusOptions {
     std::function<void()> source_done;
 };
 
+/// One plan the flat Layers planner weighed: its ladder (ratio 1: the exact rungs, 0: the
+/// budget's steps), its smallest reduced kernel (infinity: every layer at full resolution),
+/// its layer count, and what the predicted planner predicted of it (0 under the steps).
+struct DefocusPlanEstimate {
+    float ladder_ratio       = 1.0f;
+    float min_reduced_coc_px = 0.0f;
+    int layers               = 0;
+    double predicted_psnr_db = 0.0;  ///< against the reference, after the bench's tone map
+    double predicted_ms      = 0.0;  ///< the layers' blur and composite on the threads given
+    bool chosen              = false;
+};
+
 /// What a defocus decided and found, for `-v` and for tests.
 struct DefocusReport {
     DefocusMethod method = DefocusMethod::Auto;  ///< the method that ran
     std::vector<float> layer_coc_px;  ///< Layers, Reference: each layer's CoC, front to back
     std::vector<int> layer_reduction; ///< Layers: each layer's buffer reduction
+    /// Flat Layers: the plans the planner weighed, cheapest first (the steps', or the
+    /// user's, alone when nothing was predicted).
+    std::vector<DefocusPlanEstimate> plans;
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
     NonFiniteCount nonfinite;
     /// Flat Layers and Reference: output pixels whose uncovered background was filled with

@@ -61,7 +61,7 @@ bool defocus_command(CommandContext& c)
             return c.fail("lens character (lens=, highlights=, sprites=, ...) is for the layered methods, not method=truth");
         if (what != "image")
             return c.fail(format("method=truth gives an image, not output={}", what));
-        for (const char* name : { "layers", "reduction", "budget", "bloom", "bloomgain", "iris", "zdilate",
+        for (const char* name : { "layers", "ratio", "planner", "reduction", "budget", "bloom", "bloomgain", "iris", "zdilate",
                                   "step", "border", "views", "fill" })
             if (c.options.given(name))
                 return c.fail(format("{}= does not apply to method=truth", name));
@@ -107,6 +107,25 @@ bool defocus_command(CommandContext& c)
             if (!layers.empty())
                 c.message(format("  layer CoC px (/reduction):{}{}", layers,
                                  report.layer_coc_px.size() > 64 ? " ..." : ""));
+            // The plans the planner weighed that no other beats on both time and accuracy.
+            std::string front;
+            int on_front = 0;
+            double best_db = -1e300;
+            for (const bokeh::DefocusPlanEstimate& p : report.plans) {  // cheapest first
+                if (p.predicted_psnr_db <= best_db && !p.chosen)
+                    continue;
+                best_db = std::max(best_db, p.predicted_psnr_db);
+                ++on_front;
+                front += format("\n    {:<9} {:<9} {:3} layers {:6.1f} dB {:8.1f} ms{}",
+                                p.ladder_ratio == 1.0f ? std::string("exact") : format("ratio {:.3g}", p.ladder_ratio),
+                                std::isinf(p.min_reduced_coc_px) ? std::string("full res")
+                                                                 : format("q {:g}", p.min_reduced_coc_px),
+                                p.layers, p.predicted_psnr_db, p.predicted_ms, p.chosen ? "  <- chosen" : "");
+            }
+            if (report.plans.size() > 1)
+                c.message(format("  planner: {} plans weighed against budget {:g} dB; {} on the time/accuracy "
+                                 "front (predicted, single thread):{}",
+                                 report.plans.size(), o.budget_db, on_front, front));
         }
         if (ok && report.nonfinite.total() > 0 && c.verbosity >= 1)
             c.message(format("  warning: {} non-finite colour and {} non-finite depth values "
@@ -156,6 +175,13 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("back", 1.0, 0.0, 1e3, "multiplies the CoC behind focus"),
         OptionSpec::Float("maxcoc", 512.0, 0.0, 8192.0, "largest CoC diameter in px"),
         OptionSpec::Int("layers", 0, 0, 1024, "layers: count (0: from the CoC range and budget)"),
+        OptionSpec::Float("ratio", 0.0, 0.0, 16.0,
+                          "layers: ratio between neighbouring rungs of the CoC ladder (1: the exact rungs; "
+                          "0: the planner's)"),
+        OptionSpec::Choice("planner", { "steps", "predicted" },
+                           "flat layers: steps: the budget's measured settings; predicted: the cheapest plan "
+                           "whose predicted PSNR clears the budget (-v lists the plans weighed; its error "
+                           "model reads 10 dB optimistic to 30 dB pessimistic: docs/methods/planner.md)"),
         OptionSpec::Int("reduction", 16, 1, 16, "layers: coarsest buffer reduction (buffers are 1/1, 1/2, 1/4, 1/8, 1/16: the largest power of two up to it)"),
         OptionSpec::String("budget", "40dB", "accuracy budget, PSNR against the reference"),
         OptionSpec::Float("bloom", 1.0, -1e30, 1e30, "bloom threshold (unpremultiplied colour)"),

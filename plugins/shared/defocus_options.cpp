@@ -190,6 +190,8 @@ bool defocus_options_from(const OptionValues& v, const OIIO::ImageSpec& spec, De
                                        : DefocusMethod::Auto;
     o.layers        = v.get_int("layers");
     o.max_reduction = v.get_int("reduction");
+    o.ladder_ratio  = float(v.get_float("ratio"));
+    o.planner       = v.get_string("planner") == "predicted" ? DefocusPlanner::Predicted : DefocusPlanner::Steps;
     std::string budget = v.get_string("budget");
     if (OIIO::Strutil::iends_with(budget, "db"))
         budget.resize(budget.size() - 2);

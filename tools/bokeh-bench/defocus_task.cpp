@@ -17,6 +17,8 @@
 #include <bokeh/scene.h>
 
 #include <algorithm>
+#include <cmath>
+#include <limits>
 #include <cstdio>
 #include <functional>
 
@@ -261,6 +263,76 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
             if (!a.images_dir.empty() && v.name.find("default") != std::string::npos
                 && (shot.name == "lights" || shot.name == "giant"))
                 write_lens_sheet(shot, out, a.images_dir, a.threads);
+        }
+    }
+    return true;
+}
+
+// The plans task: on each shot, the default (the budget's steps) and the plans the predicted
+// planner weighs (its run's report), a grid of them run and measured (in-process median
+// time, PSNR against the reference) beside what it predicted of them, and its choice.
+bool run_plans_task(const BenchArgs& a, std::vector<std::string>& rows)
+{
+    std::vector<Shot> all = shots(a);
+    const std::vector<float> ratios = { 1.0f, 1.0625f, 1.125f, 1.25f, 1.5f, 2.0f, 3.0f };
+    const std::vector<float> qs     = { 8.0f, 16.0f, 32.0f, 64.0f, 128.0f, std::numeric_limits<float>::infinity() };
+    std::printf("\n%-16s %-7s %-8s %6s %9s %9s %9s %9s\n", "scene", "ratio", "q", "layers", "pred dB", "PSNR dB",
+                "pred ms", "ms");
+    for (Shot& shot : all) {
+        bokeh::DefocusOptions ref_opts = shot.base;
+        ref_opts.method                = bokeh::DefocusMethod::Reference;
+        OIIO::ImageBuf ref;
+        if (!bokeh::defocus(ref, shot.image, ref_opts, nullptr, a.threads)) {
+            std::fprintf(stderr, "bokeh-bench: %s: %s\n", shot.name.c_str(), ref.geterror().c_str());
+            return false;
+        }
+        OIIO::ImageBuf out;
+        bokeh::DefocusReport rep;
+        bokeh::DefocusOptions predicted = shot.base;
+        predicted.planner               = bokeh::DefocusPlanner::Predicted;
+        if (!bokeh::defocus(out, shot.image, predicted, &rep, a.threads)) {
+            std::fprintf(stderr, "bokeh-bench: %s: %s\n", shot.name.c_str(), out.geterror().c_str());
+            return false;
+        }
+        // The steps' plan (the default) first.
+        {
+            bokeh::DefocusReport steps;
+            const double ms = median_ms([&] { bokeh::defocus(out, shot.image, shot.base, &steps, a.threads); }, a.reps);
+            bokeh::ImageError e;
+            std::string err;
+            bokeh::compare(e, out, ref, err, {}, a.threads);
+            const bokeh::DefocusPlanEstimate& p = steps.plans.at(0);
+            std::printf("%-16s %-7s %-8g %6d %9s %9.1f %9s %9.1f  (default: steps)\n", shot.name.c_str(), "steps",
+                        p.min_reduced_coc_px, p.layers, "", e.psnr_db, "", ms);
+            rows.push_back(format("{},0,{:g},{},,{:.2f},,{:.2f},{},steps", shot.name, p.min_reduced_coc_px, p.layers,
+                                  e.psnr_db, ms, a.threads));
+        }
+        for (const bokeh::DefocusPlanEstimate& p : rep.plans) {
+            const bool on_grid = p.chosen
+                                 || (std::find(qs.begin(), qs.end(), p.min_reduced_coc_px) != qs.end()
+                                     && std::any_of(ratios.begin(), ratios.end(), [&](float r) {
+                                            return std::abs(r - p.ladder_ratio) < 1e-3f;
+                                        }));
+            if (!on_grid)
+                continue;
+            bokeh::DefocusOptions o = shot.base;
+            o.method                = bokeh::DefocusMethod::Layers;
+            o.ladder_ratio          = p.ladder_ratio;
+            if (std::isinf(p.min_reduced_coc_px))
+                o.max_reduction = 1;
+            else
+                o.min_reduced_coc_px = p.min_reduced_coc_px;
+            const double ms = median_ms([&] { bokeh::defocus(out, shot.image, o, nullptr, a.threads); }, a.reps);
+            bokeh::ImageError e;
+            std::string err;
+            bokeh::compare(e, out, ref, err, {}, a.threads);
+            std::printf("%-16s %-7.4g %-8g %6d %9.1f %9.1f %9.1f %9.1f%s\n", shot.name.c_str(), p.ladder_ratio,
+                        p.min_reduced_coc_px, p.layers, p.predicted_psnr_db, e.psnr_db, p.predicted_ms, ms,
+                        p.chosen ? "  (planner=predicted)" : "");
+            std::fflush(stdout);
+            rows.push_back(format("{},{:g},{:g},{},{:.2f},{:.2f},{:.2f},{:.2f},{},{}", shot.name, p.ladder_ratio,
+                                  p.min_reduced_coc_px, p.layers, p.predicted_psnr_db, e.psnr_db, p.predicted_ms,
+                                  ms, a.threads, p.chosen ? "predicted" : ""));
         }
     }
     return true;

@@ -21,7 +21,8 @@
 // defocus (lens_task.cpp); --task truth-chain every step from the built-in scenes' geometric
 // thin-lens truth to the fast methods (truth_chain_task.cpp; its own CSV columns); --task
 // lensfit round trips of the lens fit, 8 x --reps random lenses (lens_fit_task.cpp; its
-// own columns).
+// own columns); --task plans the flat planner's predicted plans against measured ones
+// (defocus_task.cpp; its own columns).
 //
 //   bokeh-bench [--task blur|defocus|resample|iris|deep|lens|truth-chain] [--threads N] [--reps N] [--csv FILE] [--quick]
 //               [--size WxH] [--data DIR] [--images DIR] [--scenes a,b] [--image FILE]...
@@ -105,7 +106,7 @@ int main(int argc, char* argv[])
     std::string csv, task = "blur";
     bokeh_bench::BenchArgs args;
     std::vector<std::string> image_files;  // the blur task's frames from files
-    const char* usage = "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens|lensfit|truth-chain] "
+    const char* usage = "usage: bokeh-bench [--task blur|defocus|resample|iris|deep|optics|diffraction|lens|lensfit|truth-chain|plans] "
                         "[--threads N] [--reps N] [--csv FILE] [--quick] [--size WxH] [--data DIR] "
                         "[--images DIR] [--scenes a,b] [--image FILE]...\n";
     for (int i = 1; i < argc; ++i) {
@@ -128,7 +129,8 @@ int main(int argc, char* argv[])
                                                    || std::string(argv[i + 1]) == "diffraction"
                                                    || std::string(argv[i + 1]) == "lens"
                                                    || std::string(argv[i + 1]) == "lensfit"
-                                                   || std::string(argv[i + 1]) == "truth-chain"))
+                                                   || std::string(argv[i + 1]) == "truth-chain"
+                                                   || std::string(argv[i + 1]) == "plans"))
             task = argv[++i];
         else if (a == "--size" && i + 1 < argc
                  && std::sscanf(argv[i + 1], "%dx%d", &args.width, &args.height) == 2 && args.width > 0
@@ -180,6 +182,14 @@ int main(int argc, char* argv[])
     if (task == "lensfit") {  // round trips of the lens fit: its own columns
         rows.push_back(bokeh_bench::kLensFitCsvHeader);
         if (!bokeh_bench::run_lens_fit_task(quick ? 3 : 8 * reps, threads, rows))
+            return 1;
+        return write_csv(csv, rows);
+    }
+    if (task == "plans") {  // the flat planner's predictions against measurements: its own columns
+        rows.push_back(bokeh_bench::kPlansCsvHeader);
+        args.threads = threads;
+        args.reps    = reps;
+        if (!bokeh_bench::run_plans_task(args, rows))
             return 1;
         return write_csv(csv, rows);
     }
