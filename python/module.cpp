@@ -131,6 +131,25 @@ PYBIND11_MODULE(openbokeh, m)
                                "non-finite colour values replaced by 0")
         .def_property_readonly("nonfinite_depth", [](const bokeh::DefocusReport& r) { return r.nonfinite.depth; },
                                "NaN or -inf depth values taken as far")
+        .def_property_readonly(
+            "plans",
+            [](const bokeh::DefocusReport& r) {
+                py::list plans;
+                for (const bokeh::DefocusPlanEstimate& p : r.plans) {
+                    py::dict d;
+                    d["ladder_ratio"]       = p.ladder_ratio;
+                    d["min_reduced_coc_px"] = p.min_reduced_coc_px;
+                    d["layers"]             = p.layers;
+                    d["predicted_psnr_db"]  = p.predicted_psnr_db;
+                    d["predicted_ms"]       = p.predicted_ms;
+                    d["chosen"]             = p.chosen;
+                    plans.append(d);
+                }
+                return plans;
+            },
+            "flat layers: the plans the planner weighed, cheapest first, as dicts (ladder_ratio: 1 the exact "
+            "rungs, 0 the budget's steps; min_reduced_coc_px: inf at full resolution; predicted_psnr_db, "
+            "predicted_ms: planner='predicted' only; chosen)")
         .def_readonly("summary", &bokeh::DefocusReport::summary, "one line")
         .def("__repr__", [](const bokeh::DefocusReport& r) {
             return format("<DefocusReport {}: {} layer(s); {}>", bokeh::method_name(r.method),

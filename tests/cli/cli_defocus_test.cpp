@@ -98,6 +98,11 @@ TEST(CliDefocus, VerboseNamesTheLayers)
     const RunResult g = bokehtool(format("-v {} --defocus:focus=6:fstop=2:quality=gather -o {}/g.exr", kScene, dir));
     ASSERT_EQ(g.status, 0) << g.err;
     EXPECT_NE(g.out.find("gather"), std::string::npos) << g.out;
+    // planner=predicted lists the plans it weighed, its choice marked.
+    const RunResult p = bokehtool(format("-v {} --defocus:focus=6:fstop=2:planner=predicted -o {}/p.exr", kScene, dir));
+    ASSERT_EQ(p.status, 0) << p.err;
+    EXPECT_NE(p.out.find("plans weighed against budget 40 dB"), std::string::npos) << p.out;
+    EXPECT_NE(p.out.find("<- chosen"), std::string::npos) << p.out;
     // Without -v it says nothing.
     const RunResult q = bokehtool(format("{} --defocus:focus=6:fstop=2 -o {}/q.exr", kScene, dir));
     ASSERT_EQ(q.status, 0) << q.err;
@@ -157,6 +162,8 @@ TEST(CliDefocus, BadInputFailsCleanly)
         { format("{} --defocus:focus=0.01 -o {}", kScene, out), "focal length" },
         { format("{} --defocus:quality=gather:method=layers -o {}", kScene, out), "disagree" },
         { format("{} --defocus:iris=5000 -o {}", kScene, out), "iris" },
+        { format("{} --defocus:ratio=0.5 -o {}", kScene, out), "ladder ratio 0.5 is outside 1..16" },
+        { format("{} --defocus:planner=guess -o {}", kScene, out), "planner" },
         { format("{} --defocus:fstop=2:iris=100 -o {}", kScene, out), "exceeds 30" },
         // Aperture options the kernel would ignore (as --blur refuses them).
         { format("{} --defocus:kernel=hex:blades=5 -o {}", kScene, out), "blades does not apply to kernel=hex" },

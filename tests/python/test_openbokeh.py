@@ -171,6 +171,7 @@ DEFOCUS_CASES = [
     {"focus": 2, "fstop": 2, "kernel": "polygon", "blades": 7, "aspect": 1.5, "budget": "30dB"},
     {"focus": 6, "fstop": 2, "method": "reference"},
     {"focus": 6, "fstop": 2, "layers": 24, "views": 2},
+    {"focus": 6, "fstop": 2, "planner": "predicted", "budget": "35dB"},
 ]
 
 
@@ -191,6 +192,15 @@ def test_defocus_and_its_report_match_bokehtool(tmp, scene_file, options):
         assert len(layers) == min(len(report.layer_coc_px), 64)
         for text, coc, red in zip(layers, report.layer_coc_px, report.layer_reduction or [1] * 64):
             assert text == f"{coc:g}" + (f"/{red}" if red > 1 else "")
+    # The plans weighed: one chosen, with the layers drawn; the predicted planner's choice
+    # is the cheapest predicted to clear the budget, and -v marks it.
+    if report.method == "layers":
+        chosen = [p for p in report.plans if p["chosen"]]
+        assert len(chosen) == 1 and chosen[0]["layers"] == len(report.layer_coc_px)
+        if options.get("planner") == "predicted":
+            meets = [p["predicted_ms"] for p in report.plans if p["predicted_psnr_db"] >= 35.0]
+            assert chosen[0]["predicted_ms"] == min(meets)
+            assert "<- chosen" in said
 
 
 @pytest.mark.parametrize("output", ["coc", "focalplane", "layers"])
