@@ -49,6 +49,11 @@ using namespace detail;
 
 namespace {
 
+// A flat result's layers drawn in groups whose planes take about this much (at least
+// kMinGroupLayers layers a group; measured in defocus_deep below).
+constexpr double kGroupPlanesBytes = 128.0 * 1024.0 * 1024.0;
+constexpr size_t kMinGroupLayers   = 4;
+
 using OIIO::Strutil::fmt::format;
 using Clock = std::chrono::steady_clock;
 
@@ -260,8 +265,11 @@ struct LayerScratch {
 // behind the post a full disk 20x too bright where the thin-lens truth shows a
 // sliver); not continued at all, seams open between a round post's ribbons.
 // Behind the pixel's last layer nothing is known, and every nearer piece hides.
+//
+// Only layers [first, end) are written, f.layer_rgba[k - first] and f.layer_vis[k - first]
+// (a frame drawn in groups of layers to fit the memory budget); the rest is computed for all.
 void pixel_layers(Frame& f, std::vector<Sprite>& found, LayerScratch& sc, int64_t p, const std::vector<Piece>& pieces,
-                  const Membership& m, const DefocusOptions& o, bool reference)
+                  const Membership& m, const DefocusOptions& o, bool reference, size_t first, size_t end)
 {
     const size_t K = m.coc_px.size();
     std::vector<float>& T = sc.T;
@@ -309,7 +317,11 @@ void pixel_layers(Frame& f, std::vector<Sprite>& found, LayerScratch& sc, int64_
             const float w  = side == 0 ? 1.0f - upper : upper;
             if (w <= 0.0f || k >= K)
                 continue;
-            float* v = f.layer_rgba[k].data() + size_t(p) * 4;
+            if (k < first || k >= end) {  // not drawn now; what it hides behind it still counts
+                T[k] *= 1.0f - alpha;
+                continue;
+            }
+            float* v = f.layer_rgba[k - first].data() + size_t(p) * 4;
             for (int c = 0; c < 4; ++c)
                 v[c] += T[k] * w * pc.rgba[c];
             float lum;
@@ -333,8 +345,8 @@ void pixel_layers(Frame& f, std::vector<Sprite>& found, LayerScratch& sc, int64_
     // product forward).
     for (size_t k = 1; k < K; ++k)
         sc.nearer_t[k] *= sc.nearer_t[k - 1];
-    for (size_t k = 0; k < K; ++k)
-        f.layer_vis[k][size_t(p)] =
+    for (size_t k = first; k < end; ++k)
+        f.layer_vis[k - first][size_t(p)] =
             sc.self[k] * (k > last_layer ? sc.nearer_t[k] : sc.holds[k] ? 1.0f : sc.close_t[k]);
     std::fill(T.begin(), T.end(), 1.0f);
 }
@@ -382,6 +394,8 @@ bool take_deep_sprites(Frame& f, std::vector<Sprite>& highlights, const DefocusO
     return true;
 }
 
+void write_flat_plane(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Plane& out, int nthreads);
+
 // The flat result: the layers composited (pseudo-high resolution: f.out times f.up).
 bool write_flat_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Membership& m,
                        const DefocusOptions& o, float progress_from, int nthreads, std::string& err)
@@ -391,6 +405,14 @@ bool write_flat_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Fra
     std::fill_n(out.px.get(), out.size(), 0.0f);
     if (!composite_layers(out, f, m, o, nthreads, err, nullptr, progress_from))
         return false;
+    write_flat_plane(dst, src, f, out, nthreads);
+    return true;
+}
+
+// The flat result `out` (RGBA over f.out times f.up) into dst, with src's metadata.
+void write_flat_plane(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Frame& f, const Plane& out, int nthreads)
+{
+    const OIIO::ROI region = scaled_roi(f.out, f.up);
     OIIO::ImageSpec fs = derived_spec(src.spec(), { "R", "G", "B", "A" }, region);
     scale_display_window(fs, src.spec(), f.up);
     record_lens(fs, f.lens);
@@ -402,6 +424,49 @@ bool write_flat_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Fra
             std::copy_n(out.row(y), size_t(out.w) * 4,
                         static_cast<float*>(dst.pixeladdr(region.xbegin, region.ybegin + y)));
     });
+}
+
+// A deep frame's flat result drawn `group` layers at a time, farthest first, each group
+// composited over what the farther ones left: only `group` layers' planes are alive at
+// once (the memory budget), at the price of sorting every pixel's pieces again for each
+// group. Each layer is filled, blurred and laid over in the same order and with the same
+// operations as when all are alive, so the pixels are the same.
+bool draw_flat_in_groups(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, Frame& f, const Membership& m,
+                         const DefocusOptions& o, const OIIO::DeepData& dd, const DeepChannels& ch,
+                         const CocOfDepth& coc_of, bool reference, size_t group, int nthreads, std::string& err)
+{
+    const size_t K    = m.coc_px.size();
+    const int64_t npx = dd.pixels();
+    Plane out(f.out.width() * f.up, f.out.height() * f.up, 4);
+    std::fill_n(out.px.get(), out.size(), 0.0f);
+    const size_t groups = (K + group - 1) / group;
+    for (size_t g = 0; g < groups; ++g) {
+        const size_t end = K - g * group, first = end > group ? end - group : 0;
+        f.layer_rgba.assign(end - first, std::vector<float>(size_t(npx) * 4, 0.0f));
+        f.layer_vis.assign(end - first, std::vector<float>(size_t(npx), 1.0f));
+        parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
+            std::vector<Sprite> found;  // none: lens character is not drawn in groups
+            std::vector<Piece> pieces;
+            std::vector<double> cuts;
+            LayerScratch scratch(K);
+            for (int64_t p = b; p < e; ++p)
+                if (dd.samples(p) > 0) {
+                    pixel_pieces(pieces, cuts, dd, p, ch, coc_of, m, o);
+                    pixel_layers(f, found, scratch, p, pieces, m, o, reference, first, end);
+                }
+        });
+        Membership part;
+        part.coc_px.assign(m.coc_px.begin() + std::ptrdiff_t(first), m.coc_px.begin() + std::ptrdiff_t(end));
+        part.reduction.assign(m.reduction.begin() + std::ptrdiff_t(first), m.reduction.begin() + std::ptrdiff_t(end));
+        DefocusOptions og = o;
+        if (o.progress)
+            og.progress = [&o, g, groups](float x) { o.progress((float(g) + x) / float(groups)); };
+        if (!composite_layers(out, f, part, og, nthreads, err))
+            return false;
+    }
+    f.layer_rgba.clear();
+    f.layer_vis.clear();
+    write_flat_plane(dst, src, f, out, nthreads);
     return true;
 }
 
@@ -540,6 +605,44 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             return fail(err);
     }
     const size_t K = m.coc_px.size();
+    size_t group       = K;  // layers alive at once
+    bool budget_groups = false;
+    // A flat result of one view without sprites can be drawn in groups of layers
+    // (draw_flat_in_groups); a deep result holds every layer, views and sprites reach
+    // across them.
+    const bool groupable = !o.deep_output && plan.aperture_views <= 1 && !o.lens_character;
+    {
+        // The layers' planes (RGBA and visibility: 20 bytes a pixel a layer, as allocated
+        // below), and the result: a flat plane and image (32 bytes an output pixel), or a
+        // deep one's blurred layers and their samples (16 + 24 bytes an output pixel a layer).
+        // The output is at most the display and data windows joined.
+        const OIIO::ROI display(spec.full_x, spec.full_x + spec.full_width, spec.full_y,
+                                spec.full_y + spec.full_height);
+        const OIIO::ROI out  = o.grow ? OIIO::roi_union(tidy.roi(), display) : tidy.roi();
+        const double up2     = double(o.supersample) * double(o.supersample);
+        const double result  = o.deep_output ? double(K) * double(out.npixels()) * 40.0 : double(out.npixels()) * up2 * 32.0;
+        const double bytes   = double(K) * double(npx) * 20.0 + result;
+        if (!within_defocus_memory(o, bytes,
+                                   format("{} layers of {}x{} deep pixels{}", K, tidy.roi().width(), tidy.roi().height(),
+                                          o.deep_output ? " and their deep result" : ""),
+                                   "fewer layers need less", err)) {
+            // Drawn in groups of layers that fit, where it can be.
+            const double room = double(o.memory_budget_bytes) - result;
+            const double fits = room / (double(npx) * 20.0);
+            if (!groupable || fits < 1.0)
+                return fail(err);
+            group         = size_t(fits);
+            budget_groups = true;
+        }
+    }
+    // Fewer layers alive are also faster: allocating and clearing the planes of them all
+    // costs more than sorting each pixel's samples once a group. LowResLeftView's merged
+    // passes, method=reference (137 layers, 1024x576, 2 threads): all alive 8.2 s and
+    // 1.79 GB; 51 at a time 4.4 s; 25: 3.6 s; 11 (kGroupPlanesBytes): 2.75 s and 342 MB;
+    // 5: 3.6 s (bokehtool -v --maxmemory N ... --deepmerge
+    // --defocus:method=reference:focus=300:fstop=2:unit=cm).
+    if (groupable)
+        group = std::min(group, std::max<size_t>(kMinGroupLayers, size_t(kGroupPlanesBytes / (double(npx) * 20.0))));
 
     // Each layer's pixels: the pixel's pieces in it, composited front to back.
     Frame f;
@@ -552,6 +655,23 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     // 3 m, f/2, 2 threads; bokehtool --progress:interval=0): the layers' planes allocated
     // (20 bytes a pixel a layer: 3.1 of the reference's 7.6 s), filled (1.1 s), blurred.
     constexpr float kAllocatedShare = 0.4f, kFilledShare = 0.55f;
+    const bool reference = rep.method == DefocusMethod::Reference;
+    if (group < K) {
+        const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
+        f.out               = defocus_output_region(src.spec(), f.data, extreme, o);
+        rep.layer_coc_px    = m.coc_px;
+        rep.layer_reduction = m.reduction;
+        if (!draw_flat_in_groups(dst, src, f, m, plan, dd, ch, coc_of, reference, group, nthreads, err))
+            return fail(err);
+        rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers ({} at a time{}), output {}x{}{}",
+                             method_name(rep.method), rep.min_coc_px, rep.max_coc_px, K, group,
+                             budget_groups ? ": the memory budget" : "", f.out.width() * f.up,
+                             f.out.height() * f.up,
+                             repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string());
+        if (report)
+            *report = std::move(rep);
+        return true;
+    }
     ProgressCounter alloc_progress(o.progress, double(K), 0.0f, kAllocatedShare);
     f.layer_rgba.resize(K);
     f.layer_vis.resize(K);
@@ -571,7 +691,6 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     // the layers below, once the brightest are chosen).
     std::vector<Sprite> highlights;
     std::mutex highlights_mutex;
-    const bool reference = rep.method == DefocusMethod::Reference;
     ProgressCounter fill_progress(o.progress, double((npx + 2047) / 2048), kAllocatedShare, kFilledShare);
     parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
         std::vector<Sprite> found;
@@ -582,7 +701,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             if (dd.samples(p) == 0)
                 continue;
             pixel_pieces(pieces, cuts, dd, p, ch, coc_of, m, o);
-            pixel_layers(f, found, scratch, p, pieces, m, o, reference);
+            pixel_layers(f, found, scratch, p, pieces, m, o, reference, 0, K);
         }
         if (!found.empty()) {
             std::lock_guard<std::mutex> lock(highlights_mutex);

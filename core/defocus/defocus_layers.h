@@ -134,6 +134,11 @@ inline void scale_display_window(OIIO::ImageSpec& spec, const OIIO::ImageSpec& l
     spec.full_height = like.full_height * up;
 }
 
+/// Whether `bytes` (what `what` would hold) fits the options' memory budget; false + `err`
+/// saying both, with the options' hint and `remedy` (may be empty) in parentheses.
+bool within_defocus_memory(const DefocusOptions& o, double bytes, const std::string& what, const std::string& remedy,
+                           std::string& err);
+
 /// Check the options that do not depend on the image. False + `err` naming the option.
 bool check_defocus_options(const DefocusOptions& o, std::string& err);
 

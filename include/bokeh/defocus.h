@@ -140,6 +140,12 @@ struct DefocusOptions {
     /// (0..1) as the layers' tiles are blurred, each weighted by its kernel's size; from
     /// one thread at a time, in rising order. Empty: nothing is counted.
     std::function<void(float)> progress;
+    /// The memory the defocus may hold, bytes (0: no limit): its estimate of what it will
+    /// hold (the frame's working planes; a deep frame's layers, 20 bytes a pixel a layer) is
+    /// checked before they are allocated, and one past it refused, with
+    /// `memory_budget_hint` (how the caller's user raises it: a host names its option).
+    int64_t memory_budget_bytes = 0;
+    std::string memory_budget_hint;
     /// A flat defocus calls this once it holds the source's pixels in its own form and
     /// reads `src` no more (not even its spec): a caller that owns the only copy of the
     /// source may free it there, so the source and the result are never both held (a 4K

@@ -5,6 +5,7 @@
 // plugins/shared/defocus_options.cpp, which the Python module shares.
 
 #include <bokeh/deep.h>
+#include <bokeh/io.h>
 #include <bokeh/defocus.h>
 #include <bokeh/plugin.h>
 #include <bokeh/truth.h>
@@ -89,6 +90,8 @@ bool defocus_command(CommandContext& c)
     else {
         bokeh::DefocusReport report;
         o.progress = c.progress;
+        o.memory_budget_bytes = c.memory_budget_bytes > 0 ? c.memory_budget_bytes : bokeh::default_memory_budget_bytes();
+        o.memory_budget_hint  = "--maxmemory raises it";
         // The popped input is this command's alone (a copy kept elsewhere, as --dup makes,
         // holds its own reference): once the defocus holds its pixels, let it go. Neither
         // `in.buf` nor the source is read after the call.

@@ -124,6 +124,21 @@ TEST(Robust, TypedSizesAreCheckedBeforeMemoryIsTaken)
                             "memory budget of 3.5 MiB", out);
     r = bokehtool(format("--maxmemory 5M {}--deepmerge -o {}/merged.exr", two_deep, dir));
     EXPECT_EQ(r.status, 0) << r.err;
+    // A defocus: a flat frame's working planes (26 bytes a source pixel, 32 an output pixel:
+    // 1920 x 1080 x 58 is 114.7 MiB); a deep frame's layers, 20 bytes a pixel a layer, as
+    // many as layers= asks for.
+    r = bokehtool("--maxmemory 100M --scene lights:width=1920:height=1080:aa=1 --defocus -o " + out);
+    expect_clean_failure(r, "--defocus: the defocus of 1920x1080 pixels into 1920x1080 would take 114.7 MiB, over "
+                            "the memory budget of 100.0 MiB (--maxmemory raises it)", out);
+    // A deep result holds them all: refused. A flat one is drawn in groups of layers that fit.
+    const std::string deep = "--maxmemory 64M --scene lights:width=480:height=270:aa=1 --deepen ";
+    r = bokehtool(deep + "--defocus:layers=400:output=deep -o " + out);
+    expect_clean_failure(r, "layers of 480x270 deep pixels and their deep result would take", out);
+    EXPECT_NE(r.err.find("over the memory budget of 64.0 MiB (--maxmemory raises it; fewer layers need less)"),
+              std::string::npos) << r.err;
+    r = bokehtool(format("-v {}--defocus:layers=400 -o {}/deep_defocus.exr", deep, dir));
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_NE(r.out.find("at a time: the memory budget)"), std::string::npos) << r.out;
 }
 
 TEST(Robust, DeepFileRefusedOnItsSampleCount)

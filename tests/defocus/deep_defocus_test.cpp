@@ -8,6 +8,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <iostream>
 
 #include <OpenImageIO/deepdata.h>
@@ -353,6 +354,63 @@ TEST(DeepDefocus, ASlopedOpaqueSurfaceStaysOpaque)
         // (measured 0.9965), which the flat method's last step fills from the source.
         EXPECT_GT(worst_edge, 0.99f) << method_name(m);
         EXPECT_LT(max_difference(out, flat_out), 5e-3) << method_name(m);
+    }
+}
+
+// Under a memory budget that holds a few layers' planes, the flat result is drawn in groups
+// of layers, farthest first: the same pixels, bit for bit, as with every layer alive. A deep
+// result (which holds every layer) and views (which reach across them) are refused instead.
+TEST(DeepDefocus, ALowMemoryBudgetDrawsTheLayersInGroupsWithTheSamePixels)
+{
+    const int w = 96, h = 40;
+    // A half-transparent sloped surface (CoC -30 .. -10 px) over a textured wall at +8 px:
+    // every pixel records two surfaces, each layer gets a ribbon of the slope.
+    const OIIO::ImageBuf slope = rgbaz_image(w, h, [&](int x, int y) {
+        return std::array<float, 5>{ 0.3f, 0.2f + 0.002f * y, 0.1f, 0.6f, -30.0f + 20.0f * float(x) / float(w) };
+    });
+    const OIIO::ImageBuf wall = rgbaz_image(w, h, [&](int x, int y) {
+        return std::array<float, 5>{ (x / 4 + y / 4) % 2 ? 0.9f : 0.1f, 0.5f, 0.2f, 1.0f, 8.0f };
+    });
+    OIIO::ImageBuf a, b, deep;
+    ASSERT_TRUE(deep_from_flat(a, slope) && deep_from_flat(b, wall));
+    ASSERT_TRUE(deep_merge(deep, { &a, &b })) << deep.geterror();
+    for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
+        SCOPED_TRACE(method_name(m));
+        DefocusOptions o   = direct_options(m, Border::Black);
+        o.aperture_views   = 1;
+        DefocusReport all, grouped;
+        OIIO::ImageBuf whole, parts;
+        ASSERT_TRUE(defocus(whole, deep, o, &all)) << whole.geterror();
+        ASSERT_GT(all.layer_coc_px.size(), 6u);
+        // The result (32 bytes an output pixel) and three layers' planes (20 bytes a pixel).
+        o.memory_budget_bytes = int64_t(w) * h * 32 + 3 * int64_t(w) * h * 20 + 100;
+        ASSERT_TRUE(defocus(parts, deep, o, &grouped)) << parts.geterror();
+        EXPECT_NE(grouped.summary.find("(3 at a time: the memory budget)"), std::string::npos) << grouped.summary;
+        EXPECT_EQ(grouped.layer_coc_px, all.layer_coc_px);
+        ASSERT_EQ(whole.roi(), parts.roi());
+        int64_t differ = 0;
+        for (int y = whole.roi().ybegin; y < whole.roi().yend; ++y)
+            for (int x = whole.roi().xbegin; x < whole.roi().xend; ++x)
+                for (int c = 0; c < 4; ++c) {
+                    const float u = at(whole, x, y, c), v = at(parts, x, y, c);
+                    differ += std::memcmp(&u, &v, sizeof(float)) != 0;
+                }
+        EXPECT_EQ(differ, 0);
+        // Under one layer's planes, or with a deep result or views, it is refused.
+        for (int variant = 0; variant < 3; ++variant) {
+            DefocusOptions r = o;
+            if (variant == 0)
+                r.memory_budget_bytes = int64_t(w) * h * 32 + int64_t(w) * h * 10;
+            if (variant == 1)
+                r.deep_output = true;
+            if (variant == 2)
+                r.aperture_views = 2;
+            OIIO::ImageBuf out;
+            EXPECT_FALSE(defocus(out, deep, r)) << variant;
+            const std::string why = out.geterror();
+            EXPECT_NE(why.find("deep pixels"), std::string::npos) << why;
+            EXPECT_NE(why.find("over the memory budget of"), std::string::npos) << why;
+        }
     }
 }
 
