@@ -427,9 +427,9 @@ void write_flat_plane(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Fram
 }
 
 // A deep frame's flat result drawn `group` layers at a time, farthest first, each group
-// composited over what the farther ones left: only `group` layers' planes are alive at
-// once (the memory budget), at the price of sorting every pixel's pieces again for each
-// group. Each layer is filled, blurred and laid over in the same order and with the same
+// composited over what the farther ones left (with views, over each view's own plane):
+// only `group` layers' planes are alive at once, at the price of sorting every pixel's
+// pieces again for each group. Each layer is filled, blurred and laid over in the same order and with the same
 // operations as when all are alive, so the pixels are the same.
 bool draw_flat_in_groups(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, Frame& f, const Membership& m,
                          const DefocusOptions& o, const OIIO::DeepData& dd, const DeepChannels& ch,
@@ -439,6 +439,14 @@ bool draw_flat_in_groups(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, Frame& 
     const int64_t npx = dd.pixels();
     Plane out(f.out.width() * f.up, f.out.height() * f.up, 4);
     std::fill_n(out.px.get(), out.size(), 0.0f);
+    // Sub-aperture views: each its own plane over all the groups, their mean at the end (as
+    // composite_layers takes it with every layer alive).
+    const std::vector<ApertureView> views = aperture_views(o, nthreads);
+    std::vector<Plane> view_out;
+    for (size_t v = 0; v < views.size() && views.size() > 1; ++v) {
+        view_out.emplace_back(out.w, out.h, out.nc);
+        std::fill_n(view_out.back().px.get(), view_out.back().size(), 0.0f);
+    }
     const size_t groups = (K + group - 1) / group;
     for (size_t g = 0; g < groups; ++g) {
         const size_t end = K - g * group, first = end > group ? end - group : 0;
@@ -461,11 +469,19 @@ bool draw_flat_in_groups(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, Frame& 
         DefocusOptions og = o;
         if (o.progress)
             og.progress = [&o, g, groups](float x) { o.progress((float(g) + x) / float(groups)); };
-        if (!composite_layers(out, f, part, og, nthreads, err))
+        if (!composite_layers(out, f, part, og, nthreads, err, nullptr, 0.0f, view_out.empty() ? nullptr : &view_out))
             return false;
     }
     f.layer_rgba.clear();
     f.layer_vis.clear();
+    for (size_t v = 0; v < view_out.size(); ++v) {
+        const float share = float(views[v].share);
+        const Plane& one  = view_out[v];
+        parallel_for_chunks(0, int64_t(out.size()), 1 << 16, nthreads, [&](int64_t b, int64_t e) {
+            for (int64_t i = b; i < e; ++i)
+                out.px[size_t(i)] += share * one.px[size_t(i)];
+        });
+    }
     write_flat_plane(dst, src, f, out, nthreads);
     return true;
 }
@@ -607,10 +623,9 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     const size_t K = m.coc_px.size();
     size_t group       = K;  // layers alive at once
     bool budget_groups = false;
-    // A flat result of one view without sprites can be drawn in groups of layers
-    // (draw_flat_in_groups); a deep result holds every layer, views and sprites reach
-    // across them.
-    const bool groupable = !o.deep_output && plan.aperture_views <= 1 && !o.lens_character;
+    // A flat result without sprites can be drawn in groups of layers (draw_flat_in_groups);
+    // a deep result holds every layer, sprites reach across them.
+    const bool groupable = !o.deep_output && !o.lens_character;
     {
         // The layers' planes (RGBA and visibility: 20 bytes a pixel a layer, as allocated
         // below), and the result: a flat plane and image (32 bytes an output pixel), or a
@@ -656,6 +671,11 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     // (20 bytes a pixel a layer: 3.1 of the reference's 7.6 s), filled (1.1 s), blurred.
     constexpr float kAllocatedShare = 0.4f, kFilledShare = 0.55f;
     const bool reference = rep.method == DefocusMethod::Reference;
+    std::string views;  // the views, and why when the planner took them
+    if (plan.aperture_views > 1)
+        views = format(", {0} x {0} views", plan.aperture_views);
+    if (plan.aperture_views > 1 && o.aperture_views == 0)
+        views += format(" ({:.0f} % of the pixels hold samples over 1 px of CoC apart)", 100.0 * layered_share);
     if (group < K) {
         const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
         f.out               = defocus_output_region(src.spec(), f.data, extreme, o);
@@ -663,9 +683,9 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         rep.layer_reduction = m.reduction;
         if (!draw_flat_in_groups(dst, src, f, m, plan, dd, ch, coc_of, reference, group, nthreads, err))
             return fail(err);
-        rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers ({} at a time{}), output {}x{}{}",
+        rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers ({} at a time{}){}, output {}x{}{}",
                              method_name(rep.method), rep.min_coc_px, rep.max_coc_px, K, group,
-                             budget_groups ? ": the memory budget" : "", f.out.width() * f.up,
+                             budget_groups ? ": the memory budget" : "", views, f.out.width() * f.up,
                              f.out.height() * f.up,
                              repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string());
         if (report)
@@ -721,11 +741,6 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                         : write_flat_result(dst, src, f, m, plan, kFilledShare, nthreads, err)))
         return fail(err);
     report_sprites(rep, f.sprites.get());
-    std::string views;  // the views, and why when the planner took them
-    if (plan.aperture_views > 1)
-        views = format(", {0} x {0} views", plan.aperture_views);
-    if (plan.aperture_views > 1 && o.aperture_views == 0)
-        views += format(" ({:.0f} % of the pixels hold samples over 1 px of CoC apart)", 100.0 * layered_share);
     rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers{}, output {}x{}{}{}{}", method_name(rep.method),
                          rep.min_coc_px, rep.max_coc_px, K, views, f.out.width() * f.up, f.out.height() * f.up,
                          o.deep_output ? ", deep" : "",

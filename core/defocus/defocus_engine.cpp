@@ -438,7 +438,8 @@ SpriteGain sprite_gain(const Frame& f, const Membership& m, int k, int gx, int g
 }  // namespace
 
 bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
-                              int nthreads, std::string& err, std::vector<Plane>* per_layer, float progress_from)
+                              int nthreads, std::string& err, std::vector<Plane>* per_layer, float progress_from,
+                              std::vector<Plane>* view_targets)
 {
     if (per_layer) {
         per_layer->clear();
@@ -473,8 +474,15 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     for (size_t k = 0; k < full.size(); ++k)
         if (lens[k].empty())
             full[k] = aperture_weights(o, m.coc_px[k], m.reduction[k], nthreads);
+    // With `view_targets` each view composites over its own plane there, and the mean is
+    // the caller's (layers drawn in groups: draw_flat_in_groups).
+    if (view_targets && view_targets->size() != views.size()) {
+        err = "composite_layers: one target a view is needed";
+        return false;
+    }
+    const bool own_views = views.size() > 1 && !view_targets;
     Plane under(1, 1, 4), mean(1, 1, 4);
-    if (views.size() > 1) {
+    if (own_views) {
         under = Plane(out.w, out.h, out.nc);
         std::copy_n(out.px.get(), out.size(), under.px.get());
         mean = Plane(out.w, out.h, out.nc);
@@ -483,8 +491,9 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
     std::vector<std::vector<TileContent>> contents(m.coc_px.size());
     for (const ApertureView& view : views) {
         const bool first_view = &view == &views.front();
-        if (views.size() > 1)
+        if (own_views)
             std::copy_n(under.px.get(), under.size(), out.px.get());
+        Plane& view_out = view_targets ? (*view_targets)[size_t(&view - views.data())] : out;
         for (int k = int(m.coc_px.size()) - 1; k >= 0; --k) {
             const float c = m.coc_px[size_t(k)];
             const std::vector<KernelWeights>& lens_kernels = lens[size_t(k)];
@@ -500,7 +509,7 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             if (first_view)
                 contents[size_t(k)].resize(tiles[size_t(k)].size());
             const double weight = tile_weight(size_t(k));
-            Plane& target = per_layer ? (*per_layer)[size_t(k)] : out;
+            Plane& target = per_layer ? (*per_layer)[size_t(k)] : view_out;
             SpriteGain gain = sprite_gain(f, m, k, gx, gy, cells * s, cols[size_t(k)], s, tiles[size_t(k)].size());
             const LayerPass pass{ f, m, k, w, lens_kernels, cells, s, cols[size_t(k)], gx, gy, up, target };
             parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
@@ -516,7 +525,7 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             if (f.sprites)
                 draw_layer_sprites(target, f, m, k, nthreads, &gain, first_view);
         }
-        if (views.size() > 1) {
+        if (own_views) {
             const float share = float(view.share);
             parallel_for_chunks(0, int64_t(out.size()), 1 << 16, nthreads, [&](int64_t b, int64_t e) {
                 for (int64_t i = b; i < e; ++i)
@@ -524,7 +533,7 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             });
         }
     }
-    if (views.size() > 1)
+    if (own_views)
         std::copy_n(mean.px.get(), mean.size(), out.px.get());
     return true;
 }

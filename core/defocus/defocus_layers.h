@@ -228,9 +228,13 @@ OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& da
 /// PSF at focus: lens_layer_kernels) and composite them, front over back, into `out`
 /// (RGBA over f.out). With `per_layer`, each blurred layer is written there instead (one
 /// RGBA plane over f.out per layer) and `out` is left alone. Progress (o.progress) goes
-/// from `progress_from` (what the caller's work before took) to 1. False + `err`.
+/// from `progress_from` (what the caller's work before took) to 1. With sub-aperture views
+/// and `view_targets` (one plane over f.out a view), each view's layers are laid over its
+/// own target and `out` is left alone (the caller takes the views' mean: layers drawn in
+/// groups). False + `err`.
 bool composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o, int nthreads,
-                      std::string& err, std::vector<Plane>* per_layer = nullptr, float progress_from = 0.0f);
+                      std::string& err, std::vector<Plane>* per_layer = nullptr, float progress_from = 0.0f,
+                      std::vector<Plane>* view_targets = nullptr);
 
 /// The display window's centre and half-diagonal, for field positions; a lens whose PSF
 /// does not change with the field (no cat's eye, field curvature, astigmatism or offset
