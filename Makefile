@@ -94,10 +94,12 @@ bench: build
 	$(BUILD)/bin/bokeh-bench --task iris --threads 2 --csv docs/bench/iris.csv
 	$(BUILD)/bin/bokeh-bench --task deep --threads 2 --reps 5 --data ../shared/data --images docs/bench --csv docs/bench/deep.csv
 	$(BUILD)/bin/bokeh-bench --task diffraction --reps 3 --csv docs/bench/diffraction.csv
+	$(BUILD)/bin/bokeh-bench --task plans --threads 2 --reps 3 --data ../shared/data --csv docs/bench/plans.csv
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/blur.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/defocus.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/deep.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/diffraction_chart.py docs/bench/diffraction.csv docs/bench
+	/usr/bin/python3 tools/bokeh-bench/plans_chart.py docs/bench/plans.csv docs/bench
 	/usr/bin/python3 tools/bokeh-bench/chart.py docs/bench/resample.csv docs/bench --size-label "reduction factor" && /usr/bin/python3 tools/bokeh-bench/artifact_chart.py docs/bench/resample_artifacts.csv docs/bench --timings docs/bench/resample.csv
 	/usr/bin/python3 tools/bokeh-bench/tables.py docs/benchmarks.md docs/bench
 

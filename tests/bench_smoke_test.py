@@ -121,6 +121,25 @@ for args, says in ((["--scenes", "nosuch"], "nosuch"),
     check(says in r.stderr, f"{args}: names it: {r.stderr.strip()}")
     check(not os.path.exists(bad_csv), f"{args}: nothing written")
 
+# The plans task (the flat planner's plans, predicted against measured) and its chart.
+plans_csv = os.path.join(scratch, "plans.csv")
+r = run([bench, "--task", "plans", "--size", "240x135", "--reps", "1", "--scenes", "lights,edges",
+         "--csv", plans_csv])
+check(r.returncode == 0, "bokeh-bench --task plans ran: " + r.stderr[-2000:])
+with open(plans_csv, newline="") as f:
+    plan_rows = list(csv.DictReader(f))
+for scene in ("lights", "edges"):
+    mine = [p for p in plan_rows if p["scene"] == scene]
+    check(sum(p["chosen"] == "steps" for p in mine) == 1, f"{scene}: the default's row")
+    check(sum(p["chosen"] == "predicted" for p in mine) == 1, f"{scene}: planner=predicted's row")
+    check(len(mine) > 6, f"{scene}: a grid of plans ({len(mine)} rows)")
+    check(all(float(p["psnr_db"]) > 0 and float(p["median_ms"]) > 0 for p in mine), f"{scene}: measured")
+plans_chart = os.path.join(os.path.dirname(chart), "plans_chart.py")
+r = run([sys.executable, plans_chart, plans_csv, charts])
+check(r.returncode == 0, "plans_chart.py ran: " + r.stderr[-2000:])
+check(os.path.exists(os.path.join(charts, "plans.png")), "plans.png written")
+check("lights: default (steps" in r.stdout, "plans_chart.py printed the default's figures: " + r.stdout)
+
 if failures:
     print(f"{len(failures)} check(s) failed")
     sys.exit(1)
