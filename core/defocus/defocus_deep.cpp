@@ -544,6 +544,49 @@ bool write_deep_result(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Fra
     return true;
 }
 
+// How many of a deep frame's K layers are alive at once. The layers' planes take 20 bytes
+// a pixel a layer (RGBA and visibility), the result 32 bytes an output pixel (a flat plane
+// and image) or 40 an output pixel a layer (a deep one's blurred layers and samples); the
+// output is at most the display and data windows joined. A flat result without sprites
+// can be drawn in groups (draw_flat_in_groups): then groups of kGroupPlanesBytes, fewer
+// past the memory budget. A deep result holds every layer, sprites reach across them:
+// past the budget they are refused. False + `err`.
+struct LayersAlive {
+    size_t at_once = 0;
+    bool by_budget = false;  // fewer than kGroupPlanesBytes would hold: the budget's doing
+};
+bool layers_alive(LayersAlive& alive, size_t K, int64_t npx, const OIIO::ROI& data, const OIIO::ImageSpec& spec,
+                  const DefocusOptions& o, std::string& err)
+{
+    alive.at_once        = K;
+    const bool groupable = !o.deep_output && !o.lens_character;
+    const OIIO::ROI display(spec.full_x, spec.full_x + spec.full_width, spec.full_y, spec.full_y + spec.full_height);
+    const OIIO::ROI out    = o.grow ? OIIO::roi_union(data, display) : data;
+    const double up2       = double(o.supersample) * double(o.supersample);
+    const double result    = o.deep_output ? double(K) * double(out.npixels()) * 40.0 : double(out.npixels()) * up2 * 32.0;
+    const double per_layer = double(npx) * 20.0;
+    if (!within_defocus_memory(o, double(K) * per_layer + result,
+                               format("{} layers of {}x{} deep pixels{}", K, data.width(), data.height(),
+                                      o.deep_output ? " and their deep result" : ""),
+                               "fewer layers need less", err)) {
+        const double fits = (double(o.memory_budget_bytes) - result) / per_layer;
+        if (!groupable || fits < 1.0)
+            return false;
+        alive.at_once   = size_t(fits);
+        alive.by_budget = true;
+    }
+    // Fewer layers alive are also faster: allocating and clearing the planes of them all
+    // costs more than sorting each pixel's samples once a group. LowResLeftView's merged
+    // passes, method=reference (137 layers, 1024x576, 2 threads): all alive 8.2 s and
+    // 1.79 GB; 51 at a time 4.4 s; 25: 3.6 s; 11 (kGroupPlanesBytes): 2.75 s and 342 MB;
+    // 5: 3.6 s (bokehtool -v --maxmemory N ... --deepmerge
+    // --defocus:method=reference:focus=300:fstop=2:unit=cm).
+    if (groupable)
+        alive.at_once = std::min(alive.at_once,
+                                 std::max<size_t>(kMinGroupLayers, size_t(kGroupPlanesBytes / per_layer)));
+    return true;
+}
+
 }  // namespace
 
 bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& o,
@@ -621,43 +664,10 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             return fail(err);
     }
     const size_t K = m.coc_px.size();
-    size_t group       = K;  // layers alive at once
-    bool budget_groups = false;
-    // A flat result without sprites can be drawn in groups of layers (draw_flat_in_groups);
-    // a deep result holds every layer, sprites reach across them.
-    const bool groupable = !o.deep_output && !o.lens_character;
-    {
-        // The layers' planes (RGBA and visibility: 20 bytes a pixel a layer, as allocated
-        // below), and the result: a flat plane and image (32 bytes an output pixel), or a
-        // deep one's blurred layers and their samples (16 + 24 bytes an output pixel a layer).
-        // The output is at most the display and data windows joined.
-        const OIIO::ROI display(spec.full_x, spec.full_x + spec.full_width, spec.full_y,
-                                spec.full_y + spec.full_height);
-        const OIIO::ROI out  = o.grow ? OIIO::roi_union(tidy.roi(), display) : tidy.roi();
-        const double up2     = double(o.supersample) * double(o.supersample);
-        const double result  = o.deep_output ? double(K) * double(out.npixels()) * 40.0 : double(out.npixels()) * up2 * 32.0;
-        const double bytes   = double(K) * double(npx) * 20.0 + result;
-        if (!within_defocus_memory(o, bytes,
-                                   format("{} layers of {}x{} deep pixels{}", K, tidy.roi().width(), tidy.roi().height(),
-                                          o.deep_output ? " and their deep result" : ""),
-                                   "fewer layers need less", err)) {
-            // Drawn in groups of layers that fit, where it can be.
-            const double room = double(o.memory_budget_bytes) - result;
-            const double fits = room / (double(npx) * 20.0);
-            if (!groupable || fits < 1.0)
-                return fail(err);
-            group         = size_t(fits);
-            budget_groups = true;
-        }
-    }
-    // Fewer layers alive are also faster: allocating and clearing the planes of them all
-    // costs more than sorting each pixel's samples once a group. LowResLeftView's merged
-    // passes, method=reference (137 layers, 1024x576, 2 threads): all alive 8.2 s and
-    // 1.79 GB; 51 at a time 4.4 s; 25: 3.6 s; 11 (kGroupPlanesBytes): 2.75 s and 342 MB;
-    // 5: 3.6 s (bokehtool -v --maxmemory N ... --deepmerge
-    // --defocus:method=reference:focus=300:fstop=2:unit=cm).
-    if (groupable)
-        group = std::min(group, std::max<size_t>(kMinGroupLayers, size_t(kGroupPlanesBytes / (double(npx) * 20.0))));
+    LayersAlive alive;
+    if (!layers_alive(alive, K, npx, tidy.roi(), spec, o, err))
+        return fail(err);
+    const size_t group = alive.at_once;
 
     // Each layer's pixels: the pixel's pieces in it, composited front to back.
     Frame f;
@@ -685,7 +695,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             return fail(err);
         rep.summary = format("deep {}: CoC {:.1f} .. {:.1f} px, {} layers ({} at a time{}){}, output {}x{}{}",
                              method_name(rep.method), rep.min_coc_px, rep.max_coc_px, K, group,
-                             budget_groups ? ": the memory budget" : "", views, f.out.width() * f.up,
+                             alive.by_budget ? ": the memory budget" : "", views, f.out.width() * f.up,
                              f.out.height() * f.up,
                              repairs.total() ? format(", {} bad samples repaired", repairs.total()) : std::string());
         if (report)
