@@ -208,9 +208,8 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         // shares (6); the result plane (16 an output pixel), the fill's pyramid (8) and the
         // result as an image (16, after the frame is given back). The output is at most the
         // display and data windows joined, times the supersampling.
-        const OIIO::ImageSpec& s = src.spec();
-        const OIIO::ROI data = src.roi(), display(s.full_x, s.full_x + s.full_width, s.full_y, s.full_y + s.full_height);
-        const OIIO::ROI out  = opts.grow ? OIIO::roi_union(data, display) : data;
+        const OIIO::ROI data = src.roi();
+        const OIIO::ROI out  = defocus_output_bound(src.spec(), data, opts.grow);
         const double up2     = double(opts.supersample) * double(opts.supersample);
         const double bytes   = double(data.npixels()) * (26.0 + (opts.iris != 0.0f ? 16.0 : 0.0))
                              + double(out.npixels()) * up2 * 32.0;

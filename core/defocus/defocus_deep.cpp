@@ -560,8 +560,7 @@ bool layers_alive(LayersAlive& alive, size_t K, int64_t npx, const OIIO::ROI& da
 {
     alive.at_once        = K;
     const bool groupable = !o.deep_output && !o.lens_character;
-    const OIIO::ROI display(spec.full_x, spec.full_x + spec.full_width, spec.full_y, spec.full_y + spec.full_height);
-    const OIIO::ROI out    = o.grow ? OIIO::roi_union(data, display) : data;
+    const OIIO::ROI out    = defocus_output_bound(spec, data, o.grow);
     const double up2       = double(o.supersample) * double(o.supersample);
     const double result    = o.deep_output ? double(K) * double(out.npixels()) * 40.0 : double(out.npixels()) * up2 * 32.0;
     const double per_layer = double(npx) * 20.0;

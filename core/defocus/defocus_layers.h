@@ -219,6 +219,10 @@ void share_between(float c, const std::vector<float>& rungs, uint16_t& lower, fl
 /// Each rung's buffer reduction for the options' budget.
 std::vector<int> layer_reductions(const std::vector<float>& rungs, const DefocusOptions& o);
 
+/// The most a defocus's output can cover: the data window joined to the display window
+/// when it grows (`grow`), else the data window.
+OIIO::ROI defocus_output_bound(const OIIO::ImageSpec& spec, const OIIO::ROI& data, bool grow);
+
 /// The output region: the data window grown by the largest CoC radius `extreme_px` (and
 /// the spill of a reduced buffer), within the display window joined to the data window.
 OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& data, float extreme_px,

@@ -22,7 +22,8 @@
 // CoCs or grid rungs crosses 64 switches between exact rungs and the ladder.
 //
 // Known limits: the budget's settings are steps measured on the synthetic scenes, not a
-// search for the cheapest plan that meets it.
+// search for the cheapest plan that meets it (that is the predicted planner's,
+// core/defocus/defocus_planner.cpp, not yet accurate enough to be the default).
 
 #include <bokeh/defocus.h>
 #include <bokeh/parallel.h>
@@ -124,7 +125,6 @@ LayerSettings settings_for_budget(float budget_db)
     if (budget_db <= 50.0f) return { 1.125, 64.0f };
     return { 1.0625, 96.0f };
 }
-
 
 }  // namespace
 
@@ -250,13 +250,17 @@ std::vector<int> detail::layer_reductions(const std::vector<float>& rungs, const
     return r;
 }
 
+OIIO::ROI detail::defocus_output_bound(const OIIO::ImageSpec& s, const OIIO::ROI& data, bool grow)
+{
+    return grow ? OIIO::roi_union(OIIO::get_roi_full(s), data) : data;
+}
+
 OIIO::ROI detail::defocus_output_region(const OIIO::ImageSpec& s, const OIIO::ROI& data, float extreme,
                                 const DefocusOptions& o)
 {
     OIIO::ROI out = data;
     if (o.grow) {
-        const OIIO::ROI display(s.full_x, s.full_x + s.full_width, s.full_y, s.full_y + s.full_height);
-        const OIIO::ROI limit = OIIO::roi_union(display, data);
+        const OIIO::ROI limit = defocus_output_bound(s, data, true);
         // Half the largest kernel: how far bokeh spread past the data window; a layer in a
         // buffer reduced by s reaches up to 1.5 s px farther (its box and the bilinear
         // enlargement).
