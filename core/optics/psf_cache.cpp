@@ -3,8 +3,11 @@
 // process's caches, one per lens, so the frames of a sequence build each PSF once.
 //
 // Bins: 1 / kPsfCocBinsPerOctave octave in |CoC| from 1 px (1/8 px below, sign kept) and
-// 1/8 of the half-diagonal in field; a request takes its bin's PSF, built at the bin's centre (the
-// sprites blend the bins around them: core/defocus/defocus_sprites.cpp). The shared caches hold
+// 1/8 of the half-diagonal in field; a request takes its bin's PSF, built at the bin's centre.
+// The sprites (core/defocus/defocus_sprites.cpp) crossfade the exact PSFs of two points of a
+// finer CoC grid (psf_coc_steps_around: between bins, steps at most kPsfGridStepRadius_px
+// apart in rim radius): one rim, where a crossfade of two bins 4.4 % apart drew two past
+// about 12 px. The shared caches hold
 // at most kSharedPsfCacheBytes over all lenses, the least recently used lens dropped
 // first; a PSF is the same for any thread count, so a warm cache changes no result.
 // Limits: a lens is found by comparing every field of LensCharacter (same_lens), a linear
@@ -52,6 +55,39 @@ size_t psf_bytes(const Psf& p) { return sizeof(Psf) + p.rgb.size() * sizeof(floa
 std::shared_ptr<const Psf> PsfCache::get(const PsfRequest& req, std::string& err)
 {
     return get_exact(centre_of(bin_of(req)), err);
+}
+
+namespace {
+// The grid's steps between bin b and b + 1 (psf_coc_steps_around), equal in log2 |CoC|: the
+// widest is the last, r1 (1 - 2^(-1 / (n m))) in rim radius for the next bin's rim r1, so m
+// is the least for which that is at most kPsfGridStepRadius_px.
+double steps_after_bin(double b)
+{
+    const double n  = kPsfCocBinsPerOctave;
+    const double r1 = 0.5 * std::exp2((b + 1.0) / n);
+    if (r1 <= kPsfGridStepRadius_px)
+        return 1.0;
+    return std::max(1.0, std::ceil(-1.0 / (n * std::log2(1.0 - kPsfGridStepRadius_px / r1))));
+}
+}  // namespace
+
+void psf_coc_steps_around(double coc_px, double& coc0_px, double& coc1_px, double& t)
+{
+    const double a = std::abs(coc_px), sign = coc_px < 0.0 ? -1.0 : 1.0;
+    if (a < 1.0) {  // the cache's linear bins, 1/8 px (the last one's neighbour is 1 px)
+        const double l = 8.0 * a, b0 = std::floor(l);
+        coc0_px = sign * b0 / 8.0;
+        coc1_px = sign * (b0 + 1.0) / 8.0;
+        t       = l - b0;
+        return;
+    }
+    const double n = kPsfCocBinsPerOctave;
+    const double l = n * std::log2(a), b = std::floor(l);
+    const double m = steps_after_bin(b);
+    const double s = (l - b) * m, j = std::floor(s);
+    coc0_px = sign * std::exp2((b + j / m) / n);
+    coc1_px = sign * std::exp2((b + (j + 1.0) / m) / n);
+    t       = s - j;
 }
 
 std::shared_ptr<const Psf> PsfCache::get_exact(const PsfRequest& req, std::string& err)

@@ -146,12 +146,28 @@ bool beam_map_image(OIIO::ImageBuf& dst, const LensCharacter& lens, double coc_m
                     double coc_max_px, int width, int height, int nthreads = 0);
 
 /// The PSF cache's CoC bins per octave of |CoC| (from 1 px; below, bins 1/8 px apart). A
-/// sprite crossfades the two bins around its CoC, and a crossfade of two sharp rims is two
-/// rims 2^(1/n) - 1 apart in radius: at 8 a bin (9 %) that doubled rim was most of the
-/// hybrid's distance from the scatter reference; at 16 (4.4 %) edges went from 42.3 to
-/// 51.0 dB and giant from 43.0 to 47.3 dB, at 32 no further (bokeh-bench --task lens
-/// --size 640x360, achromat with rim diffraction).
+/// sprite crossfades two points of a finer grid between them (psf_coc_steps_around).
 constexpr int kPsfCocBinsPerOctave = 16;
+
+/// The CoC grid sprites draw on (|CoC| >= 1 px): between two CoC bins, steps at most
+/// this far apart in rim radius (px). At 0.5 a rim between two bins draws 0.16 px wider
+/// than lens_psf's own at 64..67 px, at 0.25 0.14 px, with the bins alone 0.98 px
+/// (DefocusSprites.ARimStaysOneRimBetweenCachedCocs); 0.25 built twice the PSFs (giant's
+/// first frame at supersample 2 took 2.8x the plain defocus against 2.2x for the bins).
+constexpr double kPsfGridStepRadius_px = 0.5;
+
+/// The two points of the sprites' CoC grid around `coc_px` (signed) and the weight `t`
+/// (0..1, linear in log2 |CoC|; in CoC below 1 px) of the second: below 1 px the cache's
+/// linear bins (1/8 px apart), above it the bins cut into steps of at most
+/// kPsfGridStepRadius_px in rim radius. A crossfade of two anti-aliased rims that close
+/// is one rim: measured on the achromat with rim diffraction at 36 mm / 640 px pitch, the
+/// crossfade of the grid's two PSFs is 45..48 dB (peak PSNR) from lens_psf at the CoC
+/// itself over 33..130 px, where the bins' own crossfade fell from 44 to 23 dB (a rim drawn
+/// twice); below 22 px the grid is the bins. A PSF radially resampled from the nearest bin
+/// does worse below 20 px (its one-pixel anti-aliased edge is not band-limited: 32..38 dB
+/// at 13.7 px with Lanczos-3), so each grid point is built by lens_psf
+/// (PsfCache::get_exact).
+void psf_coc_steps_around(double coc_px, double& coc0_px, double& coc1_px, double& t);
 
 /// PSFs by (CoC, field) bin, built on first use (thread-safe). CoC bins are
 /// 1 / kPsfCocBinsPerOctave octave apart (|CoC| >= 1 px; 1/8 px below; sign kept), field

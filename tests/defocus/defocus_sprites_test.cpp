@@ -241,6 +241,66 @@ TEST(DefocusSprites, LoneBrightPixelIsOneSpriteShapedAsThePsf)
     EXPECT_LT(worst, kRampBound);
 }
 
+namespace {
+// The edge of a row profile `v` (index = px from the centre) going outwards from its
+// plateau (the mean of its first `inner` values): where it crosses 0.9, 0.5 and 0.1 of
+// the plateau, linearly between pixels, searched from the outside in.
+struct Edge {
+    double at90, at50, at10;
+};
+Edge row_edge(const std::vector<double>& v, int inner)
+{
+    double plateau = 0.0;
+    for (int i = 0; i < inner; ++i)
+        plateau += v[size_t(i)] / inner;
+    auto crossing = [&](double level) {
+        for (size_t i = v.size() - 1; i > 0; --i)
+            if (v[i - 1] >= level * plateau && v[i] < level * plateau)
+                return double(i - 1) + (v[i - 1] - level * plateau) / (v[i - 1] - v[i]);
+        return -1.0;
+    };
+    return { crossing(0.9), crossing(0.5), crossing(0.1) };
+}
+}  // namespace
+
+TEST(DefocusSprites, ARimStaysOneRimBetweenCachedCocs)
+{
+    // A lone light whose CoC walks from one cache bin (64 px) to the next (2^(1/16) x 64 =
+    // 66.8 px) in eighths, with the plain aperture's hard, anti-aliased rim. Along the row
+    // through its centre the drawn sprite's edge (10-90 % of its plateau) must be as narrow
+    // as lens_psf's own PSF at that CoC (within 0.3 px: two rims crossfaded 4.4 % apart, as
+    // the bins alone drew them, made it up to 0.98 px wider, 2.47 against 1.60), and sit
+    // where that PSF's does (50 % within 0.2 px).
+    const OIIO::ROI display(-60, 61, -60, 61);
+    DefocusOptions o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Off);
+    double worst_width = 0.0, worst_shift = 0.0;
+    for (int k = 0; k <= 8; ++k) {
+        const double coc = 64.0 * std::exp2(k / 128.0);
+        const OIIO::ImageBuf src = lone_light(1, 1, 0, 0, float(coc), display);
+        const OIIO::ImageBuf out = run_defocus(src, o, nullptr);
+        float peak;
+        const Psf psf = sprite_psf(o, display.width(), coc, peak);
+        std::vector<double> drawn, single;
+        for (int x = 0; x <= 45; ++x) {
+            drawn.push_back(0.5 * (at(out, x, 0, 1) + at(out, -x, 0, 1)));
+            single.push_back(1e6 * psf_at(psf, x, 0, 1));
+        }
+        const Edge d = row_edge(drawn, 16), s = row_edge(single, 16);
+        ASSERT_GT(d.at10, 0.0) << "CoC " << coc;
+        ASSERT_GT(s.at10, 0.0) << "CoC " << coc;
+        const double width = (d.at10 - d.at90) - (s.at10 - s.at90), shift = d.at50 - s.at50;
+        std::printf("[ figures  ] rim at CoC %.3f px: 10-90 %% width %.2f px (the PSF's own %.2f), 50 %% at %.2f px "
+                    "(the PSF's %.2f)\n",
+                    coc, d.at10 - d.at90, s.at10 - s.at90, d.at50, s.at50);
+        EXPECT_LT(width, 0.3) << "CoC " << coc << ": the rim is wider than one PSF's";
+        EXPECT_NEAR(shift, 0.0, 0.2) << "CoC " << coc;
+        worst_width = std::max(worst_width, width);
+        worst_shift = std::max(worst_shift, std::abs(shift));
+    }
+    std::printf("[ figures  ] rim between two bins: widest %.2f px over the PSF's own, farthest %.2f px\n", worst_width,
+                worst_shift);
+}
+
 TEST(DefocusSprites, ASpriteCutByTheOutputsEdgeKeepsItsShape)
 {
     // The lone light of the test above, 3 px from the left and 5 px from the top of an

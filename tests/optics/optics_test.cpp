@@ -548,3 +548,45 @@ TEST(LensPsf, CacheAndBadInput)
     a.coc_px = std::nan("");
     EXPECT_FALSE(bokeh::lens_psf(p, bokeh::LensCharacter{}, a, err));
 }
+
+TEST(LensPsf, TheSpritesCocGridHoldsItsStepAndMeetsTheBins)
+{
+    // psf_coc_steps_around over 0.05 .. 400 px, both signs: the two points bracket the CoC
+    // with the weight that places it in log2 |CoC| (in CoC below 1 px), they are at most
+    // kPsfGridStepRadius_px apart in rim radius past 1 px (1/8 px in CoC below), every
+    // cache bin 2^(b/16) is a grid point, and the grid is continuous across 1 px.
+    double widest = 0.0;
+    for (double sign : { -1.0, 1.0 })
+        for (double a = 0.05; a < 400.0; a *= 1.0137) {
+            const double c = sign * a;
+            double c0, c1, t;
+            bokeh::psf_coc_steps_around(c, c0, c1, t);
+            ASSERT_GE(t, 0.0);
+            ASSERT_LT(t, 1.0);
+            ASSERT_LE(std::abs(c0), a + 1e-9) << c;
+            ASSERT_GT(std::abs(c1), a) << c;
+            ASSERT_EQ(c0 < 0.0 || (c0 == 0.0 && c < 0.0), c < 0.0) << c;
+            if (a < 1.0) {
+                EXPECT_NEAR(std::abs(c1) - std::abs(c0), 0.125, 1e-12) << c;
+                EXPECT_NEAR(std::abs(c0) + t * 0.125, a, 1e-9) << c;
+            } else {
+                const double l0 = std::log2(std::abs(c0)), l1 = std::log2(std::abs(c1));
+                EXPECT_NEAR(l0 + t * (l1 - l0), std::log2(a), 1e-9) << c;
+                EXPECT_LE(0.5 * (std::abs(c1) - std::abs(c0)), bokeh::kPsfGridStepRadius_px + 1e-9) << c;
+                widest = std::max(widest, 0.5 * (std::abs(c1) - std::abs(c0)));
+            }
+        }
+    for (int b = 0; b <= 128; b += 7) {
+        const double bin = std::exp2(b / double(bokeh::kPsfCocBinsPerOctave));
+        double c0, c1, t;
+        bokeh::psf_coc_steps_around(bin * (1.0 + 1e-12), c0, c1, t);
+        EXPECT_NEAR(c0, bin, 1e-9 * bin) << "bin " << b;
+    }
+    double c0, c1, t;
+    bokeh::psf_coc_steps_around(0.99, c0, c1, t);
+    EXPECT_DOUBLE_EQ(c1, 1.0);
+    bokeh::psf_coc_steps_around(1.0, c0, c1, t);
+    EXPECT_DOUBLE_EQ(c0, 1.0);
+    std::printf("[ figures  ] CoC grid: widest step %.3f px in rim radius (bound %.2f)\n", widest,
+                bokeh::kPsfGridStepRadius_px);
+}
