@@ -41,12 +41,12 @@ demo: tool
 	$(BOKEHTOOL) -v --scene lights -o out/sharp.exr --defocus:focus=6:fstop=2 -o out/demo.exr --ch R,G,B -o out/demo.png
 	$(BOKEHTOOL) out/sharp.exr --defocus:focus=6:fstop=2:output=focalplane -o out/focalplane.png
 	$(BOKEHTOOL) -v out/sharp.exr --defocus:focus=6:fstop=2:lens=achromat:diffraction=exact:onion=0.15 --ch R,G,B -o out/demo_lens.png
-	$(BOKEHTOOL) --bokeh:lens=achromat:fstop=1.4:diffraction=exact:onion=0.15:catseye=0.5:sheet=1 60 -o out/bokeh_sheet.png
+	$(BOKEHTOOL) --bokeh:lens=achromat:fstop=1.4:diffraction=exact:onion=0.15:catseye=0.5:lateralr=0.002:lateralb=-0.002:sheet=1 60 -o out/bokeh_sheet.png
 	$(BOKEHTOOL) out/sharp.exr --defocus:focus=6:fstop=2:lens=achromat:catseye=0.5 --lensdistort:k1=-0.06:k2=0.01:lateralr=0.002:lateralb=-0.002 --ch R,G,B -o out/demo_field.png
 	$(BOKEHTOOL) out/sharp.exr --defocus:focus=2.5:fstop=1.4:kernel=polygon:blades=7:rotation=12:curvature=0.15:lens=uncorrected:correction=0:monochromatic=0.5:chromatic=0.8 -o out/plate.exr
 	@echo "demo: the plate's lens: kernel=polygon:blades=7:rotation=12:curvature=0.15:lens=uncorrected:correction=0:monochromatic=0.5:chromatic=0.8"
 	$(BOKEHTOOL) out/plate.exr --fitlens:at=575,187/1548,498/1850,588:box=96:fstop=1.4 --ch R,G,B -o out/demo_fit.png
-	@echo "demo: wrote out/sharp.exr (the scene, RGBA+Z), out/demo.exr + out/demo.png (its depth of field), out/demo_lens.png (the same with an achromat's lens character on the highlights), out/focalplane.png, out/bokeh_sheet.png (an achromat's bokeh across defocus and field), out/demo_field.png (the lens across the field: cat's eye, barrel distortion, lateral colour), out/plate.exr and out/demo_fit.png (the lens fitted back from three of the plate's highlights: crop, fit, difference x 4, fitted light)"
+	@echo "demo: wrote out/sharp.exr (the scene, RGBA+Z), out/demo.exr + out/demo.png (its depth of field), out/demo_lens.png (the same with an achromat's lens character on the highlights), out/focalplane.png, out/bokeh_sheet.png (an achromat's bokeh across defocus and field, with cat's eye and lateral colour), out/demo_field.png (the lens across the field: cat's eye, barrel distortion, lateral colour), out/plate.exr and out/demo_fit.png (the lens fitted back from three of the plate's highlights: crop, fit, difference x 4, fitted light)"
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

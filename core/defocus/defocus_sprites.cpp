@@ -304,6 +304,13 @@ bool detail::check_sprite_options(const DefocusOptions& o, std::string& err)
               "method=layers, auto or reference)";
         return false;
     }
+    // Lateral colour magnifies the whole frame, in focus or not: drawn on the sprites alone
+    // it would colour the highlights' bokeh and leave every edge beside them white.
+    if (o.lens.lateral_r_px != 0.0 || o.lens.lateral_b_px != 0.0) {
+        err = "lateral colour moves the whole frame, not the highlights alone: defocus without it, then warp "
+              "the result with lens_distort (--lensdistort:lateralr=...:lateralb=...)";
+        return false;
+    }
     return true;
 }
 

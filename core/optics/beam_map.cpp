@@ -136,6 +136,8 @@ bool validate_lens(const LensCharacter& l, std::string& err)
         { "field_curvature", l.field_curvature_px, -4096.0, 4096.0 },
         { "astigmatism", l.astigmatism_px, -4096.0, 4096.0 },
         { "anamorphic_focus", l.anamorphic_focus_px, -4096.0, 4096.0 },
+        { "lateral_r (px)", l.lateral_r_px, -512.0, 512.0 },
+        { "lateral_b (px)", l.lateral_b_px, -512.0, 512.0 },
     };
     for (const Range& r : ranges)
         if (!(std::isfinite(r.value) && r.value >= r.lo && r.value <= r.hi)) {

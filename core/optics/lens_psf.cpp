@@ -36,6 +36,11 @@
 //  the axis, no squeeze, rings centred, no surface noise) is computed over one octant and
 //  copied to the other seven.
 //  5. Each wavelength's PSF is normalised to unit energy and added with its RGB weights.
+//  6. Lateral colour (the talk's "magnification varying with radius / wavelength"): each
+//     of R and B is the same PSF displaced radially by its px at the frame corner times
+//     H, sampled at the displaced point (no resampling), so a white point's R-B fringe
+//     is exactly |lateral_r_px - lateral_b_px| H (per channel, not per wavelength: the
+//     magnification's spectrum inside a channel is not modelled).
 // Limits: astigmatic and anamorphic PSFs carry the spherical aberration of the larger
 // axis' CoC scaled along the other; their fringes use the mean scale. The hole's inner
 // rim has no fringes.
@@ -428,21 +433,36 @@ struct PsfSampler {
 // other seven: an eighth of the lookups, the same pixels but for the order of each
 // pixel's sub-sample sum. (Off the axis too, when nothing depends on the field but the
 // CoC: no cat's eye, astigmatism or rings.)
-void rasterise(Psf& out, const PsfSampler& sampler, int rows_per_chunk, int nthreads)
+// Lateral colour: channel c's image displaced by shift[c] px (x right, y up; green's 0) is
+// sampled at the point less its shift, three lookups a sub-sample instead of one.
+void rasterise(Psf& out, const PsfSampler& sampler, const double shift[3][2], int rows_per_chunk, int nthreads)
 {
     const Geometry& g  = sampler.g;
     const int w = out.width, h = out.height, cx = w / 2, cy = h / 2;
+    bool shifted = false;
+    for (int c = 0; c < 3; ++c)
+        shifted = shifted || shift[c][0] != 0.0 || shift[c][1] != 0.0;
     auto pixel = [&](int px, int py, float o[3]) {
         const int ss   = g.ss;
         const double x = px - cx, y = cy - double(py);
         double v[3]    = { 0.0, 0.0, 0.0 };
         for (int j = 0; j < ss; ++j)
-            for (int i = 0; i < ss; ++i)
-                sampler.intensity(x - 0.5 + (i + 0.5) / ss, y - 0.5 + (j + 0.5) / ss, v);
+            for (int i = 0; i < ss; ++i) {
+                const double sx = x - 0.5 + (i + 0.5) / ss, sy = y - 0.5 + (j + 0.5) / ss;
+                if (!shifted) {
+                    sampler.intensity(sx, sy, v);
+                    continue;
+                }
+                for (int c = 0; c < 3; ++c) {
+                    double one[3] = { 0.0, 0.0, 0.0 };
+                    sampler.intensity(sx - shift[c][0], sy - shift[c][1], one);
+                    v[c] += one[c];
+                }
+            }
         for (int c = 0; c < 3; ++c)
             o[c] = float(v[c] / (ss * ss));
     };
-    const bool radial = sampler.lens.aperture.round() && !g.barrel && g.m_inv[0][1] == 0.0 && g.m_inv[1][0] == 0.0
+    const bool radial = !shifted && sampler.lens.aperture.round() && !g.barrel && g.m_inv[0][1] == 0.0 && g.m_inv[1][0] == 0.0
                         && g.m_inv[0][0] == g.m_inv[1][1] && w == h
                         && (!sampler.modulated
                             || (sampler.lens.surface_noise == 0.0 && g.onion_x == 0.0 && g.onion_y == 0.0));
@@ -540,10 +560,20 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     double margin_px = 1.0;
     if (edge_law_on)
         margin_px += table.d_out * g.kappa;
+    // Lateral colour: R and B displaced along the field's direction by their px at the
+    // corner times H (x right, y up, as the field); the square grows to hold them.
+    double shift[3][2] = { { 0.0, 0.0 }, { 0.0, 0.0 }, { 0.0, 0.0 } };
+    const double lateral_px[3] = { lens.lateral_r_px, 0.0, lens.lateral_b_px };
+    for (int c = 0; c < 3; ++c) {
+        shift[c][0] = lateral_px[c] * req.field_x;
+        shift[c][1] = lateral_px[c] * req.field_y;
+    }
+    const double shift_x = std::max(std::abs(shift[0][0]), std::abs(shift[2][0]));
+    const double shift_y = std::max(std::abs(shift[0][1]), std::abs(shift[2][1]));
     // The image of the reference disk of radius r_max: A = M (2 / c_ref).
     const double a_scale = 2.0 / std::abs(g.c_ref);
-    const double ex = r_max * a_scale * std::hypot(g.m[0][0], g.m[0][1]) + margin_px;
-    const double ey = r_max * a_scale * std::hypot(g.m[1][0], g.m[1][1]) + margin_px;
+    const double ex = r_max * a_scale * std::hypot(g.m[0][0], g.m[0][1]) + margin_px + shift_x;
+    const double ey = r_max * a_scale * std::hypot(g.m[1][0], g.m[1][1]) + margin_px + shift_y;
     int w = 2 * int(std::ceil(ex)) + 1, h = 2 * int(std::ceil(ey)) + 1;
     if (req.size_px > 0)
         w = h = req.size_px | 1;
@@ -557,7 +587,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     // All light (fringe band included) within half a pixel of the centre: the centre
     // pixel's square holds that whole disk, so the pixel-area integral is exactly a point,
     // as the flat kernel's (the half-pixel bins' interpolation would spread it a pixel).
-    if (ex - 1.0 <= 0.5 && ey - 1.0 <= 0.5) {
+    if (ex - 1.0 <= 0.5 && ey - 1.0 <= 0.5 && shift_x == 0.0 && shift_y == 0.0) {
         for (int c = 0; c < 3; ++c)
             out.rgb[(size_t(h / 2) * w + w / 2) * 3 + c] = 1.0f;
         return true;
@@ -565,7 +595,7 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
     const SpanLut spans(lens, g, r_max, nthreads);
     const PsfSampler sampler(lens, g, table, spans, spectrum, reach_px);
     constexpr int kRowsPerChunk = 8;
-    rasterise(out, sampler, kRowsPerChunk, nthreads);
+    rasterise(out, sampler, shift, kRowsPerChunk, nthreads);
     normalise_channels(out, kRowsPerChunk, nthreads);
     return true;
 }

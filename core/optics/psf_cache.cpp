@@ -132,7 +132,8 @@ bool same_lens(const LensCharacter& a, const LensCharacter& b)
            && a.onion_sharpness == b.onion_sharpness && a.onion_offset == b.onion_offset
            && a.onion_behind_stop == b.onion_behind_stop && a.surface_noise == b.surface_noise
            && a.catseye == b.catseye && a.field_curvature_px == b.field_curvature_px
-           && a.astigmatism_px == b.astigmatism_px && a.anamorphic_focus_px == b.anamorphic_focus_px;
+           && a.astigmatism_px == b.astigmatism_px && a.anamorphic_focus_px == b.anamorphic_focus_px
+           && a.lateral_r_px == b.lateral_r_px && a.lateral_b_px == b.lateral_b_px;
 }
 
 namespace {

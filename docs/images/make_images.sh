@@ -36,6 +36,9 @@ for lens in uncorrected achromat apochromat:chromatic=10; do
         60 -o "$out/bokeh_$name.png"
 done
 "$tool" -q --bokeh:lens=achromat:fstop=1.4:map=1 40 -o "$out/beam_map_achromat.png"
+# Lateral colour across the field (docs/methods/distortion.md).
+"$tool" -q --bokeh:sheet=1:lens=achromat:lateralr=0.004:lateralb=-0.004:columns=5:rows=3:size=96 40 \
+    -o "$out/bokeh_lateral.png"
 
 # Flat silhouettes (docs/methods/disocclusion.md): a 150 px crop of a defocused foreground's
 # edge, 2x, in edges (the near orange panel over the in-focus checker) and lights (the post

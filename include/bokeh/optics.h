@@ -99,6 +99,12 @@ struct LensCharacter {
     double astigmatism_px     = 0.0;  ///< tangential minus sagittal CoC at H = 1, px;
                                       ///< negative: ovals along the tangent ("swirl")
     double anamorphic_focus_px = 0.0; ///< horizontal minus vertical CoC, px
+    /// Lateral colour (magnification varying with wavelength): the red and blue images
+    /// displaced radially against the green at the frame corner, px, growing linearly with
+    /// H (a magnification: `--lensdistort`'s lateralr times the half-diagonal in px). A
+    /// white point's R-B fringe at field H is |lateral_r_px - lateral_b_px| H px.
+    double lateral_r_px = 0.0;
+    double lateral_b_px = 0.0;
 };
 
 /// Names of the presets ("off", "uncorrected", "achromat", "apochromat").

@@ -61,6 +61,11 @@ bool bokeh_command(CommandContext& c)
     if (!bokeh::film_back_width(sensor, sensor_mm) && !bokeh::parse_number(sensor, sensor_mm))
         return c.fail(format("sensor '{}' is neither a width in mm nor a film back", sensor));
     lens.pixel_pitch_mm = sensor_mm / v.get_int("width");
+    // Lateral colour as --lensdistort takes it (a magnification), in px at the corner of
+    // the 16:9 frame `width` px wide the field is measured on (the sheet's rows run to it).
+    const double half_diagonal_px = 0.5 * std::hypot(1.0, 9.0 / 16.0) * v.get_int("width");
+    lens.lateral_r_px             = v.get_float("lateralr") * half_diagonal_px;
+    lens.lateral_b_px             = v.get_float("lateralb") * half_diagonal_px;
     if (!bokeh::lens_character_from(v, lens, err))
         return c.fail(err);
 
@@ -227,6 +232,9 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Int("columns", 9, 1, 64, "sheet: defocus columns (front .. focus .. back)"),
         OptionSpec::Int("rows", 4, 1, 64, "sheet: field rows (centre .. corner)"),
         OptionSpec::Bool("map", false, "Kawase's beam map: CoC across, ray height up"),
+        OptionSpec::Float("lateralr", 0.0, -0.1, 0.1,
+                          "lateral colour: red's magnification against green's, minus 1, as --lensdistort's"),
+        OptionSpec::Float("lateralb", 0.0, -0.1, 0.1, "lateral colour: blue's magnification against green's, minus 1"),
     };
     // The aperture and camera options every command shares (aperture_options.h), after the kernel.
     std::vector<OptionSpec> shared = bokeh::aperture_shape_option_specs(true);

@@ -995,6 +995,9 @@ TEST(DefocusSprites, BadOptionsRefusedByName)
     o.lens.onion = 2.0;
     refused(o, "onion");
     o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
+    o.lens.lateral_r_px = 2.0;
+    refused(o, "lens_distort");
+    o = with_lens(direct_options(DefocusMethod::Layers, Border::Black), LensPreset::Achromat);
     o.supersample = 3;
     refused(o, "supersample");
     o.supersample = 2;

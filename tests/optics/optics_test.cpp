@@ -590,3 +590,64 @@ TEST(LensPsf, TheSpritesCocGridHoldsItsStepAndMeetsTheBins)
     std::printf("[ figures  ] CoC grid: widest step %.3f px in rim radius (bound %.2f)\n", widest,
                 bokeh::kPsfGridStepRadius_px);
 }
+
+TEST(LensPsf, LateralColourDisplacesRedAndBlueByTheirMagnification)
+{
+    // The closed form of a magnification per channel: off the axis at field (0.6, 0.3)
+    // (H = 0.671), red displaced by 6 px at the corner and blue by -4 px, each channel's
+    // centroid sits 6 H and -4 H px from green's along the field's direction (x right, y
+    // up) to 0.02 px (the rim's sub-samples land elsewhere on a shifted disk: measured 0.013),
+    // and the R-B fringe is 10 H px (to 0.01 px); each channel still sums to 1; green
+    // is the PSF without lateral colour, pixel for pixel (centred on the same point); on
+    // the axis the PSF is the one without it, bit for bit.
+    bokeh::LensCharacter lens;
+    lens.preset = bokeh::LensPreset::Achromat;
+    bokeh::PsfRequest req;
+    req.coc_px  = 20.0;
+    req.field_x = 0.6;
+    req.field_y = 0.3;
+    bokeh::LensCharacter shifted = lens;
+    shifted.lateral_r_px         = 6.0;
+    shifted.lateral_b_px         = -4.0;
+    bokeh::Psf plain, psf;
+    std::string err;
+    ASSERT_TRUE(bokeh::lens_psf(plain, lens, req, err)) << err;
+    ASSERT_TRUE(bokeh::lens_psf(psf, shifted, req, err)) << err;
+    double cx[3] = {}, cy[3] = {}, sum[3] = {};
+    for (int y = 0; y < psf.height; ++y)
+        for (int x = 0; x < psf.width; ++x)
+            for (int c = 0; c < 3; ++c) {
+                const double v = psf.at(x, y, c);
+                sum[c] += v;
+                cx[c] += v * (x - psf.width / 2);
+                cy[c] += v * (psf.height / 2 - y);  // y up
+            }
+    const double H = std::hypot(0.6, 0.3);
+    for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(sum[c], 1.0, 1e-5) << "channel " << c;
+    EXPECT_NEAR(cx[0] - cx[1], 6.0 * 0.6, 0.02);
+    EXPECT_NEAR(cy[0] - cy[1], 6.0 * 0.3, 0.02);
+    EXPECT_NEAR(cx[2] - cx[1], -4.0 * 0.6, 0.02);
+    EXPECT_NEAR(cy[2] - cy[1], -4.0 * 0.3, 0.02);
+    EXPECT_NEAR(std::hypot(cx[0] - cx[2], cy[0] - cy[2]), 10.0 * H, 0.01);
+    double worst = 0.0;
+    for (int y = 0; y < psf.height; ++y)
+        for (int x = 0; x < psf.width; ++x) {
+            const int px = x - psf.width / 2 + plain.width / 2, py = y - psf.height / 2 + plain.height / 2;
+            const double want = px >= 0 && py >= 0 && px < plain.width && py < plain.height ? plain.at(px, py, 1) : 0.0;
+            worst = std::max(worst, std::abs(double(psf.at(x, y, 1)) - want));
+        }
+    EXPECT_LT(worst, 1e-7) << "green moved";
+    std::printf("[ figures  ] lateral colour at H %.3f: R-B fringe %.4f px (closed form %.4f), green within %.1e\n", H,
+                std::hypot(cx[0] - cx[2], cy[0] - cy[2]), 10.0 * H, worst);
+
+    req.field_x = req.field_y = 0.0;
+    ASSERT_TRUE(bokeh::lens_psf(plain, lens, req, err)) << err;
+    ASSERT_TRUE(bokeh::lens_psf(psf, shifted, req, err)) << err;
+    EXPECT_EQ(plain.width, psf.width);
+    EXPECT_TRUE(plain.rgb == psf.rgb) << "on the axis lateral colour moves nothing";
+
+    shifted.lateral_b_px = std::nan("");
+    EXPECT_FALSE(bokeh::lens_psf(psf, shifted, req, err));
+    EXPECT_NE(err.find("lateral_b"), std::string::npos) << err;
+}
