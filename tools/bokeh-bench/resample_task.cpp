@@ -212,6 +212,33 @@ struct Sheet {
     }
 };
 
+// `src` enlarged by `factor` with the depth-aware composite `o`, every texel and every
+// full-resolution pixel at depth 1 (a Z channel added to the layer, dropped from the result).
+bool enlarge_over_one_depth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int factor,
+                            const bokeh::DepthAwareOptions& o, int threads)
+{
+    const OIIO::ImageSpec& ss = src.spec();
+    OIIO::ImageSpec zs(ss.width, ss.height, 1, OIIO::TypeDesc::FLOAT);
+    zs.x = ss.x, zs.y = ss.y;
+    zs.channelnames = { "Z" };
+    OIIO::ImageBuf z(zs);
+    const float one = 1.0f;
+    IBA::fill(z, { one });
+    OIIO::ImageBuf low = IBA::channel_append(src, z);
+    OIIO::ImageSpec fs(ss.width * factor, ss.height * factor, 1, OIIO::TypeDesc::FLOAT);
+    fs.x = ss.x * factor, fs.y = ss.y * factor;
+    fs.channelnames = { "Z" };
+    OIIO::ImageBuf full(fs);
+    IBA::fill(full, { one });
+    OIIO::ImageBuf out;
+    if (!bokeh::enlarge_depth_aware(out, low, full, factor, o, threads)) {
+        dst.errorfmt("{}", out.geterror());
+        return false;
+    }
+    dst.reset();
+    return IBA::channels(dst, out, ss.nchannels, {});
+}
+
 }  // namespace
 
 bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
@@ -396,6 +423,20 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
             if (!measure(bokeh::filter_name(f), "",
                          [&](OIIO::ImageBuf& dst, const OIIO::ImageBuf& src) {
                              return bokeh::enlarge(dst, src, s, o, threads);
+                         }))
+                return false;
+        }
+        // The depth-aware composites (resample.h) on the same scenes over one depth: a layer
+        // of the frame's own surface, where PCF is bilinear and the joint bilateral its
+        // cubic B-spline, so their Mach bands and shimmer are what they show on a surface
+        // (their depth edges are the depth-aware tests' job: tests/resample).
+        for (const bokeh::DepthAwareMethod m :
+             { bokeh::DepthAwareMethod::PCF, bokeh::DepthAwareMethod::JointBilateral }) {
+            bokeh::DepthAwareOptions o;
+            o.method = m;
+            if (!measure(m == bokeh::DepthAwareMethod::PCF ? "depth-aware pcf" : "depth-aware bilateral", "",
+                         [&](OIIO::ImageBuf& dst, const OIIO::ImageBuf& src) {
+                             return enlarge_over_one_depth(dst, src, s, o, threads);
                          }))
                 return false;
         }
