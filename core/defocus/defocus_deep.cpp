@@ -148,8 +148,10 @@ SampleCocs sample_cocs(const OIIO::DeepData& dd, const DeepChannels& ch, const C
 }
 
 // The layers of a deep defocus: the Reference's one full-resolution layer per occupied CoC
-// step, else the planner's rungs (a volume's CoC runs continuously between its ends: no
-// exact rungs then). False + `err` past 4096 reference steps.
+// step; the user's ladder (ratio 1: a rung per CoC the samples hold, as the flat's exact
+// rungs; > 1: that ratio); else the planner's rungs (a volume's CoC runs continuously
+// between its ends: no exact rungs then). False + `err` past 4096 reference steps, or for
+// exact rungs over volumes.
 bool deep_layer_plan(Membership& m, const SampleCocs& sc, const DefocusOptions& o, double ladder_ratio,
                      const DefocusReport& rep, std::string& err)
 {
@@ -169,7 +171,17 @@ bool deep_layer_plan(Membership& m, const SampleCocs& sc, const DefocusOptions& 
         m.reduction.assign(m.coc_px.size(), 1);
         return true;
     }
-    m.coc_px    = layer_rungs(sc.cocs, o, rep.min_coc_px, rep.max_coc_px, !sc.continuous, ladder_ratio);
+    if (o.ladder_ratio == 1.0f && sc.continuous) {
+        err = "ratio=1 asks for a layer per CoC, and this deep image holds volume samples whose CoC runs between "
+              "their ends: use method=reference (a layer every reference step) or a ratio above 1";
+        return false;
+    }
+    if (o.ladder_ratio == 1.0f)
+        m.coc_px = exact_layer_rungs(sc.cocs, rep.min_coc_px, rep.max_coc_px, std::numeric_limits<size_t>::max());
+    else if (o.ladder_ratio > 1.0f && o.layers == 0)
+        m.coc_px = coc_ladder(rep.min_coc_px, rep.max_coc_px, o.ladder_ratio);
+    if (m.coc_px.empty())
+        m.coc_px = layer_rungs(sc.cocs, o, rep.min_coc_px, rep.max_coc_px, !sc.continuous, ladder_ratio);
     m.reduction = layer_reductions(m.coc_px, o);
     return true;
 }
@@ -604,6 +616,9 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         return fail("iris mode is not available for deep images yet; flatten first (--flatten) to use it");
     if (o.depth_dilate_px > 0)
         return fail("zdilate is a remedy for flat images' filtered depth; a deep sample has its own depth");
+    if (o.planner == DefocusPlanner::Predicted)
+        return fail("planner=predicted weighs a flat frame's plans; a deep image's layers come from its samples "
+                    "(leave the planner, or set layers= or ratio=)");
     DeepOptions dopt;
     DeepRepairs repairs;
     dopt.nonfinite = o.nonfinite;

@@ -179,12 +179,13 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("maxcoc", 512.0, 0.0, 8192.0, "largest CoC diameter in px"),
         OptionSpec::Int("layers", 0, 0, 1024, "layers: count (0: from the CoC range and budget)"),
         OptionSpec::Float("ratio", 0.0, 0.0, 16.0,
-                          "layers: ratio between neighbouring rungs of the CoC ladder (1: the exact rungs; "
-                          "0: the planner's)"),
+                          "layers: ratio between neighbouring rungs of the CoC ladder (1: the exact rungs, "
+                          "refused for deep volumes; 0: the planner's)"),
         OptionSpec::Choice("planner", { "steps", "predicted" },
                            "flat layers: steps: the budget's measured settings; predicted: the cheapest plan "
                            "whose predicted PSNR clears the budget (-v lists the plans weighed; its error "
-                           "model reads 10 dB optimistic to 30 dB pessimistic: docs/methods/planner.md)"),
+                           "model reads 10 dB optimistic to 30 dB pessimistic: docs/methods/planner.md); "
+                           "refused for deep images"),
         OptionSpec::Int("reduction", 16, 1, 16, "layers: coarsest buffer reduction (buffers are 1/1, 1/2, 1/4, 1/8, 1/16: the largest power of two up to it)"),
         OptionSpec::String("budget", "40dB", "accuracy budget, PSNR against the reference"),
         OptionSpec::Float("bloom", 1.0, -1e30, 1e30, "bloom threshold (unpremultiplied colour)"),

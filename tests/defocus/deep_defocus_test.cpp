@@ -260,6 +260,59 @@ TEST(DeepDefocus, EnergyOfPointsAndVolumesIsKept)
     }
 }
 
+TEST(DeepDefocus, TheUsersLadderIsHonouredOrRefused)
+{
+    // Point samples at CoCs 3, 7.5, 12 and 20 px over a background at 0: ratio=1 is a rung
+    // per CoC they hold (and one at 0), ratio=2 is the flat's ladder of that ratio over the
+    // same range (coc_ladder's own rungs: lo, lo 2^k .. hi), as on a flat frame. Exact rungs
+    // over a volume and the flat planner are refused by name, never ignored.
+    const float cocs[4] = { 3.0f, 7.5f, 12.0f, 20.0f };
+    const OIIO::ImageBuf img = deep_image(24, 24, [&](int x, int y) {
+        std::vector<Smp> v;
+        if (x % 6 == 3 && y % 6 == 3)
+            v.push_back({ 4.0f, 2.0f, 1.0f, 1.0f, cocs[(x / 6 + y / 6) % 4] });
+        v.push_back({ 0.1f, 0.1f, 0.1f, 1.0f, 0.0f });
+        return v;
+    });
+    DefocusOptions o = direct_options(DefocusMethod::Layers, Border::Black);
+    o.ladder_ratio   = 1.0f;
+    OIIO::ImageBuf out;
+    DefocusReport rep;
+    ASSERT_TRUE(defocus(out, img, o, &rep)) << out.geterror();
+    EXPECT_EQ(rep.layer_coc_px, (std::vector<float>{ 0.0f, 3.0f, 7.5f, 12.0f, 20.0f })) << rep.summary;
+    o.ladder_ratio = 2.0f;
+    ASSERT_TRUE(defocus(out, img, o, &rep)) << out.geterror();
+    double widest = 0.0;
+    for (size_t k = 2; k < rep.layer_coc_px.size(); ++k)
+        widest = std::max(widest, double(rep.layer_coc_px[k]) / rep.layer_coc_px[k - 1]);
+    EXPECT_GE(rep.layer_coc_px.size(), 5u) << rep.summary;
+    EXPECT_LE(widest, 2.0 + 1e-5) << rep.summary;
+    EXPECT_EQ(rep.layer_coc_px.back(), 20.0f) << rep.summary;
+    o.ladder_ratio = 0.0f;
+    DefocusReport planned;
+    ASSERT_TRUE(defocus(out, img, o, &planned)) << out.geterror();
+    EXPECT_NE(planned.layer_coc_px, rep.layer_coc_px) << "ratio=2 must change the ladder";
+
+    o.planner = DefocusPlanner::Predicted;
+    EXPECT_FALSE(defocus(out, img, o));
+    EXPECT_NE(out.geterror().find("predicted"), std::string::npos) << out.geterror();
+    o.planner = DefocusPlanner::Steps;
+
+    OIIO::ImageSpec spec(8, 8, 6, OIIO::TypeFloat);
+    spec.channelnames  = { "R", "G", "B", "A", "Z", "ZBack" };
+    spec.alpha_channel = 3;
+    spec.z_channel     = 4;
+    spec.deep          = true;
+    OIIO::ImageBuf volume(spec);
+    volume.deepdata()->set_samples(27, 1);
+    const float v[6] = { 1.0f, 1.0f, 1.0f, 0.5f, 2.0f, 30.0f };
+    for (int c = 0; c < 6; ++c)
+        volume.deepdata()->set_deep_value(27, c, 0, v[c]);
+    o.ladder_ratio = 1.0f;
+    EXPECT_FALSE(defocus(out, volume, o));
+    EXPECT_NE(out.geterror().find("ratio=1"), std::string::npos) << out.geterror();
+}
+
 TEST(DeepDefocus, DeepResultFlattensToTheFlatResult)
 {
     const auto img = deep_image(kW, kH, [](int x, int y) {
