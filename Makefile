@@ -82,7 +82,8 @@ fuzz: deps
 	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DBOKEH_FUZZ=ON
 	cmake --build $(BUILD) -j $(JOBS)
 	/usr/bin/python3 tests/fuzz/make_seeds.py $(FUZZ_WORK)/seeds_read_image
-	tests/fuzz/run_fuzz.sh $(BUILD)/bin $(FUZZ_WORK) $(FUZZ_SECONDS) $(FUZZ_TARGETS)
+	FUZZ_LEDGER=$(CURDIR)/tests/fuzz/runs.csv tests/fuzz/run_fuzz.sh $(BUILD)/bin $(FUZZ_WORK) $(FUZZ_SECONDS) $(FUZZ_TARGETS); \
+	  status=$$?; /usr/bin/python3 tests/fuzz/ledger.py tests/fuzz/runs.csv docs/robustness.md; exit $$status
 
 # ../shared/data: test images kept beside the repository; without it the defocus task
 # measures the built-in scenes only and the deep task is skipped, saying so.

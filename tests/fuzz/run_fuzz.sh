@@ -8,7 +8,9 @@
 #   run_fuzz.sh --fresh BIN_DIR WORK_DIR ...          (WORK_DIR emptied first: ctest's run)
 #   run_fuzz.sh --skip "why"                         (exit 77: ctest's "skipped")
 #
-# Used by ctest (fuzz_smoke: a few seconds a target) and by `make fuzz` (FUZZ_SECONDS).
+# Used by ctest (fuzz_smoke: a few seconds a target) and by `make fuzz` (FUZZ_SECONDS), which
+# sets FUZZ_LEDGER=tests/fuzz/runs.csv: each target's executions, seconds and outcome are
+# appended there, and tests/fuzz/ledger.py adds them up in docs/robustness.md.
 set -u
 if [ "${1:-}" = "--skip" ]; then
   echo "fuzz_smoke: skipped: ${2:-}"
@@ -40,12 +42,20 @@ for t in "$@"; do
   dict=()
   [ -f "$here/$t.dict" ] && dict=(-dict="$here/$t.dict")
   log="$work/$t.log"
+  start=$SECONDS
   (cd "$work" && nice -n "${FUZZ_NICE:-0}" "$exe" -max_total_time="$seconds" -timeout=10 \
      -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$work/$t-" "${dict[@]}" \
      "${dirs[@]}") >"$log" 2>&1
   rc=$?
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   secs=$(sed -n 's/^stat::.*//;s/.*Done \([0-9]*\) runs in \([0-9]*\) second.*/\2/p' "$log" | tail -1)
+  secs=${secs:-$((SECONDS - start))}  # a finding stops the run before libFuzzer's summary
+  # The ledger (make fuzz: tests/fuzz/runs.csv), so the executions add up across runs.
+  if [ -n "${FUZZ_LEDGER:-}" ]; then
+    outcome="no finding"
+    [ $rc -ne 0 ] && outcome="finding: $(ls "$work/$t-"* 2>/dev/null | head -1 | xargs -r basename)"
+    echo "$t,${runs:-0},${secs:-0},${outcome//,/;},$(nproc) cores at nice ${FUZZ_NICE:-0}" >>"$FUZZ_LEDGER"
+  fi
   if [ $rc -ne 0 ]; then
     echo "fuzz_$t: FAILED (exit $rc) after ${runs:-?} runs; log: $log; findings:"
     ls "$work/$t-"* 2>/dev/null
