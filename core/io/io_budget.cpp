@@ -214,20 +214,29 @@ private:
             // conversion to float. Under 2 MB for a 1080p RGBA+Z float file, but a 269-byte
             // file declaring 10027009 x 1 half RGBA pixels (found by the read fuzzer) took
             // 227 MB to read against 160 MB of float pixels (/usr/bin/time, bokehtool FILE).
-            int32_t rows = 0;
-            if (storage == EXR_STORAGE_TILED) {
-                int32_t tw = 0;
-                if (exr_get_tile_sizes(m_ctxt, 0, 0, 0, &tw, &rows) != EXR_ERR_SUCCESS)
-                    rows = 0;
-            } else if (exr_get_scanlines_per_chunk(m_ctxt, 0, &rows) != EXR_ERR_SUCCESS) {
-                rows = 0;
-            }
-            // A chunk's full height, even past a shorter data window: OpenEXR sizes its
+            // A chunk's full size, even past a smaller data window: OpenEXR sizes its
             // buffers by the chunk (a 254-byte ZIP file of 10027009 x 1 half RGBA pixels,
             // found by the read fuzzer, had it allocate 24 buffers of 1.3 GB, 16 lines each;
-            // untouched in a normal build, they filled ASan's shadow memory).
+            // untouched in a normal build, they filled ASan's shadow memory). For tiles, the
+            // tile the header declares, not the level's tiles clamped to the data window: a
+            // 734-byte file of 16 x 12 half RGBA pixels in tiles of 8 x 4784136, also the
+            // fuzzer's, took 730 MB and 6.4 s to be found truncated (/usr/bin/time bokehtool).
+            int64_t rows = 0, row_width = width;
+            int32_t scanlines = 0;
+            uint32_t tile_x = 0, tile_y = 0;
+            exr_tile_level_mode_t level_mode;
+            exr_tile_round_mode_t round_mode;
+            if (storage == EXR_STORAGE_TILED) {
+                if (exr_get_tile_descriptor(m_ctxt, 0, &tile_x, &tile_y, &level_mode, &round_mode) == EXR_ERR_SUCCESS
+                    && tile_x > 0) {
+                    rows      = tile_y;
+                    row_width = add_product(0, (width + int64_t(tile_x) - 1) / int64_t(tile_x), int64_t(tile_x));
+                }
+            } else if (exr_get_scanlines_per_chunk(m_ctxt, 0, &scanlines) == EXR_ERR_SUCCESS) {
+                rows = scanlines;
+            }
             const int64_t lines     = std::max<int64_t>(rows, 1);
-            const int64_t chunk_row = add_product(0, add_product(0, lines, width), sample_size);
+            const int64_t chunk_row = add_product(0, add_product(0, lines, row_width), sample_size);
             m_cost.bytes = add_product(m_cost.bytes, chunk_row, 3);
             return true;
         }

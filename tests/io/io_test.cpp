@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+
 #include <cstring>
 #include <fstream>
 #include <tuple>
@@ -239,6 +241,30 @@ TEST(ReadCost, DeepSampleCountsAreTheFilesOwn)
         EXPECT_FALSE(read_image(buf, path, tight, err));
         EXPECT_NE(err.find("more than the memory budget of"), std::string::npos) << err;
     }
+}
+
+TEST(ReadCost, ATileIsCountedAsTheHeaderDeclaresIt)
+{
+    // The read fuzzer's 734-byte file of 16 x 12 half RGBA pixels in tiles of 8 x 4784136
+    // (tests/fuzz/regressions/read_image): OpenEXR sizes its tile buffers by the declared
+    // tile, not by the data window (its read took 730 MB and 6.4 s before it was found
+    // truncated). The estimate: the float pixels, the offsets of its 2 chunks, and three
+    // rows of declared tiles, two tiles wide (16 px): 3 x 4784136 x 16 x 8 bytes; a 256 MiB
+    // budget refuses the file before it is opened, at once.
+    const std::string path =
+        std::string(BOKEH_SOURCE_DIR) + "/tests/fuzz/regressions/read_image/tiles-8x4784136-over-16x12-half-rgba.exr";
+    ReadCost cost;
+    std::string err;
+    ASSERT_TRUE(read_cost(path, int64_t(1) << 40, cost, err)) << err;
+    EXPECT_EQ(cost.bytes, 16 * 12 * 4 * 4 + 2 * 8 + int64_t(3) * 4784136 * 16 * 8);
+    OIIO::ImageBuf buf;
+    ReadOptions o;
+    o.memory_budget_bytes = int64_t(256) << 20;
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_FALSE(read_image(buf, path, o, err));
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    EXPECT_NE(err.find("more than the memory budget of"), std::string::npos) << err;
+    EXPECT_LT(s, 1.0) << "refused before OpenEXR allocates its tiles";
 }
 
 TEST(ReadCost, FlatImageIsFloatPixelsAndChunkTable)
