@@ -45,6 +45,22 @@ OIIO::ImageBuf deep_image(int w, int h, const std::function<std::vector<Smp>(int
     return make_deep(w, h, px);
 }
 
+// A w x h deep image (R, G, B, A, Z, ZBack) holding one sample, `v`, at (x, y).
+OIIO::ImageBuf one_sample(int w, int h, int x, int y, const std::array<float, 6>& v)
+{
+    OIIO::ImageSpec spec(w, h, 6, OIIO::TypeFloat);
+    spec.channelnames  = { "R", "G", "B", "A", "Z", "ZBack" };
+    spec.alpha_channel = 3;
+    spec.z_channel     = 4;
+    spec.deep          = true;
+    OIIO::ImageBuf img(spec);
+    const int64_t p = int64_t(y) * w + x;
+    img.deepdata()->set_samples(p, 1);
+    for (int c = 0; c < 6; ++c)
+        img.deepdata()->set_deep_value(p, c, 0, v[size_t(c)]);
+    return img;
+}
+
 // The exact blur of a flat RGBA layer by the disk of diameter |coc| (rotated half a turn in
 // front of focus, as the defocus does), over `roi`, border black.
 OIIO::ImageBuf blurred_layer(const OIIO::ImageBuf& layer, float coc, const OIIO::ROI& roi)
@@ -222,18 +238,8 @@ TEST(DeepDefocus, EnergyOfPointsAndVolumesIsKept)
     // A lone bright point and a lone volume spanning CoCs 2..30 (cut at every rung it
     // crosses): their light is conserved, spread over the aperture.
     for (bool volume : { false, true }) {
-        OIIO::ImageSpec spec(33, 33, 6, OIIO::TypeFloat);
-        spec.channelnames  = { "R", "G", "B", "A", "Z", "ZBack" };
-        spec.alpha_channel = 3;
-        spec.z_channel     = 4;
-        spec.deep          = true;
-        OIIO::ImageBuf img(spec);
-        OIIO::DeepData& dd = *img.deepdata();
-        const int64_t p    = 16 * 33 + 16;
-        dd.set_samples(p, 1);
-        const float v[6] = { 1000.0f, 500.0f, 0.0f, 0.5f, volume ? 2.0f : 12.0f, volume ? 30.0f : 12.0f };
-        for (int c = 0; c < 6; ++c)
-            dd.set_deep_value(p, c, 0, v[c]);
+        const OIIO::ImageBuf img = one_sample(33, 33, 16, 16,
+                                              { 1000.0f, 500.0f, 0.0f, 0.5f, volume ? 2.0f : 12.0f, volume ? 30.0f : 12.0f });
         OIIO::ImageBuf out;
         DefocusReport rep;
         ASSERT_TRUE(defocus(out, img, direct_options(DefocusMethod::Layers, Border::Black), &rep)) << out.geterror();
@@ -298,16 +304,7 @@ TEST(DeepDefocus, TheUsersLadderIsHonouredOrRefused)
     EXPECT_NE(out.geterror().find("predicted"), std::string::npos) << out.geterror();
     o.planner = DefocusPlanner::Steps;
 
-    OIIO::ImageSpec spec(8, 8, 6, OIIO::TypeFloat);
-    spec.channelnames  = { "R", "G", "B", "A", "Z", "ZBack" };
-    spec.alpha_channel = 3;
-    spec.z_channel     = 4;
-    spec.deep          = true;
-    OIIO::ImageBuf volume(spec);
-    volume.deepdata()->set_samples(27, 1);
-    const float v[6] = { 1.0f, 1.0f, 1.0f, 0.5f, 2.0f, 30.0f };
-    for (int c = 0; c < 6; ++c)
-        volume.deepdata()->set_deep_value(27, c, 0, v[c]);
+    const OIIO::ImageBuf volume = one_sample(8, 8, 3, 3, { 1.0f, 1.0f, 1.0f, 0.5f, 2.0f, 30.0f });
     o.ladder_ratio = 1.0f;
     EXPECT_FALSE(defocus(out, volume, o));
     EXPECT_NE(out.geterror().find("ratio=1"), std::string::npos) << out.geterror();
