@@ -231,6 +231,9 @@ private:
                     && tile_x > 0) {
                     rows      = tile_y;
                     row_width = add_product(0, (width + int64_t(tile_x) - 1) / int64_t(tile_x), int64_t(tile_x));
+                    // Tiles past the image are what costs then: the message says so.
+                    if (int64_t(tile_x) > width || int64_t(tile_y) > height)
+                        m_cost.what += format(", tiles of {} x {}", tile_x, tile_y);
                 }
             } else if (exr_get_scanlines_per_chunk(m_ctxt, 0, &scanlines) == EXR_ERR_SUCCESS) {
                 rows = scanlines;
