@@ -148,6 +148,17 @@ bokeh::DefocusOptions direct_options(bokeh::DefocusMethod m, bokeh::Border borde
     return o;
 }
 
+bokeh::DefocusOptions plane_lens(bokeh::DefocusMethod m)
+{
+    bokeh::DefocusOptions o;
+    o.method                   = m;
+    o.coc.mode                 = bokeh::DepthMode::Depth;
+    o.coc.lens.focal_mm        = 85.0;
+    o.coc.lens.fstop           = 1.4;
+    o.coc.lens.sensor_width_mm = 36.0;
+    return o;
+}
+
 OIIO::ImageBuf run_defocus(const OIIO::ImageBuf& src, const bokeh::DefocusOptions& o, bokeh::DefocusReport* rep,
                            int nthreads)
 {

@@ -77,6 +77,10 @@ double channel_sum(const OIIO::ImageBuf& img, int c);
 /// the border rule (each test names its own) and whether the data window grows.
 bokeh::DefocusOptions direct_options(bokeh::DefocusMethod m, bokeh::Border border, bool grow = true);
 
+/// The lens of the focus-pull tests' slanted plane: 85 mm f/1.4 on a 36 mm back, Z in
+/// metres (the focus left to the test).
+bokeh::DefocusOptions plane_lens(bokeh::DefocusMethod m);
+
 /// The defocus of `src` with `o` (a test failure if it fails), its report in `rep`.
 OIIO::ImageBuf run_defocus(const OIIO::ImageBuf& src, const bokeh::DefocusOptions& o,
                            bokeh::DefocusReport* rep = nullptr, int nthreads = 0);

@@ -503,12 +503,7 @@ TEST(DefocusSprites, FocusPullDoesNotPop)
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         for (bool character : { false, true }) {
             SCOPED_TRACE(std::string(method_name(m)) + (character ? " lens character" : " plain"));
-            DefocusOptions o;
-            o.method                   = m;
-            o.coc.mode                 = DepthMode::Depth;
-            o.coc.lens.focal_mm        = 85.0;
-            o.coc.lens.fstop           = 1.4;
-            o.coc.lens.sensor_width_mm = 36.0;
+            DefocusOptions o = bokeh_test::plane_lens(m);
             if (character) {
                 o = with_lens(o, LensPreset::Uncorrected);
                 o.lens.onion          = 0.8;

@@ -30,6 +30,7 @@ using namespace bokeh;
 using bokeh_test::at;
 using bokeh_test::channel_sum;
 using bokeh_test::direct_options;
+using bokeh_test::plane_lens;
 using bokeh_test::make_image;
 using bokeh_test::Px;
 using bokeh_test::run_defocus;
@@ -531,18 +532,6 @@ OIIO::ImageBuf slanted_plane()
         p.b              = 0.3f + 0.6f * texture(x / 3, y / 3);
         return p;
     });
-}
-
-// The plane's lens: 85 mm f/1.4 on a 36 mm back, Z in metres (focus to be set).
-DefocusOptions plane_lens(DefocusMethod m)
-{
-    DefocusOptions o;
-    o.method                   = m;
-    o.coc.mode                 = DepthMode::Depth;
-    o.coc.lens.focal_mm        = 85.0;
-    o.coc.lens.fstop           = 1.4;
-    o.coc.lens.sensor_width_mm = 36.0;
-    return o;
 }
 
 // Focus distances of a pull from `near_m` to `far_m` in `n` frames, evenly in 1 / distance
