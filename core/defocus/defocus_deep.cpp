@@ -176,12 +176,7 @@ bool deep_layer_plan(Membership& m, const SampleCocs& sc, const DefocusOptions& 
               "their ends: use method=reference (a layer every reference step) or a ratio above 1";
         return false;
     }
-    if (o.ladder_ratio == 1.0f)
-        m.coc_px = exact_layer_rungs(sc.cocs, rep.min_coc_px, rep.max_coc_px, std::numeric_limits<size_t>::max());
-    else if (o.ladder_ratio > 1.0f && o.layers == 0)
-        m.coc_px = coc_ladder(rep.min_coc_px, rep.max_coc_px, o.ladder_ratio);
-    if (m.coc_px.empty())
-        m.coc_px = layer_rungs(sc.cocs, o, rep.min_coc_px, rep.max_coc_px, !sc.continuous, ladder_ratio);
+    m.coc_px    = layer_rungs(sc.cocs, o, rep.min_coc_px, rep.max_coc_px, !sc.continuous, ladder_ratio);
     m.reduction = layer_reductions(m.coc_px, o);
     return true;
 }
@@ -486,14 +481,8 @@ bool draw_flat_in_groups(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, Frame& 
     }
     f.layer_rgba.clear();
     f.layer_vis.clear();
-    for (size_t v = 0; v < view_out.size(); ++v) {
-        const float share = float(views[v].share);
-        const Plane& one  = view_out[v];
-        parallel_for_chunks(0, int64_t(out.size()), 1 << 16, nthreads, [&](int64_t b, int64_t e) {
-            for (int64_t i = b; i < e; ++i)
-                out.px[size_t(i)] += share * one.px[size_t(i)];
-        });
-    }
+    for (size_t v = 0; v < view_out.size(); ++v)
+        add_view_share(out, view_out[v], float(views[v].share), nthreads);
     write_flat_plane(dst, src, f, out, nthreads);
     return true;
 }

@@ -437,6 +437,14 @@ SpriteGain sprite_gain(const Frame& f, const Membership& m, int k, int gx, int g
 
 }  // namespace
 
+void detail::add_view_share(Plane& mean, const Plane& view, float share, int nthreads)
+{
+    parallel_for_chunks(0, int64_t(mean.size()), 1 << 16, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i)
+            mean.px[size_t(i)] += share * view.px[size_t(i)];
+    });
+}
+
 bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o,
                               int nthreads, std::string& err, std::vector<Plane>* per_layer, float progress_from,
                               std::vector<Plane>* view_targets)
@@ -525,13 +533,8 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
             if (f.sprites)
                 draw_layer_sprites(target, f, m, k, nthreads, &gain, first_view);
         }
-        if (own_views) {
-            const float share = float(view.share);
-            parallel_for_chunks(0, int64_t(out.size()), 1 << 16, nthreads, [&](int64_t b, int64_t e) {
-                for (int64_t i = b; i < e; ++i)
-                    mean.px[size_t(i)] += share * out.px[size_t(i)];
-            });
-        }
+        if (own_views)
+            add_view_share(mean, out, float(view.share), nthreads);
     }
     if (own_views)
         std::copy_n(mean.px.get(), mean.size(), out.px.get());

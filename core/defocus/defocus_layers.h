@@ -208,6 +208,8 @@ bool reference_layers(Plane& out, const Frame& f, const DefocusOptions& o, Defoc
 /// The rungs of the layered method for CoCs `cocs` spanning [lo, hi]: the reference's
 /// (exact) rungs when there are at most 64 (and `exact_allowed`), else the budget's
 /// geometric ladder, its ratio at most `ladder_ratio` when that is > 0; a rung at 0 always.
+/// The user's `o.ladder_ratio` comes first: 1 the exact rungs whatever their count (when
+/// `exact_allowed`), > 1 (without `o.layers`) the ladder of that ratio.
 std::vector<float> layer_rungs(const std::vector<float>& cocs, const DefocusOptions& o, float lo,
                                float hi, bool exact_allowed = true, double ladder_ratio = 0.0);
 
@@ -236,6 +238,9 @@ OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& da
 /// and `view_targets` (one plane over f.out a view), each view's layers are laid over its
 /// own target and `out` is left alone (the caller takes the views' mean: layers drawn in
 /// groups). False + `err`.
+/// `mean` += `share` times `view` (same size): one sub-aperture view's part of their mean.
+void add_view_share(Plane& mean, const Plane& view, float share, int nthreads);
+
 bool composite_layers(Plane& out, const Frame& f, const Membership& m, const DefocusOptions& o, int nthreads,
                       std::string& err, std::vector<Plane>* per_layer = nullptr, float progress_from = 0.0f,
                       std::vector<Plane>* view_targets = nullptr);

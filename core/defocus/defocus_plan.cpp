@@ -32,6 +32,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 namespace bokeh {
 
@@ -227,13 +228,20 @@ void detail::share_between(float c, const std::vector<float>& r, uint16_t& lower
 std::vector<float> detail::layer_rungs(const std::vector<float>& cocs, const DefocusOptions& o, float lo, float hi,
                                        bool exact_allowed, double ladder_ratio)
 {
+    // The user's ladder: ratio 1 the exact rungs whatever their count, > 1 that ratio.
+    std::vector<float> rungs;
+    if (o.ladder_ratio == 1.0f && exact_allowed)
+        rungs = exact_layer_rungs(cocs, lo, hi, std::numeric_limits<size_t>::max());
+    else if (o.ladder_ratio > 1.0f && o.layers == 0)
+        rungs = coc_ladder(lo, hi, o.ladder_ratio);
+    if (!rungs.empty())
+        return rungs;
     const LayerSettings set = settings_for_budget(o.budget_db);
     double ratio            = ladder_ratio > 0.0 ? std::min(ladder_ratio, set.ratio) : set.ratio;
     if (o.layers > 0)
         ratio = ratio_for_count(o.layers, lo, hi);
     // A scene of few depths (planes, a handful of lights) gets one rung per CoC it holds,
     // so its layers are exact but for the reductions; others get the ladder.
-    std::vector<float> rungs;
     if (o.layers == 0 && exact_allowed)
         rungs = exact_layer_rungs(cocs, lo, hi, kMaxExactRungs);
     if (rungs.empty())

@@ -39,6 +39,7 @@
 // reads from 10 dB optimistic (giant's coarse ladders, edges at q = 8) to 30 dB pessimistic
 // (the real files), which is why it is not the default.
 
+#include <bokeh/base.h>
 #include <bokeh/defocus.h>
 #include <bokeh/parallel.h>
 
@@ -53,8 +54,6 @@ namespace bokeh {
 using namespace detail;
 
 namespace {
-
-constexpr double kPi = 3.14159265358979323846;
 
 // The constants. kReducedScale is fitted to the measured plans (giant's ladder at 1.0625
 // with q = 32); the ladder term is the closed form as it stands (1), and the margin 0: no
@@ -344,12 +343,7 @@ LayerPlan detail::choose_layer_plan(const Frame& f, const DefocusOptions& o, flo
     considered.clear();
     if (o.planner == DefocusPlanner::Steps) {
         LayerPlan plan;
-        if (o.ladder_ratio == 1.0f)
-            plan.coc_px = exact_layer_rungs(f.coc, lo, hi, std::numeric_limits<size_t>::max());
-        else if (o.ladder_ratio > 1.0f && o.layers == 0)
-            plan.coc_px = coc_ladder(lo, hi, o.ladder_ratio);
-        if (plan.coc_px.empty())
-            plan.coc_px = layer_rungs(f.coc, o, lo, hi);
+        plan.coc_px    = layer_rungs(f.coc, o, lo, hi);
         plan.reduction = layer_reductions(plan.coc_px, o);
         DefocusPlanEstimate e;
         e.ladder_ratio       = o.layers > 0 ? float(ratio_for_count(o.layers, lo, hi)) : o.ladder_ratio;
