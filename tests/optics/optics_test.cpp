@@ -22,81 +22,12 @@
 #include <bokeh/spectrum.h>
 #include <bokeh/wave_optics.h>
 
+#include "psf_support.h"
 #include "test_util.h"
 
 using bokeh::kPi;
+using namespace bokeh_test;
 
-namespace {
-
-
-bokeh::Psf psf_of(const bokeh::LensCharacter& lens, double coc, double fx = 0.0, double fy = 0.0, int size = 0)
-{
-    bokeh::Psf p;
-    bokeh::PsfRequest r;
-    r.coc_px  = coc;
-    r.field_x = fx;
-    r.field_y = fy;
-    r.size_px = size;
-    std::string err;
-    EXPECT_TRUE(bokeh::lens_psf(p, lens, r, err, 2)) << err;
-    return p;
-}
-
-// Mean of channel c over rings 1 px wide about the centre.
-std::vector<double> radial_profile(const bokeh::Psf& p, int c)
-{
-    const int cx = p.width / 2, cy = p.height / 2;
-    std::vector<double> sum(size_t(std::max(cx, cy) + 2), 0.0), n(sum.size(), 0.0);
-    for (int y = 0; y < p.height; ++y)
-        for (int x = 0; x < p.width; ++x) {
-            const size_t r = size_t(std::lround(std::hypot(x - cx, y - cy)));
-            if (r < sum.size()) {
-                sum[r] += p.at(x, y, c);
-                n[r] += 1.0;
-            }
-        }
-    for (size_t i = 0; i < sum.size(); ++i)
-        sum[i] = n[i] > 0 ? sum[i] / n[i] : 0.0;
-    return sum;
-}
-
-double channel_sum(const bokeh::Psf& p, int c)
-{
-    double s = 0.0;
-    for (int y = 0; y < p.height; ++y)
-        for (int x = 0; x < p.width; ++x)
-            s += p.at(x, y, c);
-    return s;
-}
-
-// Mean over the annulus lo <= r < hi (in px) of channel c.
-double annulus_mean(const bokeh::Psf& p, int c, double lo, double hi)
-{
-    const int cx = p.width / 2, cy = p.height / 2;
-    double s = 0.0, n = 0.0;
-    for (int y = 0; y < p.height; ++y)
-        for (int x = 0; x < p.width; ++x) {
-            const double r = std::hypot(x - cx, y - cy);
-            if (r >= lo && r < hi) {
-                s += p.at(x, y, c);
-                n += 1.0;
-            }
-        }
-    return n > 0 ? s / n : 0.0;
-}
-
-// The bokeh's outer radius: the last ring whose green mean is above 2 % of the largest.
-double outer_radius(const bokeh::Psf& p)
-{
-    const std::vector<double> prof = radial_profile(p, 1);
-    const double peak = *std::max_element(prof.begin(), prof.end());
-    size_t r = prof.size() - 1;
-    while (r > 0 && prof[r] < 0.02 * peak)
-        --r;
-    return double(r) + 0.5;
-}
-
-}  // namespace
 
 TEST(Aperture, PolygonEdgeIsTheKernelsRule)
 {
