@@ -276,7 +276,9 @@ bool reduce_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisMap
         err = format("{} reducers for {} channels", reducers.size(), nc);
         return false;
     }
-    const bool any_mean = std::count(reducers.begin(), reducers.end(), Reducer::Mean) > 0;
+    const int n_mean      = int(std::count(reducers.begin(), reducers.end(), Reducer::Mean));
+    const int n_data_mean = int(std::count(reducers.begin(), reducers.end(), Reducer::MeanOverData));
+    const bool any_mean   = n_mean + n_data_mean > 0;
     const bool any_nearest =
         std::count(reducers.begin(), reducers.end(), Reducer::NearestDepth) > 0;
     if (any_nearest && (depth_channel < 0 || depth_channel >= nc)) {
@@ -287,7 +289,19 @@ bool reduce_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisMap
     const TapMatrix wy = box_taps(src.height, dst.height, my, outside_is_black);
     if (any_mean)
         separable_pass(src, dst, Taps(wx), Taps(wy), false, nthreads);
-    if (!any_mean || std::count(reducers.begin(), reducers.end(), Reducer::Mean) < nc) {
+    if (n_data_mean > 0 && outside_is_black) {
+        // The depth's mean over the pixels inside, from the taps that do not count outside.
+        std::vector<float> inside(size_t(dst.width) * size_t(dst.height) * size_t(nc));
+        const PlaneView in_view{ inside.data(), dst.width, dst.height, nc, size_t(dst.width) * size_t(nc) };
+        separable_pass(src, in_view, Taps(box_taps(src.width, dst.width, mx, false)),
+                       Taps(box_taps(src.height, dst.height, my, false)), false, nthreads);
+        for (int y = 0; y < dst.height; ++y)
+            for (int x = 0; x < dst.width; ++x)
+                for (int c = 0; c < nc; ++c)
+                    if (reducers[size_t(c)] == Reducer::MeanOverData)
+                        dst.row(y)[size_t(x) * size_t(nc) + size_t(c)] = in_view.row(y)[size_t(x) * size_t(nc) + size_t(c)];
+    }
+    if (n_mean + n_data_mean < nc) {
         // Min, max and nearest depth over each footprint's pixels.
         const float nan = std::numeric_limits<float>::quiet_NaN();
         parallel_for_chunks(0, dst.height, 8, nthreads, [&](int64_t y0, int64_t y1) {
@@ -299,7 +313,7 @@ bool reduce_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisMap
                     float* o = dst.row(y) + size_t(x) * size_t(nc);
                     if (rx.empty() || ry.empty()) {
                         for (int c = 0; c < nc; ++c)
-                            if (reducers[size_t(c)] != Reducer::Mean)
+                            if (reducers[size_t(c)] != Reducer::Mean && reducers[size_t(c)] != Reducer::MeanOverData)
                                 o[c] = 0.0f;
                         continue;
                     }
@@ -333,7 +347,8 @@ bool reduce_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisMap
                     }
                     for (int c = 0; c < nc; ++c) {
                         switch (reducers[size_t(c)]) {
-                        case Reducer::Mean: break;
+                        case Reducer::Mean:
+                        case Reducer::MeanOverData: break;
                         case Reducer::Min: o[c] = lo[size_t(c)]; break;
                         case Reducer::Max: o[c] = hi[size_t(c)]; break;
                         case Reducer::NearestDepth: o[c] = nearest ? nearest[c] : nan; break;
@@ -387,7 +402,7 @@ std::vector<Reducer> reducers_for(const OIIO::ImageSpec& spec, const ReduceOptio
     for (int c = 0; c < spec.nchannels; ++c) {
         const std::string& name = spec.channel_name(c);
         if (c == ch.z || name == "ZBack" || OIIO::Strutil::ends_with(name, ".ZBack"))
-            r[size_t(c)] = o.depth;
+            r[size_t(c)] = o.depth == Reducer::Mean ? Reducer::MeanOverData : o.depth;
     }
     return r;
 }

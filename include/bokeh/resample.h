@@ -153,6 +153,10 @@ enum class Reducer {
     Min,           ///< smallest value (depth: the nearest surface)
     Max,           ///< largest value
     NearestDepth,  ///< the value of the block's pixel with the smallest depth (Z, CoC)
+    /// Area-weighted mean over the block's pixels inside the data window, whatever
+    /// `outside_is_black` says: a depth's mean (no energy to keep; outside is no surface,
+    /// not a surface at 0). `ReduceOptions::depth = Mean` becomes this.
+    MeanOverData,
 };
 
 struct ReduceOptions {
@@ -294,7 +298,9 @@ bool resample_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisM
 
 /// `dst` = `src` reduced by blocks: each destination pixel's footprint (its square mapped
 /// into the source) with channel c reduced by reducers[c] (one per channel; NearestDepth
-/// ranks by channel `depth_channel`).
+/// ranks by channel `depth_channel`). `outside_is_black` counts the footprint's pixels
+/// outside the source as 0 for Mean (energy kept); the other reducers use only the pixels
+/// inside.
 bool reduce_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisMap& mx,
                   const AxisMap& my, const std::vector<Reducer>& reducers, int depth_channel,
                   bool outside_is_black, std::string& err, int nthreads = 0);

@@ -273,7 +273,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                              "depth channels (Z, ZBack): min (the nearest surface), max, nearest "
                              "(the value of the pixel of least Z), mean"),
           OptionSpec::Bool("black", false,
-                           "count block pixels outside the data window as 0 (keeps the energy)") });
+                           "colour: count block pixels outside the data window as 0 (keeps the energy); depth is reduced over the pixels inside") });
     reduce.needs_scene_linear = true;
     r.add(reduce);
 

@@ -706,6 +706,7 @@ OIIO::ImageBuf brute_reduce(const OIIO::ImageBuf& src, int n, const std::vector<
             for (int c = 0; c < nc; ++c)
                 switch (r[size_t(c)]) {
                 case Reducer::Mean: o[size_t(c)] = float(sum[size_t(c)] / (black ? n * n : count)); break;
+                case Reducer::MeanOverData: o[size_t(c)] = float(sum[size_t(c)] / count); break;
                 case Reducer::Min: o[size_t(c)] = float(lo[size_t(c)]); break;
                 case Reducer::Max: o[size_t(c)] = float(hi[size_t(c)]); break;
                 case Reducer::NearestDepth: o[size_t(c)] = best[size_t(c)]; break;
@@ -739,6 +740,18 @@ TEST(ResampleReduce, MatchesTheBruteForceReference)
             ASSERT_EQ(ours.roi(), ref.roi());
             EXPECT_LE(max_difference(ours, ref), 1e-6 * 300.0);
         }
+    // Depth by mean: outside the data window is no surface, so black= (which keeps the
+    // colour's energy) leaves the depth's mean over the pixels inside.
+    for (bool black : { false, true }) {
+        ReduceOptions o;
+        o.outside_is_black = black;
+        o.depth            = Reducer::Mean;
+        OIIO::ImageBuf ours;
+        ASSERT_TRUE(reduce(ours, src, 4, o)) << ours.geterror();
+        const std::vector<Reducer> mean_z = { Reducer::Mean, Reducer::Mean, Reducer::Mean, Reducer::Mean,
+                                              Reducer::MeanOverData };
+        EXPECT_LE(max_difference(ours, brute_reduce(src, 4, mean_z, 4, black)), 1e-6 * 300.0) << black;
+    }
     // Every reducer on every channel, nearest depth ranking by Z.
     for (Reducer r : { Reducer::Min, Reducer::Max, Reducer::NearestDepth }) {
         ReduceOptions o;
