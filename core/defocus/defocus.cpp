@@ -305,6 +305,25 @@ bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, c
     return true;
 }
 
+bool defocus_coc_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts, int nthreads)
+{
+    std::string err;
+    if (!check_defocus_options(opts, err)) {
+        dst.errorfmt("coc: {}", err);
+        return false;
+    }
+    if (!coc_map(dst, src, opts.coc, nthreads))
+        return false;
+    if (opts.depth_dilate_px > 0) {
+        const OIIO::ROI d = dst.roi();
+        std::vector<float> coc(d.npixels());
+        dst.get_pixels(d, OIIO::TypeFloat, coc.data());
+        dilate_nearest(coc, d.width(), d.height(), opts.depth_dilate_px, nthreads);
+        dst.set_pixels(d, OIIO::TypeFloat, coc.data());
+    }
+    return true;
+}
+
 bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts, int nthreads)
 {
     DefocusReport rep;

@@ -142,6 +142,10 @@ bool within_defocus_memory(const DefocusOptions& o, double bytes, const std::str
 /// Check the options that do not depend on the image. False + `err` naming the option.
 bool check_defocus_options(const DefocusOptions& o, std::string& err);
 
+/// zdilate: each pixel of the w x h CoC plane takes the nearest (smallest signed) CoC of
+/// the (2r + 1)^2 square about it, cut by the frame's edge.
+void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads);
+
 /// A flat image made ready for a method (core/defocus/defocus_prepare.cpp): the options checked,
 /// the pixels premultiplied and scrubbed (counted in `rep`), each pixel's signed CoC, the
 /// depth dilation, bloom, the sprites taken out, iris space, the output region; the

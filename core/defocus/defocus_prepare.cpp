@@ -81,8 +81,12 @@ bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
     return true;
 }
 
-// Each pixel takes the nearest (smallest signed) CoC within `r` px: a separable min filter.
-void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads)
+
+}  // namespace
+
+// A separable min filter: the (2r + 1)^2 square's min is the min over its rows of each
+// row's min.
+void detail::dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads)
 {
     std::vector<float> tmp(coc.size());
     parallel_for_chunks(0, h, 16, nthreads, [&](int64_t y0, int64_t y1) {
@@ -104,8 +108,6 @@ void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads)
             }
     });
 }
-
-}  // namespace
 
 // Everything but the method: the scrubbed, premultiplied pixels, their CoC, the regions.
 bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport& rep,
@@ -163,7 +165,7 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
     f.border = o.border;
     f.up     = o.supersample;
     if (o.depth_dilate_px > 0)
-        dilate_nearest(f.coc, f.data.width(), f.data.height(), o.depth_dilate_px, nthreads);
+        detail::dilate_nearest(f.coc, f.data.width(), f.data.height(), o.depth_dilate_px, nthreads);
     if (o.bloom_gain != 1.0f)
         apply_bloom(f.img, o.bloom_threshold, o.bloom_gain, nthreads);
     // Highlights leave the layers in linear light (before iris mode's exp space).

@@ -204,6 +204,11 @@ struct DefocusReport {
 bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
              DefocusReport* report = nullptr, int nthreads = 0);
 
+/// The signed CoC the defocus draws with, one channel "coc": coc_map's of `opts.coc`, each
+/// pixel then given the nearest CoC within `opts.depth_dilate_px` (zdilate).
+bool defocus_coc_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
+                     int nthreads = 0);
+
 /// The layer map of the Layers method: per pixel the index of the nearer of the two
 /// layers it is shared between, plus its share in the farther one (channel "layer" =
 /// index + share), so a user sees where layer boundaries fall.

@@ -82,7 +82,7 @@ bool defocus_command(CommandContext& c)
         if (ok && c.verbosity >= 1)
             c.message("  defocus truth: " + report.summary);
     } else if (what == "coc")
-        ok = bokeh::coc_map(*out.buf, src, o.coc, c.nthreads);
+        ok = bokeh::defocus_coc_map(*out.buf, src, o, c.nthreads);
     else if (what == "focalplane")
         ok = bokeh::focal_plane_view(*out.buf, src, o.coc, 32.0f, c.nthreads);
     else if (what == "layers")

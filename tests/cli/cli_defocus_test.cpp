@@ -222,9 +222,9 @@ TEST(CliDefocus, LensCharacterSprites)
 
 // The CoC options, each against what it means, on the signed CoC map (output=coc) of the
 // same frame: front= and back= multiply the CoC in front of and behind focus, maxcoc=
-// clamps it, negate=1 on a negated depth gives the same map, and range= makes depths
+// clamps it, negate=1 on a negated depth gives the same map, range= makes depths
 // within half of it of the focus sharp and moves the rest half of it toward the focus
-// (so their blur shrinks).
+// (so their blur shrinks), and zdilate= gives each pixel the nearest depth around it.
 TEST(CliDefocus, CocOptionsDoWhatTheySay)
 {
     const std::string dir = fresh_dir("cli_defocus_coc_options");
@@ -254,7 +254,8 @@ TEST(CliDefocus, CocOptionsDoWhatTheySay)
                          back = coc_map("scene.exr", ":back=0.5", "back"),
                          clamp = coc_map("scene.exr", ":maxcoc=2", "maxcoc"),
                          neg = coc_map("negated.exr", ":negate=1", "negate"),
-                         range = coc_map("scene.exr", ":range=2", "range");
+                         range = coc_map("scene.exr", ":range=2", "range"),
+                         dilated = coc_map("scene.exr", ":zdilate=3", "zdilate");
     int in_front = 0, behind = 0, clamped = 0, sharp = 0, moved = 0;
     for (int y = 0; y < 108; ++y)
         for (int x = 0; x < 192; ++x) {
@@ -276,6 +277,19 @@ TEST(CliDefocus, CocOptionsDoWhatTheySay)
             behind += c > 0;
             clamped += std::abs(c) > 2.0f;  // the post in front reaches -3.6 px at this width
         }
+    // zdilate=3: each pixel takes the nearest depth (the smallest signed CoC) of the 7 x 7
+    // pixels about it, the frame's edge cutting the square; brute force over the square.
+    int grown = 0;
+    for (int y = 0; y < 108; ++y)
+        for (int x = 0; x < 192; ++x) {
+            float nearest = base.getchannel(x, y, 0, 0);
+            for (int j = std::max(0, y - 3); j <= std::min(107, y + 3); ++j)
+                for (int i = std::max(0, x - 3); i <= std::min(191, x + 3); ++i)
+                    nearest = std::min(nearest, base.getchannel(i, j, 0, 0));
+            EXPECT_EQ(dilated.getchannel(x, y, 0, 0), nearest) << x << "," << y;
+            grown += nearest < base.getchannel(x, y, 0, 0);
+        }
+    EXPECT_GT(grown, 100) << "the dilation moved edges";
     // The frame holds every case the checks tell apart.
     EXPECT_GT(in_front, 0);
     EXPECT_GT(behind, 0);
