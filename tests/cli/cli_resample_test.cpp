@@ -111,6 +111,76 @@ TEST(CliResample, ResizeResampleReduceEnlargeGiveTheLibrarysPixels)
     EXPECT_EQ(reduced.getchannel(0, 0, 0, 4), lowest);
 }
 
+namespace {
+
+// An impulse of 1 at (10, 10) in a black 21 x 21 frame, enlarged 2x by bokehtool with
+// `filter`; the output's row through the impulse summed over y (the separable response
+// along x times its sum along y).
+std::vector<double> enlarged_impulse_row(const std::string& dir, const std::string& filter)
+{
+    OIIO::ImageBuf impulse(OIIO::ImageSpec(21, 21, 1, OIIO::TypeFloat));
+    const float one = 1.0f;
+    impulse.setpixel(10, 10, &one);
+    const std::string in = dir + "/impulse.exr", out = dir + "/" + filter + ".exr";
+    EXPECT_TRUE(impulse.write(in));
+    const RunResult r = bokehtool(format("{} --enlarge:border=black:filter={} 2 -o {}", in,
+                                         OIIO::Strutil::replace(filter, "_", ":"), out));
+    EXPECT_EQ(r.status, 0) << r.err;
+    OIIO::ImageBuf img(out);
+    EXPECT_TRUE(img.read(0, 0, true, OIIO::TypeFloat)) << img.geterror();
+    EXPECT_EQ(img.spec().width, 42);
+    std::vector<double> row(42, 0.0);
+    for (int y = 0; y < img.spec().height; ++y)
+        for (int x = 0; x < 42; ++x)
+            row[size_t(x)] += img.getchannel(x, y, 0, 0);
+    return row;
+}
+
+double tent(double u) { return std::max(0.0, 1.0 - std::abs(u)); }
+
+}  // namespace
+
+TEST(CliResample, BlurAndOffsetOfTheEnlargementsDoWhatTheySay)
+{
+    // Output pixel j of a 2x enlargement sits at source coordinate u_j = (j + 0.5) / 2 -
+    // 0.5 (the centres --resize places).
+    const std::string dir = fresh_dir("cli_enlarge_blur_offset");
+    auto u = [](int j) { return (j + 0.5) / 2.0 - 0.5 - 10.0; };  // from the impulse
+    // upscale-blur-fused:offset=d: each output pixel the mean of two bilinear reads d
+    // source pixels either side, so the impulse's weight is (tent(u - d) + tent(u + d)) / 2
+    // along each axis (its sum along y is the sum of the same over y: 2, a whole tent
+    // sampled at half-pixel steps). Exact up to float rounding.
+    for (double d : { 0.3, 0.8 }) {
+        const std::vector<double> row = enlarged_impulse_row(dir, format("upscale-blur-fused_offset={}", d));
+        double worst = 0.0;
+        for (int j = 0; j < 42; ++j)
+            worst = std::max(worst, std::abs(row[size_t(j)] - 2.0 * 0.5 * (tent(u(j) - d) + tent(u(j) + d))));
+        EXPECT_LT(worst, 1e-6) << "offset " << d;
+    }
+    // reduced-blur:blur=s: a Gaussian of sigma s at the source's resolution, then the
+    // enlargement. Variances add under convolution, so the response's variance grows by
+    // 2^2 (s2^2 - s1^2) output px^2 from s1 to s2, whatever the rest of the chain adds
+    // (0.1 % : the Gaussian's tails past 4 sigma); its energy is 2 x 2 (a mean is kept).
+    auto moments = [](const std::vector<double>& row, double& energy, double& variance) {
+        double mean = 0.0;
+        energy      = 0.0;
+        for (size_t j = 0; j < row.size(); ++j) {
+            energy += row[j];
+            mean += row[j] * double(j);
+        }
+        mean /= energy;
+        variance = 0.0;
+        for (size_t j = 0; j < row.size(); ++j)
+            variance += row[j] * (double(j) - mean) * (double(j) - mean) / energy;
+    };
+    double e1 = 0.0, v1 = 0.0, e2 = 0.0, v2 = 0.0;
+    moments(enlarged_impulse_row(dir, "reduced-blur_blur=1"), e1, v1);
+    moments(enlarged_impulse_row(dir, "reduced-blur_blur=2"), e2, v2);
+    EXPECT_NEAR(e1, 4.0, 1e-5);
+    EXPECT_NEAR(e2, 4.0, 1e-5);
+    EXPECT_NEAR(v2 - v1, 4.0 * (4.0 - 1.0), 0.001 * 12.0);
+}
+
 TEST(CliResample, HelpNamesTheFilters)
 {
     const RunResult r = bokehtool("--help --enlarge");
