@@ -203,12 +203,10 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
         ref_opts.method                = bokeh::DefocusMethod::Reference;
         OIIO::ImageBuf ref;
         bokeh::DefocusReport rep;
-        OIIO::Timer timer;
-        if (!bokeh::defocus(ref, shot.image, ref_opts, &rep, a.threads)) {
+        if (!bokeh::defocus(ref, shot.image, ref_opts, &rep, a.threads)) {  // untimed: its report, its pixels
             std::fprintf(stderr, "bokeh-bench: %s: %s\n", shot.name.c_str(), ref.geterror().c_str());
             return false;
         }
-        const double ref_ms = timer() * 1e3;
         const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
         auto report = [&](const std::string& method, double ms, int n, const OIIO::ImageBuf& r) {
             bokeh::ImageError e;
@@ -220,7 +218,6 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
             rows.push_back(format("defocus {},{},,{:.1f},{},{:.3f},{},{}", shot.name, method, extreme,
                                   a.threads, ms, n, error_fields(e)));
         };
-        report(format("reference ({} layers)", rep.layer_coc_px.size()), ref_ms, 1, ref);
         if (!a.images_dir.empty()) {
             write_preview(shot.image, a.images_dir + "/defocus_" + shot.name + "_sharp.jpg", a.threads);
             write_preview(ref, a.images_dir + "/defocus_" + shot.name + "_reference.jpg", a.threads);
@@ -248,12 +245,27 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
         variants.push_back({ "gather (hikita)", [](bokeh::DefocusOptions& o) {
                                 o.method = bokeh::DefocusMethod::Gather;
                             } });
-        for (const Variant& v : variants) {
+        // The reference and every variant timed together in interleaved rounds (timing.h),
+        // each timed run right after an untimed one of the same case; the reference (seconds
+        // a run on giant) the median of 3.
+        std::vector<OIIO::ImageBuf> outs(variants.size());
+        OIIO::ImageBuf ref_timed;
+        std::vector<std::function<void()>> fns = { [&] {
+            bokeh::defocus(ref_timed, shot.image, ref_opts, nullptr, a.threads);
+        } };
+        std::vector<int> nreps = { std::min(a.reps, 3) };
+        for (size_t i = 0; i < variants.size(); ++i) {
             bokeh::DefocusOptions o = shot.base;
-            v.set(o);
-            OIIO::ImageBuf out;
-            const double ms = median_ms([&] { bokeh::defocus(out, shot.image, o, nullptr, a.threads); }, a.reps);
-            report(v.name, ms, a.reps, out);
+            variants[i].set(o);
+            fns.push_back([&, o, i] { bokeh::defocus(outs[i], shot.image, o, nullptr, a.threads); });
+            nreps.push_back(a.reps);
+        }
+        const std::vector<double> ms = interleaved_medians_ms(fns, nreps, std::vector<bool>(fns.size(), true));
+        report(format("reference ({} layers)", rep.layer_coc_px.size()), ms[0], nreps[0], ref);
+        for (size_t i = 0; i < variants.size(); ++i) {
+            const Variant& v          = variants[i];
+            const OIIO::ImageBuf& out = outs[i];
+            report(v.name, ms[i + 1], nreps[i + 1], out);
             if (!a.images_dir.empty() && (v.name.find("default") != std::string::npos
                                           || v.name.find("gather") != std::string::npos))
                 write_preview(out, a.images_dir + "/defocus_" + shot.name + "_"
@@ -294,19 +306,12 @@ bool run_plans_task(const BenchArgs& a, std::vector<std::string>& rows)
             std::fprintf(stderr, "bokeh-bench: %s: %s\n", shot.name.c_str(), out.geterror().c_str());
             return false;
         }
-        // The steps' plan (the default) first.
-        {
-            bokeh::DefocusReport steps;
-            const double ms = median_ms([&] { bokeh::defocus(out, shot.image, shot.base, &steps, a.threads); }, a.reps);
-            bokeh::ImageError e;
-            std::string err;
-            bokeh::compare(e, out, ref, err, {}, a.threads);
-            const bokeh::DefocusPlanEstimate& p = steps.plans.at(0);
-            std::printf("%-16s %-7s %-8g %6d %9s %9.1f %9s %9.1f  (default: steps)\n", shot.name.c_str(), "steps",
-                        p.min_reduced_coc_px, p.layers, "", e.psnr_db, "", ms);
-            rows.push_back(format("{},0,{:g},{},,{:.2f},,{:.2f},{},steps", shot.name, p.min_reduced_coc_px, p.layers,
-                                  e.psnr_db, ms, a.threads));
-        }
+        // Every plan run below timed together in interleaved rounds (timing.h), each timed run
+        // right after an untimed one of the same plan: the steps' plan (the default) first.
+        std::vector<const bokeh::DefocusPlanEstimate*> grid;
+        std::vector<std::function<void()>> fns;
+        std::vector<OIIO::ImageBuf> outs(1 + rep.plans.size());
+        fns.push_back([&] { bokeh::defocus(outs[0], shot.image, shot.base, nullptr, a.threads); });
         for (const bokeh::DefocusPlanEstimate& p : rep.plans) {
             const bool on_grid = p.chosen
                                  || (std::find(qs.begin(), qs.end(), p.min_reduced_coc_px) != qs.end()
@@ -322,10 +327,31 @@ bool run_plans_task(const BenchArgs& a, std::vector<std::string>& rows)
                 o.max_reduction = 1;
             else
                 o.min_reduced_coc_px = p.min_reduced_coc_px;
-            const double ms = median_ms([&] { bokeh::defocus(out, shot.image, o, nullptr, a.threads); }, a.reps);
+            const size_t k = fns.size();
+            fns.push_back([&, o, k] { bokeh::defocus(outs[k], shot.image, o, nullptr, a.threads); });
+            grid.push_back(&p);
+        }
+        const std::vector<double> times = interleaved_medians_ms(fns, std::vector<int>(fns.size(), a.reps),
+                                                                 std::vector<bool>(fns.size(), true));
+        {
+            bokeh::DefocusReport steps;
+            bokeh::defocus(out, shot.image, shot.base, &steps, a.threads);  // untimed: the steps' plan
+            const double ms = times[0];
             bokeh::ImageError e;
             std::string err;
             bokeh::compare(e, out, ref, err, {}, a.threads);
+            const bokeh::DefocusPlanEstimate& p = steps.plans.at(0);
+            std::printf("%-16s %-7s %-8g %6d %9s %9.1f %9s %9.1f  (default: steps)\n", shot.name.c_str(), "steps",
+                        p.min_reduced_coc_px, p.layers, "", e.psnr_db, "", ms);
+            rows.push_back(format("{},0,{:g},{},,{:.2f},,{:.2f},{},steps", shot.name, p.min_reduced_coc_px, p.layers,
+                                  e.psnr_db, ms, a.threads));
+        }
+        for (size_t g = 0; g < grid.size(); ++g) {
+            const bokeh::DefocusPlanEstimate& p = *grid[g];
+            const double ms                     = times[g + 1];
+            bokeh::ImageError e;
+            std::string err;
+            bokeh::compare(e, outs[g + 1], ref, err, {}, a.threads);
             std::printf("%-16s %-7.4g %-8g %6d %9.1f %9.1f %9.1f %9.1f%s\n", shot.name.c_str(), p.ladder_ratio,
                         p.min_reduced_coc_px, p.layers, p.predicted_psnr_db, e.psnr_db, p.predicted_ms, ms,
                         p.chosen ? "  (planner=predicted)" : "");

@@ -99,11 +99,22 @@ bool run_diffraction_task(int reps, bool quick, std::vector<std::string>& rows)
                  return ring_profile([](double rho) { return rho < 1.0 ? 1.0 / kPi : 0.0; }, R, 4);
              }},
         };
-        for (const Method& m : methods) {
-            std::vector<double> got;
-            // The exact PSF takes seconds from 127 px: one timed run there.
-            const int n = (m.name[0] == 'e' && m.name[1] == 'x' && coc_px >= 127) ? 1 : reps;
-            const double ms = median_ms([&] { got = m.run(); }, n);
+        // The four methods timed together in interleaved rounds (timing.h), each timed run
+        // right after an untimed one of the same method; the exact PSF (seconds a run from
+        // 127 px) the median of 3 there.
+        std::vector<std::vector<double>> outs(methods.size());
+        std::vector<std::function<void()>> fns;
+        std::vector<int> ns;
+        for (size_t i = 0; i < methods.size(); ++i) {
+            fns.push_back([&, i] { outs[i] = methods[i].run(); });
+            ns.push_back(i == 0 && coc_px >= 127 ? std::min(reps, 3) : reps);
+        }
+        const std::vector<double> times = interleaved_medians_ms(fns, ns, std::vector<bool>(fns.size(), true));
+        for (size_t i = 0; i < methods.size(); ++i) {
+            const Method& m                = methods[i];
+            const std::vector<double>& got = outs[i];
+            const double ms                = times[i];
+            const int n                    = ns[i];
             if (ref.empty())
                 ref = got;
             if (got.size() != ref.size()) {

@@ -64,21 +64,29 @@ bool explain_gap(const BenchArgs& a, const std::string& name, const OIIO::ImageB
     variants.push_back({ "every pixel a sprite", lens, &lens_ref });
     variants.back().o.highlight_threshold = 1e-6f;
     variants.back().o.max_sprites         = 10000000;
-    for (const Variant& v : variants) {
+    // The variants' times in interleaved rounds (timing.h), each timed run right after an
+    // untimed one of the same variant, the median of 3 (every pixel a sprite takes seconds).
+    std::vector<std::function<void()>> fns;
+    for (size_t i = 0; i < variants.size(); ++i)
+        fns.push_back([&, i] { OIIO::ImageBuf out; bokeh::defocus(out, img, variants[i].o, nullptr, a.threads); });
+    const int n = std::min(a.reps, 3);
+    const std::vector<double> times = interleaved_medians_ms(fns, std::vector<int>(fns.size(), n),
+                                                             std::vector<bool>(fns.size(), true));
+    for (size_t i = 0; i < variants.size(); ++i) {
+        const Variant& v = variants[i];
         OIIO::ImageBuf out;
         bokeh::DefocusReport rep;
-        OIIO::Timer timer;
-        if (!bokeh::defocus(out, img, v.o, &rep, a.threads)) {
+        if (!bokeh::defocus(out, img, v.o, &rep, a.threads)) {  // untimed: its pixels and report
             std::fprintf(stderr, "bokeh-bench: %s: %s\n", name.c_str(), out.geterror().c_str());
             return false;
         }
-        const double ms = timer() * 1e3;
+        const double ms = times[i];
         bokeh::ImageError e;
         std::string err;
         bokeh::compare(e, out, *v.ref, err, {}, a.threads);
         std::printf("%-10s   gap: %-30s %8.1f dB (%lld sprites, %.0f ms)\n", name.c_str(), v.what, e.psnr_db,
                     static_cast<long long>(rep.sprites), ms);
-        rows.push_back(format("lens {},gap: {},,{},{},{:.3f},1,{}", name, v.what, a.width, a.threads, ms,
+        rows.push_back(format("lens {},\"gap: {}\",,{},{},{:.3f},{},{}", name, v.what, a.width, a.threads, ms, n,
                               error_fields(e)));
     }
     std::fflush(stdout);
@@ -117,23 +125,25 @@ bool run_lens_task(const BenchArgs& a, std::vector<std::string>& rows)
             std::fprintf(stderr, "bokeh-bench: %s: %s\n", name.c_str(), out_lens.geterror().c_str());
             return false;
         }
-        const double plain_ms = median_ms([&] { bokeh::defocus(out_plain, img, plain, nullptr, a.threads); }, a.reps);
-        const double lens_ms  = median_ms(
-            [&] {
-                bokeh::clear_shared_psf_caches();
-                bokeh::defocus(out_lens, img, lens, nullptr, a.threads);
-            },
-            a.reps);
-        const double warm_ms = median_ms([&] { bokeh::defocus(out_lens, img, lens, nullptr, a.threads); }, a.reps);
         bokeh::DefocusOptions fine = lens;
         fine.supersample           = 2;
         OIIO::ImageBuf out_fine;
-        const double fine_ms = median_ms(
-            [&] {
-                bokeh::clear_shared_psf_caches();
-                bokeh::defocus(out_fine, img, fine, nullptr, a.threads);
-            },
-            a.reps);
+        // The four timed together in interleaved rounds (timing.h), each timed run right after
+        // an untimed one of the same case (the cold ones clear the PSF caches in both, so the
+        // warm one's warm-up refills them).
+        const std::vector<double> times = interleaved_medians_ms(
+            { [&] { bokeh::defocus(out_plain, img, plain, nullptr, a.threads); },
+              [&] {
+                  bokeh::clear_shared_psf_caches();
+                  bokeh::defocus(out_lens, img, lens, nullptr, a.threads);
+              },
+              [&] { bokeh::defocus(out_lens, img, lens, nullptr, a.threads); },
+              [&] {
+                  bokeh::clear_shared_psf_caches();
+                  bokeh::defocus(out_fine, img, fine, nullptr, a.threads);
+              } },
+            std::vector<int>(4, a.reps), std::vector<bool>(4, true));
+        const double plain_ms = times[0], lens_ms = times[1], warm_ms = times[2], fine_ms = times[3];
         const std::string no_error = ",,";
         std::string plain_db = "-", lens_db = "-";
         if (int64_t(a.width) * a.height <= 640 * 360) {

@@ -50,7 +50,7 @@ BENCHMARK(BM_FftwTile)
     ->Args({ 64, 64 })->Args({ 128, 128 })->Args({ 256, 256 })->Args({ 256, 512 })
     ->Args({ 384, 384 })->Args({ 512, 512 })->Args({ 512, 768 })->Args({ 768, 768 })
     ->Args({ 1024, 1024 })->Args({ 1536, 768 })->Args({ 2048, 1024 })
-    ->Unit(benchmark::kMicrosecond);
+    ->Unit(benchmark::kMicrosecond)->MinWarmUpTime(0.1);  // untimed runs first: caches, plans, pages
 
 const OIIO::ImageBuf& frame()
 {
@@ -94,7 +94,7 @@ void exact_cases(benchmark::internal::Benchmark* b)
     b->ArgNames({ "size", "method", "gaussian", "threads" });
 }
 BENCHMARK(BM_ExactBlur)->Apply(exact_cases)->Unit(benchmark::kMillisecond)->UseRealTime()
-    ->MinTime(0.5);
+    ->MinTime(0.5)->MinWarmUpTime(0.2);
 
 }  // namespace
 

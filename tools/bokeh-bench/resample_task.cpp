@@ -263,10 +263,62 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
     Sheet sheet;
 
     for (const Effect& eff : effects()) {
-        // The reference, timed as the pipeline's exact row.
+        // Every case of the effect (the reference, the reduced effect, each method's enlargement
+        // and pipeline at each factor, OIIO's resize at 1/4) timed together in interleaved
+        // rounds (timing.h), each timed run right after an untimed one of the same case.
+        std::vector<std::function<void()>> fns;
+        std::map<std::string, size_t> at;  // "ref", "low 4", "enlarge 4 bilinear", "pipeline 4 ...", "oiio 4 triangle"
+        auto timed = [&](const std::string& key, std::function<void()> fn) {
+            at[key] = fns.size();
+            fns.push_back(std::move(fn));
+        };
+        std::map<int, OIIO::ImageBuf> fxs;        // the reduced effect at each factor, the enlargements' input
+        std::map<std::string, OIIO::ImageBuf> sinks;  // OIIO's outputs, ImageBufs it already holds
+        timed("ref", [&] { OIIO::ImageBuf out; bokeh::blur(out, frame, eff.kernel, {}, {}, threads); });
+        for (int s : kFactors) {
+            const bokeh::Kernel k = eff.at(s);
+            OIIO::ImageBuf low;
+            if (!bokeh::reduce(low, frame, s, {}, threads) || !bokeh::blur(fxs[s], low, k, {}, {}, threads)) {
+                std::fprintf(stderr, "bokeh-bench: %s at 1/%d: %s%s\n", eff.name.c_str(), s,
+                             low.geterror().c_str(), fxs[s].geterror().c_str());
+                return false;
+            }
+            const OIIO::ImageBuf& fx = fxs[s];
+            timed(format("low {}", s), [&, s, k] {
+                OIIO::ImageBuf l, b;
+                bokeh::reduce(l, frame, s, {}, threads);
+                bokeh::blur(b, l, k, {}, {}, threads);
+            });
+            for (F f : kMethods) {
+                const bokeh::ResampleOptions o = with(f);
+                timed(format("enlarge {} {}", s, bokeh::filter_name(f)), [&fx, s, o, threads] {
+                    OIIO::ImageBuf out;
+                    bokeh::enlarge(out, fx, s, o, threads);
+                });
+                timed(format("pipeline {} {}", s, bokeh::filter_name(f)), [&, s, k, o] {
+                    OIIO::ImageBuf l, b, out;
+                    bokeh::reduce(l, frame, s, {}, threads);
+                    bokeh::blur(b, l, k, {}, {}, threads);
+                    bokeh::enlarge(out, b, s, o, threads);
+                });
+            }
+            if (s == kPeerFactor)
+                for (const auto& [name, ours] : kPeers) {
+                    (void)ours;
+                    const OIIO::ROI to(0, fx.spec().width * s, 0, fx.spec().height * s, 0, 1, 0, fx.nchannels());
+                    OIIO::ImageBuf& sink = sinks[name];
+                    timed(format("oiio {} {}", s, name), [&fx, &sink, name = name, to, threads] {
+                        IBA::resize(sink, fx, name, 0.0f, to, threads);
+                    });
+                }
+        }
+        const std::vector<double> ms = interleaved_medians_ms(fns, std::vector<int>(fns.size(), a.reps),
+                                                              std::vector<bool>(fns.size(), true));
+
+        // The reference, the pipeline's exact row (untimed here: its pixels).
         OIIO::ImageBuf ref;
-        const double ref_ms = median_ms([&] { bokeh::blur(ref, frame, eff.kernel, {}, {}, threads); },
-                                        a.reps);
+        bokeh::blur(ref, frame, eff.kernel, {}, {}, threads);
+        const double ref_ms = ms[at["ref"]];
         if (ref.has_error() || !ref.initialized()) {
             std::fprintf(stderr, "bokeh-bench: %s reference: %s\n", eff.name.c_str(), ref.geterror().c_str());
             return false;
@@ -290,20 +342,11 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
         std::printf("(RMSE and PSNR %d px inside the frame; \"frame dB\": the whole frame)\n", kMargin);
 
         for (int s : kFactors) {
-            const bokeh::Kernel k = eff.at(s);
-            OIIO::ImageBuf low, fx;
-            if (!bokeh::reduce(low, frame, s, {}, threads) || !bokeh::blur(fx, low, k, {}, {}, threads)) {
-                std::fprintf(stderr, "bokeh-bench: %s at 1/%d: %s%s\n", eff.name.c_str(), s,
-                             low.geterror().c_str(), fx.geterror().c_str());
-                return false;
-            }
+            const bokeh::Kernel k    = eff.at(s);
+            const OIIO::ImageBuf& fx = fxs[s];
             if (s == kPeerFactor)
                 quarter[eff.name] = fx;
-            const double low_ms = median_ms([&] {
-                OIIO::ImageBuf l, b;
-                bokeh::reduce(l, frame, s, {}, threads);
-                bokeh::blur(b, l, k, {}, {}, threads);
-            }, a.reps);
+            const double low_ms = ms[at[format("low {}", s)]];
             effect_rows.push_back(format("reduce + blur {} at 1/{},{}x{} -> {}x{} + blur {:g} px,,{:.3f},,,,",
                                          eff.name, s, frame_roi.width(), frame_roi.height(),
                                          fx.spec().width, fx.spec().height, double(k.width_px), low_ms));
@@ -344,14 +387,8 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
                                  out.geterror().c_str());
                     return false;
                 }
-                OIIO::ImageBuf tmp;
-                const double e_ms = median_ms([&] { bokeh::enlarge(tmp, fx, s, o, threads); }, a.reps);
-                const double p_ms = median_ms([&] {
-                    OIIO::ImageBuf l, b;
-                    bokeh::reduce(l, frame, s, {}, threads);
-                    bokeh::blur(b, l, k, {}, {}, threads);
-                    bokeh::enlarge(tmp, b, s, o, threads);
-                }, a.reps);
+                const double e_ms = ms[at[format("enlarge {} {}", s, bokeh::filter_name(f))]];
+                const double p_ms = ms[at[format("pipeline {} {}", s, bokeh::filter_name(f))]];
                 enlarge_ms[eff.name][bokeh::filter_name(f)][s]  = e_ms;
                 if (!report(bokeh::filter_name(f), "", e_ms, p_ms, out))
                     return false;
@@ -369,9 +406,7 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
                         std::fprintf(stderr, "bokeh-bench: IBA::resize %s: %s\n", name, out.geterror().c_str());
                         return false;
                     }
-                    OIIO::ImageBuf tmp;
-                    const double e_ms = median_ms([&] { IBA::resize(tmp, fx, name, 0.0f, to, threads); },
-                                                  a.reps);
+                    const double e_ms = ms[at[format("oiio {} {}", s, name)]];
                     enlarge_ms[eff.name][std::string("oiio ") + name][s] = e_ms;
                     if (!report(format("OIIO IBA::resize {}", name), "oiio", e_ms, -1.0, out))
                         return false;
@@ -475,14 +510,21 @@ bool run_resample_task(const BenchArgs& a, std::vector<std::string>& rows,
     const std::map<std::string, double> targets = { { "bilinear", 8.0 }, { "gaussian", 15.0 },
                                                     { "upscale-blur", 12.0 } };
     std::map<std::string, double> plane_ms;
-    for (F f : { F::Bilinear, F::Gaussian, F::UpscaleBlur, F::UpscaleBlurFused, F::UpscaleBlurTwoStage,
-                 F::CatmullRom, F::Lanczos3 }) {
-        std::string err;
-        const bokeh::ResampleOptions o = with(f);
-        const double ms = median_ms([&] {
-            bokeh::resample_plane(in, outp, bokeh::AxisMap::factor(s), bokeh::AxisMap::factor(s), o, err,
-                                  threads);
-        }, a.reps);
+    const std::vector<F> headline = { F::Bilinear, F::Gaussian, F::UpscaleBlur, F::UpscaleBlurFused,
+                                      F::UpscaleBlurTwoStage, F::CatmullRom, F::Lanczos3 };
+    std::vector<std::string> plane_err(headline.size());
+    std::vector<std::function<void()>> plane_fns;
+    for (size_t i = 0; i < headline.size(); ++i)
+        plane_fns.push_back([&, i] {
+            bokeh::resample_plane(in, outp, bokeh::AxisMap::factor(s), bokeh::AxisMap::factor(s), with(headline[i]),
+                                  plane_err[i], threads);
+        });
+    const std::vector<double> plane_times = interleaved_medians_ms(
+        plane_fns, std::vector<int>(plane_fns.size(), a.reps), std::vector<bool>(plane_fns.size(), true));
+    for (size_t i = 0; i < headline.size(); ++i) {
+        const F f                    = headline[i];
+        const std::string& err       = plane_err[i];
+        const double ms              = plane_times[i];
         if (!err.empty()) {
             std::fprintf(stderr, "bokeh-bench: resample_plane %s: %s\n", bokeh::filter_name(f), err.c_str());
             return false;

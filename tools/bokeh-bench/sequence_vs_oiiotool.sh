@@ -34,6 +34,11 @@ run() {  # name command...: wall and CPU (user + sys) seconds of the whole proce
   cpus[$name]+="$c "
   printf '%-10s %6.2f s wall %6.2f s CPU   (load %s)\n' "$name" "$t" "$c" "$(cut -d' ' -f1 /proc/loadavg)"
 }
+# One untimed round first (the warm-up: page cache, the tools' first start), then REPS timed
+# rounds, each running the three in turn.
+oiiotool --threads 2 --frames "1-$frames" in.#.exr -o copy/out.#.exr
+"$bokehtool" --threads 2 --frames "1-$frames" in.#.exr --defocus -o seq/out.#.exr
+"$bokehtool" --threads 2 --parallel-frames --frames "1-$frames" in.#.exr --defocus -o par/out.#.exr
 for rep in $(seq "$reps"); do
   run oiiotool  oiiotool --threads 2 --frames "1-$frames" in.#.exr -o copy/out.#.exr
   run defocus   "$bokehtool" --threads 2 --frames "1-$frames" in.#.exr --defocus -o seq/out.#.exr

@@ -26,6 +26,7 @@
 #include "truth_chain_task.h"
 
 #include "bench_common.h"
+#include "timing.h"
 
 #include <bokeh/deep.h>
 #include <bokeh/defocus.h>
@@ -132,10 +133,11 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
             std::string name;
             OIIO::ImageBuf out;
             double seconds = 0.0;
+            std::function<bool(OIIO::ImageBuf&)> fn;  // its run, for the timing below
         };
         std::vector<Stage> stages;
         auto run = [&](const std::string& stage, const std::function<bool(OIIO::ImageBuf&)>& fn) {
-            Stage s{ stage, {}, 0.0 };
+            Stage s{ stage, {}, 0.0, fn };
             const auto s0 = std::chrono::steady_clock::now();
             if (!fn(s.out)) {
                 std::fprintf(stderr, "bokeh-bench: truth-chain: %s %s: %s\n", name.c_str(), stage.c_str(),
@@ -178,6 +180,23 @@ bool run_truth_chain_task(const BenchArgs& args, std::vector<std::string>& rows)
             || !run("flat auto fill=foreground",
                     defocus_with(sharp, bokeh::DefocusMethod::Auto, bokeh::DisocclusionFill::Foreground)))
             return false;
+
+        // The defocus stages' times: the median of 3 in interleaved rounds (timing.h), each timed
+        // run right after an untimed one of the same stage (the run above made its pixels). The
+        // truths keep their one run: references of seconds each, not contenders.
+        {
+            std::vector<std::function<void()>> fns;
+            std::vector<size_t> which;
+            for (size_t i = 0; i < stages.size(); ++i)
+                if (stages[i].name.find("truth") == std::string::npos) {
+                    which.push_back(i);
+                    fns.push_back([&, i] { OIIO::ImageBuf o; stages[i].fn(o); });
+                }
+            const std::vector<double> ms = interleaved_medians_ms(fns, std::vector<int>(fns.size(), std::min(args.reps, 3)),
+                                                                  std::vector<bool>(fns.size(), true));
+            for (size_t j = 0; j < which.size(); ++j)
+                stages[which[j]].seconds = ms[j] / 1e3;
+        }
 
         // The interior, and the mask: where the deep and the flat truth differ.
         const int inset = int(std::ceil(0.5 * std::max(std::abs(geo_rep.min_coc_px), std::abs(geo_rep.max_coc_px)))) + 1;
