@@ -475,14 +475,19 @@ def figure_dof_ref_reps(b):
     return "a single run" if reps == ["1"] else f"the median of {' / '.join(reps)}"
 
 
+def db_text(db):
+    """A PSNR as the page writes it: "exact" where the CSV's 999 says identical."""
+    return "exact" if db >= 999 else f"{db:.1f} dB"
+
+
 # The shots' largest |CoC| (the CSV's size_px), with the sign of the end it is at.
 for _shot, _sign in (("lights", "-"), ("edges", "-"), ("giant", "-"), ("beachball", ""), ("lowresleftview", "-")):
     FIGURES[f"coc_{_shot}"] = lambda b, s=_shot, sign=_sign: (
         f"{sign}{dof(b, s, is_reference, 'size_px'):.0f}")
 for _shot in SHOTS:
     FIGURES[f"dof_layers_{_shot}"] = lambda b, s=_shot: ref_layers(b, s)
-    FIGURES[f"dof_default_{_shot}"] = lambda b, s=_shot: f"{dof(b, s, DEFAULT):.0f} ms / {dof_db(b, s, DEFAULT):.1f} dB"
-    FIGURES[f"dof_default_{_shot}_db"] = lambda b, s=_shot: f"{dof_db(b, s, DEFAULT):.1f}"
+    FIGURES[f"dof_default_{_shot}"] = lambda b, s=_shot: f"{dof(b, s, DEFAULT):.0f} ms / {db_text(dof_db(b, s, DEFAULT))}"
+    FIGURES[f"dof_default_{_shot}_db"] = lambda b, s=_shot: db_text(dof_db(b, s, DEFAULT))
 FIGURES.update({
     # "giant, whose CoC is 5x that" (the target's 64 px).
     "dof_giant_coc_x": lambda b: f"{dof(b, 'giant', is_reference, 'size_px') / 64:.0f}",
