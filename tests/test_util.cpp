@@ -138,6 +138,21 @@ double channel_sum(const OIIO::ImageBuf& img, int c)
     return s;
 }
 
+float texture(int x, int y, int salt)
+{
+    const unsigned h = unsigned(x) * 73856093u ^ unsigned(y) * 19349663u ^ unsigned(salt) * 83492791u;
+    return float((h * 2654435761u) >> 8 & 0xffff) / 65535.0f;
+}
+
+bokeh::KernelWeights disk(float c)
+{
+    bokeh::Kernel k;
+    k.shape     = bokeh::KernelShape::Disk;
+    k.width_px  = std::abs(c);
+    k.height_px = std::abs(c);
+    return bokeh::kernel_weights(k);
+}
+
 bokeh::DefocusOptions direct_options(bokeh::DefocusMethod m, bokeh::Border border, bool grow)
 {
     bokeh::DefocusOptions o;

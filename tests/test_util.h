@@ -1,6 +1,7 @@
 // test_util.h — helpers shared by the unit and CLI tests.
 #pragma once
 
+#include <bokeh/aperture.h>
 #include <bokeh/defocus.h>
 
 #include <array>
@@ -72,6 +73,13 @@ float at(const OIIO::ImageBuf& img, int x, int y, int c);
 
 /// Sum of channel c of a float image over its data window, in double.
 double channel_sum(const OIIO::ImageBuf& img, int c);
+
+/// A deterministic texture value in [0, 1] at (x, y); `salt` gives another texture.
+float texture(int x, int y, int salt = 0);
+
+/// The disk aperture's weights at diameter |c| px (the library's default aperture; its
+/// pixel areas are checked against the exact circle in aperture/kernel_area_test.cpp).
+bokeh::KernelWeights disk(float c);
 
 /// Defocus options for a DepthMode::Direct image (Z is the signed CoC in px): the method,
 /// the border rule (each test names its own) and whether the data window grows.

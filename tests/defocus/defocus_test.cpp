@@ -1,5 +1,7 @@
-// Depth defocus (defocus.h): the reference against an independent brute force of the layer
-// model, the layered method against the reference, occlusion, silhouettes, focus pulls,
+// Depth defocus (defocus.h): the reference against a brute force of the layer model (the
+// model written straight: an optimisation check, it shares the model; the model itself is
+// checked against thin-lens closed forms in defocus_thin_lens_test.cpp and
+// defocus_fill_test.cpp), the layered method against the reference, occlusion, silhouettes, focus pulls,
 // bad values, data windows, determinism and the edge-halo remedy.
 #include <bokeh/blur.h>
 #include <bokeh/deep.h>
@@ -30,6 +32,8 @@ using namespace bokeh;
 using bokeh_test::at;
 using bokeh_test::channel_sum;
 using bokeh_test::direct_options;
+using bokeh_test::disk;
+using bokeh_test::texture;
 using bokeh_test::plane_lens;
 using bokeh_test::make_image;
 using bokeh_test::Px;
@@ -72,23 +76,6 @@ ImageError error_of(const OIIO::ImageBuf& result, const OIIO::ImageBuf& referenc
     std::string err;
     EXPECT_TRUE(compare(e, result, reference, err)) << err;
     return e;
-}
-
-// A deterministic texture value in [0, 1].
-float texture(int x, int y, int salt = 0)
-{
-    const unsigned h = unsigned(x) * 73856093u ^ unsigned(y) * 19349663u ^ unsigned(salt) * 83492791u;
-    return float((h * 2654435761u) >> 8 & 0xffff) / 65535.0f;
-}
-
-// The disk aperture at diameter |c| (what the library's default aperture is).
-KernelWeights disk(float c)
-{
-    Kernel k;
-    k.shape     = KernelShape::Disk;
-    k.width_px  = std::abs(c);
-    k.height_px = std::abs(c);
-    return kernel_weights(k);
 }
 
 const DefocusMethod kMethods[] = { DefocusMethod::Layers, DefocusMethod::Reference, DefocusMethod::Gather };
@@ -136,6 +123,8 @@ TEST(DefocusIdentity, ZeroCocGivesTheInputBitForBit)
 }
 
 // --- the reference is exact for the layer model --------------------------------------------
+// (An optimisation check: the reference's planes, tiles and threads against the same model
+// written as a plain loop. It cannot catch a wrong model; the thin-lens closed forms do.)
 
 namespace {
 

@@ -1188,6 +1188,27 @@ TEST(ResampleMetrics, DetailFailsTheSmoothMethods)
     ASSERT_TRUE(OIIO::ImageBufAlgo::fill(flat, { float(mean[0]) }));
     ASSERT_TRUE(detail_error(score, flat, ref, err));
     EXPECT_NEAR(score, 100.0, 1e-3);
+    // Closed forms on a known sinusoid (8 periods across, so its samples' mean is its own
+    // mean m exactly): m + A a sin(t) against m + a sin(t) scores 100 |1 - A|; a phase lag
+    // d scores 100 RMS(sin(t + d) - sin(t)) / RMS(sin t) = 200 |sin(d / 2)|.
+    auto sinusoid = [](double amplitude, double phase) {
+        OIIO::ImageBuf img(OIIO::ImageSpec(64, 16, 1, OIIO::TypeFloat));
+        for (int y = 0; y < 16; ++y)
+            for (int x = 0; x < 64; ++x) {
+                const float v = float(0.5 + 0.25 * amplitude * std::sin(2.0 * bokeh::kPi * x / 8.0 + phase));
+                img.setpixel(x, y, &v);
+            }
+        return img;
+    };
+    const OIIO::ImageBuf wave = sinusoid(1.0, 0.0);
+    for (double a : { 0.0, 0.3, 0.75, 1.4 }) {
+        ASSERT_TRUE(detail_error(score, sinusoid(a, 0.0), wave, err)) << err;
+        EXPECT_NEAR(score, 100.0 * std::abs(1.0 - a), 1e-4) << "amplitude " << a;
+    }
+    for (double d : { 0.2, 1.0, bokeh::kPi }) {
+        ASSERT_TRUE(detail_error(score, sinusoid(1.0, d), wave, err)) << err;
+        EXPECT_NEAR(score, 200.0 * std::abs(std::sin(0.5 * d)), 1e-4) << "phase " << d;
+    }
     // The plane-wave pattern enlarged 8x (percent of its contrast, measured, within 2 %):
     // Lanczos-3 keeps the most (27.0), Catmull-Rom 38.2 (Kawase: bicubic best on
     // detail), bilinear 51.4, and the methods without Mach bands pay in softness:
