@@ -15,6 +15,8 @@
 #include <bokeh/optics.h>
 #include <bokeh/plugin.h>
 
+#include "memory_budget.h"
+
 #include <cmath>
 
 #include <OpenImageIO/imagebufalgo.h>
@@ -84,6 +86,12 @@ bool bokeh_command(CommandContext& c)
             return c.fail(out.buf->geterror());
     } else if (v.get_bool("sheet")) {
         const int cell = v.get_int("size") > 0 ? v.get_int("size") : int(std::ceil(std::abs(coc_px) * 1.25)) + 8;
+        // The sheet's RGB floats and the image made of them (24 bytes a pixel), checked
+        // before either is allocated: 64 x 64 cells of 2048 px would be 384 GiB.
+        const int64_t sheet_w = int64_t(v.get_int("columns")) * (cell | 1), sheet_h = int64_t(v.get_int("rows")) * (cell | 1);
+        if (!bokeh::within_memory_budget(c, bokeh::image_bytes(sheet_w, sheet_h, 24),
+                                         format("a {}x{} sheet of PSFs", sheet_w, sheet_h)))
+            return false;
         if (!bokeh::bokeh_sheet_image(*out.buf, lens, std::abs(coc_px), v.get_int("columns"), v.get_int("rows"),
                                       cell, c.nthreads))
             return c.fail(out.buf->geterror());
@@ -98,6 +106,11 @@ bool bokeh_command(CommandContext& c)
                                  "0.87,0.49 a 16:9 frame's top-right corner)",
                                  field));
         req.size_px = v.get_int("size");
+        // The PSF's RGB floats and its image (24 bytes a pixel): `size`, else the CoC with the
+        // margin aberrations and fringes may take (its own extent is known only once built).
+        const int64_t side = req.size_px > 0 ? req.size_px : int64_t(std::ceil(2.0 * std::abs(coc_px))) + 16;
+        if (!bokeh::within_memory_budget(c, bokeh::image_bytes(side, side, 24), format("a {}x{} PSF", side, side)))
+            return false;
         if (!bokeh::lens_psf_image(*out.buf, lens, req, c.nthreads))
             return c.fail(out.buf->geterror());
     }

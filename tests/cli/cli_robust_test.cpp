@@ -116,6 +116,16 @@ TEST(Robust, TypedSizesAreCheckedBeforeMemoryIsTaken)
     expect_clean_failure(r, "--resample: a 70000x70000 result of 5 channels would take", out);
     r = bokehtool(small + "--resize 128x72 -o " + dir + "/resized.exr");
     EXPECT_EQ(r.status, 0) << r.err;
+    // --bokeh: a sheet of 64 x 64 cells of 2049 px is 131136 px square, 24 bytes a pixel
+    // (384.6 GiB); a PSF its size (or its CoC's extent), the same rate.
+    r = bokehtool("--bokeh:sheet=1:columns=64:rows=64:size=2048 100 -o " + out);
+    expect_clean_failure(r, "--bokeh: a 131136x131136 sheet of PSFs would take 384.", out);
+    r = bokehtool("--maxmemory 1M --bokeh:size=301 100 -o " + out);
+    expect_clean_failure(r, "--bokeh: a 301x301 PSF would take 2.1 MiB, over the memory budget of 1.0 MiB", out);
+    r = bokehtool("--maxmemory 1M --bokeh 200 -o " + out);
+    expect_clean_failure(r, "--bokeh: a 416x416 PSF would take", out);
+    r = bokehtool(format("--maxmemory 1M --bokeh 60 -o {}/psf.exr", dir));
+    EXPECT_EQ(r.status, 0) << r.err;
     // A deep merge: its inputs fit (3.05 MiB each), the pooled and tidied samples do not.
     const std::string two_deep = "--scene lights:width=200:height=100:output=deep "
                                  "--scene lights:width=200:height=100:output=deep:seed=2 ";
