@@ -109,6 +109,10 @@ struct CommandContext {
     /// host's --maxmemory; 0: default_memory_budget_bytes(), half the machine). Last in
     /// the struct, so that plugins built before it still find every other field.
     int64_t memory_budget_bytes = 0;
+    /// The run's --timeout in seconds (0: none), for commands whose cost the user's numbers
+    /// set (a truth's rays): refused at once when even a lower bound of their time is past
+    /// it. Last in the struct for the same reason.
+    double timeout_seconds = 0.0;
 
     /// Record the reason and return false: `return ctx.fail("...")`.
     bool fail(std::string why)

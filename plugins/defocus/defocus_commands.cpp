@@ -11,6 +11,7 @@
 #include <bokeh/truth.h>
 
 #include "defocus_options.h"
+#include "memory_budget.h"
 
 #include <algorithm>
 
@@ -73,6 +74,11 @@ bool defocus_command(CommandContext& c)
         t.grow      = o.grow;
         t.nonfinite = o.nonfinite;
         t.spp       = c.options.get_int("spp");
+        // Each ray crosses one cell at least: the pixels' rays are the time's floor.
+        const OIIO::ROI d = in.buf->roi();
+        if (!bokeh::within_timeout(c, double(d.width()) * double(d.height()) * double(t.spp),
+                                   format("a truth of {}x{} pixels at {} rays a pixel", d.width(), d.height(), t.spp)))
+            return false;
         t.seed      = uint32_t(c.options.get_int("seed"));
         t.unknown   = c.options.get_bool("unknown");
         t.pixel     = c.options.get_string("pixel") == "area" ? bokeh::TruthPixel::Area : bokeh::TruthPixel::Centre;

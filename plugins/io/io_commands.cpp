@@ -223,6 +223,10 @@ bool scene(CommandContext& c)
     if (!bokeh::within_memory_budget(c, bokeh::image_bytes(o.width, o.height, per_pixel),
                                      format("a {}x{} {} scene", o.width, o.height, output)))
         return false;
+    if (output == "truth"
+        && !bokeh::within_timeout(c, double(o.width) * double(o.height) * double(c.options.get_int("spp")),
+                                  format("a {}x{} truth at {} rays a pixel", o.width, o.height, c.options.get_int("spp"))))
+        return false;
     if (output != "truth")
         for (const auto& [key, given] : c.options.explicitly_given)
             if (given && is_truth_option(key))

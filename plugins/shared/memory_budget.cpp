@@ -4,7 +4,9 @@
 
 #include <bokeh/io.h>
 
+#include <algorithm>
 #include <limits>
+#include <thread>
 
 #include <OpenImageIO/strutil.h>
 
@@ -29,6 +31,22 @@ bool within_memory_budget(CommandContext& c, int64_t bytes, const std::string& w
                                              "raises it)",
                                              what, bytes < 0 ? std::string("more than 8 EiB") : memory_size_text(bytes),
                                              memory_size_text(budget)));
+}
+
+bool within_timeout(CommandContext& c, double rays, const std::string& what)
+{
+    if (!(c.timeout_seconds > 0.0))
+        return true;
+    const int threads    = c.nthreads > 0 ? c.nthreads : std::max(1, int(std::thread::hardware_concurrency()));
+    const double seconds = rays * kTruthFloorNsPerRay * 1e-9 / threads;
+    if (seconds <= c.timeout_seconds)
+        return true;
+    const std::string at_least = seconds >= 7200.0 ? OIIO::Strutil::fmt::format("{:.1f} h", seconds / 3600.0)
+                                 : seconds >= 120.0 ? OIIO::Strutil::fmt::format("{:.0f} min", seconds / 60.0)
+                                                    : OIIO::Strutil::fmt::format("{:.0f} s", seconds);
+    return c.fail(OIIO::Strutil::fmt::format("{} is {:.2g} rays: at least {} on {} thread{}, past --timeout {:g} s",
+                                             what, rays, at_least, threads, threads == 1 ? "" : "s",
+                                             c.timeout_seconds));
 }
 
 }  // namespace bokeh

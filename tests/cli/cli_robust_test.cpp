@@ -236,6 +236,27 @@ TEST(Robust, TimeoutStopsEarlyWhenTheCommandsPaceCannotMeetIt)
     EXPECT_EQ(ok.status, 0) << ok.err;
 }
 
+TEST(Robust, ATruthThatCannotMeetTheTimeoutIsRefusedAtOnce)
+{
+    // 1920 x 1080 pixels at 1048576 rays a pixel is 2.2e12 rays: at 25 ns a ray a thread (a
+    // fifth of the fastest measured) at least 7.5 h on 2 threads, refused before the first
+    // ray, exit 1, nothing written; the defocus truth of a deep frame likewise.
+    const std::string dir = fresh_dir("robust_truth_time"), out = dir + "/truth.exr";
+    const auto t0 = std::chrono::steady_clock::now();
+    RunResult r   = bokehtool("--threads 2 --timeout 5 --scene lights:width=1920:height=1080:output=truth:spp=1048576 -o " + out);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    expect_clean_failure(r, "--scene: a 1920x1080 truth at 1048576 rays a pixel is 2.2e+12 rays: at least 7.5 h on 2 "
+                            "threads, past --timeout 5 s", out);
+    EXPECT_LT(seconds, 3.0) << "refused at once";
+    r = bokehtool("--threads 2 --timeout 10 --scene lights:width=480:height=270:output=deep "
+                  "--defocus:method=truth:spp=1048576 -o " + out);
+    expect_clean_failure(r, "--defocus: a truth of 480x270 pixels at 1048576 rays a pixel is 1.4e+11 rays: at least 28 "
+                            "min on 2 threads, past --timeout 10 s", out);
+    // Without --timeout nothing is refused for time (the same command, fewer rays, runs).
+    r = bokehtool(format("--threads 2 --scene lights:width=48:height=27:output=truth:spp=64 -o {}/small.exr", dir));
+    EXPECT_EQ(r.status, 0) << r.err;
+}
+
 TEST(Robust, SigtermDuringAWriteRemovesItsTemporaryFile)
 {
     const std::string dir = fresh_dir("robust_sigterm"), out = dir + "/big.exr";

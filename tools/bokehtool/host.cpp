@@ -718,6 +718,7 @@ bool Host::run_command(const Command& cmd, bokeh::OptionValues opts,
     ctx.verbosity = m_verbosity;
     ctx.colors    = &m_colors;
     ctx.memory_budget_bytes = m_read_options.memory_budget_bytes;
+    ctx.timeout_seconds     = m_timeout_seconds;
     ctx.message   = [this](const std::string& s) { message(s); };
     std::shared_ptr<ProgressLine> progress;
     if (m_progress && m_verbosity > 0) {
