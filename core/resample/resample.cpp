@@ -290,16 +290,31 @@ bool reduce_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisMap
     if (any_mean)
         separable_pass(src, dst, Taps(wx), Taps(wy), false, nthreads);
     if (n_data_mean > 0 && outside_is_black) {
-        // The depth's mean over the pixels inside, from the taps that do not count outside.
-        std::vector<float> inside(size_t(dst.width) * size_t(dst.height) * size_t(nc));
-        const PlaneView in_view{ inside.data(), dst.width, dst.height, nc, size_t(dst.width) * size_t(nc) };
-        separable_pass(src, in_view, Taps(box_taps(src.width, dst.width, mx, false)),
-                       Taps(box_taps(src.height, dst.height, my, false)), false, nthreads);
-        for (int y = 0; y < dst.height; ++y)
-            for (int x = 0; x < dst.width; ++x)
-                for (int c = 0; c < nc; ++c)
-                    if (reducers[size_t(c)] == Reducer::MeanOverData)
-                        dst.row(y)[size_t(x) * size_t(nc) + size_t(c)] = in_view.row(y)[size_t(x) * size_t(nc) + size_t(c)];
+        // The depth's mean over the pixels inside: the black taps are the inside taps times
+        // the footprint's share inside the source (box_row), separably, so divide by the
+        // product of the two rows' sums (1 away from the edges; 0: nothing inside, left 0).
+        auto row_sums = [](const TapMatrix& m) {
+            std::vector<double> sums(m.size(), 0.0);
+            for (size_t i = 0; i < m.size(); ++i) {
+                const TapRow r = m[i];
+                for (size_t k = 0; k < r.n; ++k)
+                    sums[i] += r.w[k];
+            }
+            return sums;
+        };
+        const std::vector<double> sx = row_sums(wx), sy = row_sums(wy);
+        parallel_for_chunks(0, dst.height, 8, nthreads, [&](int64_t y0, int64_t y1) {
+            for (int y = int(y0); y < int(y1); ++y)
+                for (int x = 0; x < dst.width; ++x) {
+                    const double inside = sx[size_t(x)] * sy[size_t(y)];
+                    if (inside == 1.0 || inside == 0.0)
+                        continue;
+                    float* o = dst.row(y) + size_t(x) * size_t(nc);
+                    for (int c = 0; c < nc; ++c)
+                        if (reducers[size_t(c)] == Reducer::MeanOverData)
+                            o[c] = float(o[c] / inside);
+                }
+        });
     }
     if (n_mean + n_data_mean < nc) {
         // Min, max and nearest depth over each footprint's pixels.
