@@ -261,14 +261,18 @@ def verdict(ok):
     return "met" if ok else "not met"
 
 
+def registrar(table):
+    """A decorator that files a function in `table` under a name: @figure("x"), @claim("y")."""
+    def register(name):
+        def add(fn):
+            table[name] = fn
+            return fn
+        return add
+    return register
+
+
 FIGURES = {}
-
-
-def figure(name):
-    def add(fn):
-        FIGURES[name] = fn
-        return fn
-    return add
+figure = registrar(FIGURES)
 
 
 # Uniform blurs: blur.csv.
@@ -535,13 +539,7 @@ for _f in DEEP_FRAMES:
 # --- statements about the figures -------------------------------------------------------
 
 CLAIMS = {}
-
-
-def claim(name):
-    def add(fn):
-        CLAIMS[name] = fn
-        return fn
-    return add
+claim = registrar(CLAIMS)
 
 
 @claim("bands6_cheapest_40db")
