@@ -247,12 +247,9 @@ bool run_defocus_task(const BenchArgs& a, std::vector<std::string>& rows)
                             } });
         // The reference and every variant timed together in interleaved rounds (timing.h),
         // each timed run right after an untimed one of the same case; the reference (seconds
-        // a run on giant) the median of 3.
+        // a run on giant) the median of 3, drawn again into `ref` (the same pixels).
         std::vector<OIIO::ImageBuf> outs(variants.size());
-        OIIO::ImageBuf ref_timed;
-        std::vector<std::function<void()>> fns = { [&] {
-            bokeh::defocus(ref_timed, shot.image, ref_opts, nullptr, a.threads);
-        } };
+        std::vector<std::function<void()>> fns = { [&] { bokeh::defocus(ref, shot.image, ref_opts, nullptr, a.threads); } };
         std::vector<int> nreps = { std::min(a.reps, 3) };
         for (size_t i = 0; i < variants.size(); ++i) {
             bokeh::DefocusOptions o = shot.base;
@@ -311,7 +308,8 @@ bool run_plans_task(const BenchArgs& a, std::vector<std::string>& rows)
         std::vector<const bokeh::DefocusPlanEstimate*> grid;
         std::vector<std::function<void()>> fns;
         std::vector<OIIO::ImageBuf> outs(1 + rep.plans.size());
-        fns.push_back([&] { bokeh::defocus(outs[0], shot.image, shot.base, nullptr, a.threads); });
+        bokeh::DefocusReport steps;  // the steps' plan, as its timed runs report it
+        fns.push_back([&] { bokeh::defocus(outs[0], shot.image, shot.base, &steps, a.threads); });
         for (const bokeh::DefocusPlanEstimate& p : rep.plans) {
             const bool on_grid = p.chosen
                                  || (std::find(qs.begin(), qs.end(), p.min_reduced_coc_px) != qs.end()
@@ -334,12 +332,10 @@ bool run_plans_task(const BenchArgs& a, std::vector<std::string>& rows)
         const std::vector<double> times = interleaved_medians_ms(fns, std::vector<int>(fns.size(), a.reps),
                                                                  std::vector<bool>(fns.size(), true));
         {
-            bokeh::DefocusReport steps;
-            bokeh::defocus(out, shot.image, shot.base, &steps, a.threads);  // untimed: the steps' plan
             const double ms = times[0];
             bokeh::ImageError e;
             std::string err;
-            bokeh::compare(e, out, ref, err, {}, a.threads);
+            bokeh::compare(e, outs[0], ref, err, {}, a.threads);
             const bokeh::DefocusPlanEstimate& p = steps.plans.at(0);
             std::printf("%-16s %-7s %-8g %6d %9s %9.1f %9s %9.1f  (default: steps)\n", shot.name.c_str(), "steps",
                         p.min_reduced_coc_px, p.layers, "", e.psnr_db, "", ms);
