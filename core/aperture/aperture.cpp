@@ -1,10 +1,18 @@
 // aperture.cpp — the aperture as an edge-distance function of polar angle (the radial LUT
-// of Kawase's "Bokeh Deep Dive" that turns a round beam pattern into any aperture's).
+// of Kawase's "Bokeh Deep Dive" that turns a round beam pattern into any aperture's), and
+// the three things made from it: the inside test the kernels' exact weights count, the
+// edge the lens PSFs draw, and the area-uniform pupil points the thin-lens truth shoots.
 //
-// Round and bladed apertures are evaluated in closed form (the polygon rule of
-// core/aperture/kernel.cpp, shared through polygon_edge_distance, so a lens PSF and the flat
-// kernel of the same aperture have the same edge); a star is the closed form of its
-// 2N-gon; a picture is tabulated at 1024 angles and interpolated linearly.
+// Round and bladed apertures are evaluated in closed form (polygon_edge_distance); a star
+// is the closed form of its 2N-gon; a picture is tabulated at 1024 angles and interpolated
+// linearly. A polygon's inside test takes the largest projection on its blades' normals
+// instead of an angle (2.5-3.6x faster kernel weights for 3-9 blades, the same bits as the
+// angle's rule on 14 polygons of 3-64 blades; past ~40 blades the dot products cost more
+// than the angle, so only up to 32 blades hold normals).
+// The area sampler: a polygon's cumulative area inside a sector is closed-form, half the
+// integral of d(t)^2 with d(t) = (1 - q) A / cos t + q (A the apothem, q the curvature):
+// (1 - q)^2 A^2 tan t + 2 q (1 - q) A asinh(tan t) + q^2 t; any other edge's is summed at
+// 8192 angles (midpoint rule; a star's or a picture's area to under 1e-6 of itself).
 // Limits: an edge-distance function describes star-shaped openings only; a picture's
 // notches that a ray from the centroid crosses twice are filled.
 
@@ -24,10 +32,35 @@ using OIIO::Strutil::fmt::format;
 namespace {
 constexpr int kTableSize = 1024;
 
+constexpr int kSectorSteps  = 4096;  // the polygon sampler's inverse CDF nodes a sector
+constexpr int kEdgeSteps    = 8192;  // other edges: the angles their area is summed at
+
 double wrap_angle(double a, double period)
 {
     a = std::fmod(a, period);
     return a < 0.0 ? a + period : a;
+}
+
+// The area of a polygon's sector from its normal to angle t, times 2, up to a constant
+// (the closed form in the header above): apothem A, curvature q.
+double sector_area2(double A, double q, double t)
+{
+    const double tn = std::tan(t);
+    return (1 - q) * (1 - q) * A * A * tn + 2 * q * (1 - q) * A * std::asinh(tn) + q * q * t;
+}
+
+// The blades' unit normals, (u, v) with v up, for a polygon of up to 32 blades.
+std::vector<std::pair<double, double>> blade_normals(int blades, double vertex_rad)
+{
+    std::vector<std::pair<double, double>> n;
+    if (blades > 32)
+        return n;
+    const double sector = 2.0 * kPi / blades;
+    for (int j = 0; j < blades; ++j) {
+        const double a = vertex_rad + (j + 0.5) * sector;  // the middle of sector j
+        n.emplace_back(std::cos(a), std::sin(a));
+    }
+    return n;
 }
 }  // namespace
 
@@ -39,25 +72,57 @@ double polygon_edge_distance(int blades, double curvature, double phi_from_verte
     return d_poly + curvature * (1.0 - d_poly);
 }
 
+bool Aperture::polygon(int blades, double curvature, double rotation_deg, double hole, Aperture& out,
+                       std::string& err)
+{
+    if (blades < 3 || blades > 64) {
+        err = format("blades {} is outside 3..64", blades);
+        return false;
+    }
+    if (!std::isfinite(rotation_deg)) {
+        err = "rotation is not finite";
+        return false;
+    }
+    if (!(curvature >= 0.0 && curvature <= 1.0)) {
+        err = format("curvature {} is outside 0..1", curvature);
+        return false;
+    }
+    if (!(hole >= 0.0 && hole < 1.0)) {
+        err = format("hole {} is outside 0..<1", hole);
+        return false;
+    }
+    out        = Aperture();
+    out.m_hole = hole;
+    if (curvature < 1.0) {  // curvature 1 is the circle
+        out.m_kind       = Kind::Polygon;
+        out.m_blades     = blades;
+        out.m_curvature  = curvature;
+        out.m_vertex_rad = 0.5 * kPi + rotation_deg * kPi / 180.0;
+        out.m_apothem    = std::cos(0.5 * (2.0 * kPi / blades));
+        out.m_min_edge   = polygon_edge_distance(blades, curvature, kPi / blades);
+        out.m_normals    = blade_normals(blades, out.m_vertex_rad);
+    }
+    return true;
+}
+
 bool Aperture::from_kernel(const Kernel& k, Aperture& out, std::string& err)
 {
-    if (k.shape != KernelShape::Disk && k.shape != KernelShape::Polygon) {
-        err = "a lens aperture is a disk or a bladed polygon (kernel=disk|polygon|hex)";
+    if (k.shape != KernelShape::Disk && k.shape != KernelShape::Polygon && k.shape != KernelShape::Opening) {
+        err = "a lens aperture is a disk, a bladed polygon or an opening (kernel=disk|polygon|hex|star)";
         return false;
     }
     Kernel unit = k;
     unit.width_px = unit.height_px = 1.0f;
     if (!validate(unit, err))
         return false;
-    out = Aperture();
-    out.m_hole = k.hole;
-    if (k.shape == KernelShape::Polygon && k.curvature < 1.0f) {
-        out.m_kind       = Kind::Polygon;
-        out.m_blades     = k.blades;
-        out.m_curvature  = k.curvature;
-        out.m_vertex_rad = 0.5 * kPi + k.rotation_deg * kPi / 180.0;
-        out.m_min_edge   = polygon_edge_distance(k.blades, k.curvature, kPi / k.blades);
+    if (k.shape == KernelShape::Opening) {
+        out = k.opening;
+        return true;
     }
+    if (k.shape == KernelShape::Polygon)
+        return polygon(k.blades, k.curvature, k.rotation_deg, k.hole, out, err);
+    out        = Aperture();
+    out.m_hole = k.hole;
     return true;
 }
 
@@ -198,11 +263,134 @@ double Aperture::edge(double phi) const
 
 bool Aperture::inside(double x, double y) const
 {
-    const double r = std::hypot(x, y);
-    if (r == 0.0)
-        return m_hole == 0.0;
-    const double e = edge(std::atan2(y, x));
-    return r < e && r >= m_hole * e;
+    const double r = std::sqrt(x * x + y * y);
+    double d       = 1.0;
+    if (m_kind != Kind::Round && r > 0.0) {  // at the centre any d > 0 gives the same answer
+        if (!m_normals.empty()) {
+            // The blade nearest in angle to a point is the one its projection is largest
+            // on, p = r cos(psi), so the edge distance cos(pi/N) / cos(psi) is A r / p.
+            double p = 0.0;
+            for (const auto& [nx, ny] : m_normals)
+                p = std::max(p, x * nx + y * ny);
+            const double d_poly = m_apothem * r / p;
+            d                   = d_poly + m_curvature * (1.0 - d_poly);
+        } else {
+            d = edge(std::atan2(y, x));
+        }
+    }
+    return r < d && r >= m_hole * d;
+}
+
+double Aperture::area() const
+{
+    double unit = 0.0;
+    switch (m_kind) {
+    case Kind::Round: unit = kPi; break;
+    case Kind::Polygon: {
+        const double half = kPi / m_blades;
+        unit = 0.5 * m_blades * (sector_area2(m_apothem, m_curvature, half) - sector_area2(m_apothem, m_curvature, -half));
+        break;
+    }
+    default: {
+        const double step = 2.0 * kPi / kEdgeSteps;
+        for (int i = 0; i < kEdgeSteps; ++i) {
+            const double e = edge((i + 0.5) * step);
+            unit += 0.5 * e * e * step;
+        }
+    }
+    }
+    return unit * (1.0 - m_hole * m_hole);
+}
+
+Aperture Aperture::point_reflected() const
+{
+    Aperture r = *this;
+    switch (m_kind) {
+    case Kind::Round: break;
+    case Kind::Polygon:
+    case Kind::Star:
+        r.m_vertex_rad = m_vertex_rad + kPi;
+        r.m_normals    = m_kind == Kind::Polygon ? blade_normals(m_blades, r.m_vertex_rad) : m_normals;
+        break;
+    case Kind::Table:
+        std::rotate(r.m_table.begin(), r.m_table.begin() + kTableSize / 2, r.m_table.end());
+        break;
+    }
+    return r;
+}
+
+// --- area-uniform points -------------------------------------------------------------
+
+ApertureSampler::ApertureSampler(const Aperture& a, float aspect)
+    : m_aperture(a)
+    , m_polygon(a.m_kind == Aperture::Kind::Polygon)
+    , m_round(a.m_kind == Aperture::Kind::Round)
+    , m_blades(a.m_blades)
+    , m_hole2(a.m_hole * a.m_hole)
+    , m_aspect(aspect)
+{
+    double unit_area = kPi;  // at circumradius 1
+    if (m_polygon) {
+        m_sector       = 2.0 * kPi / m_blades;
+        m_first_normal = a.m_vertex_rad + 0.5 * m_sector;
+        m_apothem      = std::cos(0.5 * m_sector);
+        m_curvature    = a.m_curvature;
+        const double A = m_apothem, q = m_curvature;
+        const double half = 0.5 * m_sector, h0 = sector_area2(A, q, -half), total = sector_area2(A, q, half) - h0;
+        m_angle.resize(kSectorSteps + 1);
+        m_angle.front() = -half;
+        m_angle.back()  = half;
+        for (int i = 1; i < kSectorSteps; ++i) {
+            const double target = total * double(i) / kSectorSteps;
+            double lo = -half, hi = half;
+            for (int it = 0; it < 60; ++it) {
+                const double mid = 0.5 * (lo + hi);
+                (sector_area2(A, q, mid) - h0 < target ? lo : hi) = mid;
+            }
+            m_angle[size_t(i)] = 0.5 * (lo + hi);
+        }
+        unit_area = 0.5 * total * m_blades;
+    } else if (!m_round) {
+        // The cumulative area at the edges of kEdgeSteps equal angle cells, each cell's
+        // share from its middle's edge distance.
+        const double step = 2.0 * kPi / kEdgeSteps;
+        m_angle.resize(kEdgeSteps + 1);
+        m_angle.front() = 0.0;
+        for (int i = 0; i < kEdgeSteps; ++i) {
+            const double e       = a.edge((i + 0.5) * step);
+            m_angle[size_t(i) + 1] = m_angle[size_t(i)] + 0.5 * e * e * step;
+        }
+        unit_area = m_angle.back();
+    }
+    m_area = unit_area * (1.0 - m_hole2) * 0.25 * aspect;
+}
+
+std::array<double, 2> ApertureSampler::operator()(double u1, double u2) const
+{
+    double phi, d = 1.0;
+    if (m_polygon) {
+        const double s = u1 * m_blades;
+        const int j    = std::min(m_blades - 1, int(s));
+        const double f = (s - j) * kSectorSteps;
+        const int i    = std::min(kSectorSteps - 1, int(f));
+        const double t = m_angle[size_t(i)] + (m_angle[size_t(i) + 1] - m_angle[size_t(i)]) * (f - i);
+        phi            = m_first_normal + j * m_sector + t;
+        d              = polygon_edge_distance(m_blades, m_curvature, t + 0.5 * m_sector);  // t from the sector's normal
+    } else if (m_round) {
+        phi = 2.0 * kPi * u1;
+    } else {
+        // The cell holding the share u1 of the area, then uniform in angle inside it.
+        const double target = u1 * m_angle.back();
+        const size_t i = std::min(size_t(kEdgeSteps - 1),
+                                  size_t(std::upper_bound(m_angle.begin(), m_angle.end(), target) - m_angle.begin()) - 1);
+        const double cell = m_angle[i + 1] - m_angle[i];
+        const double f    = cell > 0.0 ? std::clamp((target - m_angle[i]) / cell, 0.0, 1.0) : 0.5;
+        phi               = (double(i) + f) * (2.0 * kPi / kEdgeSteps);
+        d                 = m_aperture.edge(phi);
+    }
+    const double r = d * std::sqrt(m_hole2 + (1.0 - m_hole2) * u2);
+    // Unit circumradius, v up -> diameter 1 px, y down, height times the aspect.
+    return { 0.5 * r * std::cos(phi), -0.5 * m_aspect * r * std::sin(phi) };
 }
 
 double Aperture::edge_normal_cos(double phi) const

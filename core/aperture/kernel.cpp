@@ -15,17 +15,15 @@
 // only their normalisation is redone in double. A separable one runs from its factors,
 // make_kernel(name, w, 1)'s row and make_kernel(name, 1, h)'s column (its 2-D kernel is
 // their product), so its N^2 kernel is made only where the brute force or the FFT asks.
-// Polygon with N blades: the edge distance at polar angle phi from an edge's normal is
-// cos(pi/N) / cos(phi) (circumradius 1); curved blades blend it toward the circle,
-// d = d_poly + curvature (1 - d_poly), an approximation of real curved blades, which are
-// circle arcs. A catadioptric lens's central obstruction is a hole of `hole * d`.
+// Disk, polygon and any other opening: the Aperture's inside test (core/aperture/
+// aperture.cpp: a polygon's edge cos(pi/N) / cos(phi) from an edge's normal, curved blades
+// blended toward the circle, a catadioptric hole of `hole * d`) at the kernel's half sizes.
 // The area: a look at each pixel (5 x 5 points inside, 32 on its border), then 64 x 64
 // stratified samples where it is mixed.
-// Changed for speed (same samples, same bits): without a hole the aperture is convex, so
-// a pixel with four corners inside is inside and a boundary pixel's fine samples are
+// Changed for speed (same samples, same bits): without a hole a disk or polygon is convex,
+// so a pixel with four corners inside is inside and a boundary pixel's fine samples are
 // counted by runs per sample row; pixels off the ellipse that bounds every shape are
-// outside. A polygon's inside test takes the largest projection on its edge normals, not
-// the polar angle (atan2, two fmod, cos), up to 32 blades (Shape).
+// outside.
 
 #include <bokeh/base.h>
 #include <bokeh/aperture.h>
@@ -112,11 +110,21 @@ bool validate_aperture(const Kernel& aperture, float aspect, std::string& err)
     k.height_px = 1.0f;
     if (!validate(k, err))
         return false;
-    if (!(aspect >= 0.05f && aspect <= 20.0f)) {
-        err = format("aspect {} is outside 0.05..20", aspect);
+    if (!(aspect >= kMinAspect && aspect <= kMaxAspect)) {
+        err = format("aspect {} is outside {}..{}", aspect, kMinAspect, kMaxAspect);
         return false;
     }
     return true;
+}
+
+Kernel point_reflected(const Kernel& k)
+{
+    Kernel r = k;
+    if (k.shape == KernelShape::Opening)
+        r.opening = k.opening.point_reflected();
+    else
+        r.rotation_deg += 180.0f;  // a polygon's; a disk, box, Gaussian or filter has none to turn
+    return r;
 }
 
 bool validate(const Kernel& k, std::string& err)
@@ -313,55 +321,20 @@ KernelWeights trimmed(const KernelWeights& kw)
     return t;
 }
 
-// Inside test of a disk or polygon in kernel pixel coordinates (y down).
+// Inside test of an aperture kernel (disk, polygon, opening) in kernel pixel coordinates
+// (y down): the Aperture's, at the kernel's half sizes.
 struct Shape {
-    const Kernel& k;
-    double ax, ay;           // half sizes
-    double alpha, vertex;    // polygon: sector angle, angle of a vertex
-    double apothem;          // polygon: cos(alpha / 2), the edges' distance (circumradius 1)
-    bool polygon;
-    // Polygon of up to 32 blades: the unit normals of its edges, (u, v) with v up. The
-    // edge nearest in angle to a point is the one its projection is largest on,
-    // p = r cos(phi), so the edge distance cos(pi/N) / cos(phi) is cos(pi/N) r / p: N dot
-    // products instead of atan2, two fmod and a cos per sample, 2.5-3.6x faster weights
-    // for 3-9 blades with the same bits (checked on 14 polygons of 3-64 blades, with
-    // curvature, hole, aspect); past ~40 blades the dot products cost more than the angle.
-    std::vector<std::pair<double, double>> normals;
+    Aperture aperture;
+    double ax, ay;  // half sizes
 
     explicit Shape(const Kernel& kernel)
-        : k(kernel)
-        , ax(0.5 * kernel.width_px)
+        : ax(0.5 * kernel.width_px)
         , ay(0.5 * kernel.height_px)
-        , alpha(2.0 * kPi / kernel.blades)
-        , vertex(0.5 * kPi + kernel.rotation_deg * kPi / 180.0)
-        , apothem(std::cos(0.5 * alpha))
-        , polygon(kernel.shape == KernelShape::Polygon && kernel.curvature < 1.0f)
     {
-        if (polygon && kernel.blades <= 32)
-            for (int j = 0; j < kernel.blades; ++j) {
-                const double a = vertex + (j + 0.5) * alpha;  // the middle of sector j
-                normals.emplace_back(std::cos(a), std::sin(a));
-            }
+        std::string err;
+        Aperture::from_kernel(kernel, aperture, err);  // kernel_weights takes valid kernels
     }
-
-    bool inside(double x, double y) const
-    {
-        const double u = x / ax, v = -y / ay;  // v up
-        const double r = std::sqrt(u * u + v * v);
-        double d       = 1.0;
-        if (polygon && r > 0.0) {  // at the centre any d > 0 gives the same answer
-            if (!normals.empty()) {
-                double p = 0.0;
-                for (const auto& [nx, ny] : normals)
-                    p = std::max(p, u * nx + v * ny);
-                const double d_poly = apothem * r / p;
-                d = d_poly + k.curvature * (1.0 - d_poly);
-            } else {
-                d = polygon_edge_distance(k.blades, k.curvature, std::atan2(v, u) - vertex);
-            }
-        }
-        return r < d && r >= k.hole * d;
-    }
+    bool inside(double x, double y) const { return aperture.inside(x / ax, -y / ay); }
 };
 
 // How many of the fine x fine samples of pixel (dx, dy) are inside a convex shape. Each
@@ -406,10 +379,10 @@ KernelWeights shape_weights(const Kernel& k, int nthreads)
     const int nx = 2 * kw.rx + 1, ny = 2 * kw.ry + 1;
     kw.w.assign(size_t(nx) * size_t(ny), 0.0);
     constexpr int coarse = 5, fine = 64;
-    // Without a hole the aperture is convex (a disk, or a polygon whose sides bulge towards
-    // the circle): a pixel whose four corners are inside is inside, which the 5 x 5 look
-    // below would also find, so the corners (shared by neighbours) are tested once each.
-    const bool convex = k.hole == 0.0f && k.edge != KernelEdge::Hard;
+    // Without a hole a disk or a polygon (its sides bulge towards the circle) is convex: a
+    // pixel whose four corners are inside is inside, which the 5 x 5 look below would also
+    // find, so the corners (shared by neighbours) are tested once each.
+    const bool convex = shape.aperture.convex() && shape.aperture.hole() == 0.0 && k.edge != KernelEdge::Hard;
     std::vector<char> corner;
     if (convex) {
         corner.resize(size_t(nx + 1) * size_t(ny + 1));
@@ -425,7 +398,7 @@ KernelWeights shape_weights(const Kernel& k, int nthreads)
         return corner[j * s + i] && corner[j * s + i + 1] && corner[(j + 1) * s + i]
                && corner[(j + 1) * s + i + 1];
     };
-    // Every shape lies inside its ellipse (u^2 + v^2 < 1 in Shape::inside): a pixel whose
+    // Every shape lies inside its ellipse (an Aperture's edge is at most 1): a pixel whose
     // nearest point is not inside it has no sample inside the shape.
     auto outside_ellipse = [&](int dx, int dy) {
         const double x = std::clamp(0.0, dx - 0.5, dx + 0.5) / shape.ax;
@@ -519,6 +492,7 @@ KernelWeights kernel_weights(const Kernel& k, int nthreads)
     }
     case KernelShape::Disk:
     case KernelShape::Polygon:
+    case KernelShape::Opening:
         if (k.width_px <= 0.0f || k.height_px <= 0.0f)
             return KernelWeights{ 0, 0, { 1.0 } };
         return shape_weights(k, nthreads);

@@ -133,7 +133,7 @@ bool is_premultiplied(const OIIO::ImageSpec& spec)
     return spec.get_int_attribute("oiio:UnassociatedAlpha", 0) == 0;
 }
 
-bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, int nthreads, std::string& err)
+bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, std::string& err, int nthreads)
 {
     if (src.deep()) {
         err = "a deep image cannot be used here; flatten it first (--flatten)";
@@ -205,18 +205,18 @@ OIIO::ImageSpec derived_spec(const OIIO::ImageSpec& like, const std::vector<std:
     return spec;
 }
 
-bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads, std::string& err)
+bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads)
 {
     const OIIO::ImageSpec& spec = dst.spec();
     const ChannelMap ch         = find_channels(spec);
     if (dst.deep() || ch.r < 0) {
-        err = "the destination has no colour channel";
+        dst.errorfmt("the destination has no colour channel");
         return false;
     }
     const OIIO::ROI have = dst.roi();
     if (src.roi.xbegin < have.xbegin || src.roi.xend > have.xend
         || src.roi.ybegin < have.ybegin || src.roi.yend > have.yend) {
-        err = "the destination does not cover the working image";
+        dst.errorfmt("the destination does not cover the working image");
         return false;
     }
     const bool unpremultiply = ch.a >= 0 && !is_premultiplied(spec);

@@ -74,6 +74,7 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
     const bool gaussian = k.shape == KernelShape::Gaussian;
     const bool shape    = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
     const bool filter   = k.shape == KernelShape::Filter;
+    const bool opening  = k.shape == KernelShape::Opening;
     // A method asked for by name: taken where it applies to `k`, else refused with `why`.
     auto named = [&](bool applies, const char* why) {
         m = asked;
@@ -94,8 +95,9 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
         // phase of the machine): still the reduction.
         // A hard-edged Gaussian is oiiotool's, cut at 2 sigma: three boxes stand for the
         // whole one.
-        // OIIO's filters have no approximation here: exact.
-        m = opts.iris != 0.0f || filter ? BlurMethod::Exact
+        // OIIO's filters and the other openings (a star, a picture) have no approximation
+        // measured here: exact.
+        m = opts.iris != 0.0f || filter || opening ? BlurMethod::Exact
             : gaussian                  ? (k.edge == KernelEdge::Hard ? BlurMethod::Exact : BlurMethod::ThreeBoxes)
             : shape && k.edge == KernelEdge::Antialiased && reduction_factor(k) > 1.0
                 ? BlurMethod::Reduced
@@ -114,12 +116,13 @@ bool resolve_method(const Kernel& k, const BlurOptions& opts, BlurMethod& m, std
     case BlurMethod::Reduced:
         return named(!filter, "method=reduced is not offered for OIIO's filters (no approximation of them is "
                               "measured); use an exact method");
-    case BlurMethod::Spans: return named(shape, "method=spans is for disk and polygon kernels");
+    case BlurMethod::Spans: return named(shape || opening, "method=spans is for disk, polygon and star kernels");
     case BlurMethod::Separable:
         return named(gaussian || (filter && is_separable(k)),
                      "method=separable is for the gaussian kernel and OIIO's separable filters");
     case BlurMethod::Fft:
-        return named(shape || gaussian || filter, "method=fft is for disk, polygon, gaussian and OIIO's filter kernels");
+        return named(shape || opening || gaussian || filter,
+                     "method=fft is for disk, polygon, star, gaussian and OIIO's filter kernels");
     case BlurMethod::BilinearTaps:
         return named(k.shape == KernelShape::Disk && k.edge == KernelEdge::Antialiased
                          && k.width_px == k.height_px && (k.width_px == 9.0f || k.width_px == 17.0f)
@@ -278,7 +281,7 @@ bool plan_blur(BlurPlan& plan, OIIO::ROI& roi, const Kernel& k, const BlurOption
     // sigma 7.75, 0.47x at 15.75, 0.25x at 63.75, bokeh-ab).
     const int nc = in.nchannels();
     auto fft_ns      = [&] { return fft_convolve_cost_ns(roi.width(), roi.height(), nc, rx, ry); };
-    const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon;
+    const bool shape = k.shape == KernelShape::Disk || k.shape == KernelShape::Polygon || k.shape == KernelShape::Opening;
     const bool by_spans = method == BlurMethod::Spans || method == BlurMethod::BilinearTaps
                           || (shape && method == BlurMethod::Exact);
     plan.spans = by_spans && !weights.is_identity() ? kernel_spans(reflected(weights)) : std::vector<Span>{};

@@ -112,22 +112,23 @@ void holdout_gains(const DeepLayout& L, const DeepLayout& H,
 
 }  // namespace
 
-bool deep_tidy(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt, int nthreads)
+bool deep_tidy(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt, DeepRepairs* report,
+               int nthreads)
 {
-    return unary_deep(dst, src, "deeptidy", false, opt, nthreads,
+    return unary_deep(dst, src, "deeptidy", false, opt, report, nthreads,
                       [](const DeepLayout& L, const Samples& in, Samples& out, TidyScratch& t) {
                           tidy_pixel(L, in, out, t);
                       });
 }
 
 bool deep_slice(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, double znear, double zfar,
-                const DeepOptions& opt, int nthreads)
+                const DeepOptions& opt, DeepRepairs* report, int nthreads)
 {
     if (std::isnan(znear) || std::isnan(zfar) || !(znear < zfar)) {
         dst.errorfmt("deepslice: the range [{}, {}) is empty; give near < far", znear, zfar);
         return false;
     }
-    return unary_deep(dst, src, "deepslice", false, opt, nthreads,
+    return unary_deep(dst, src, "deepslice", false, opt, report, nthreads,
                       [&](const DeepLayout& L, const Samples& in, Samples& out, TidyScratch&) {
                           for (int s = 0; s < in.n; ++s) {
                               const double* smp = in.at(s);
@@ -149,7 +150,7 @@ bool deep_slice(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, double znear, do
 }
 
 bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& srcs, bool cull,
-                const DeepOptions& opt, int nthreads)
+                const DeepOptions& opt, DeepRepairs* report, int nthreads)
 {
     if (srcs.empty()) {
         dst.errorfmt("deepmerge: no images to merge");
@@ -199,7 +200,7 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
         roi = OIIO::roi_union(roi, srcs[i]->roi());
     }
     DeepResult res;
-    const bool ok = run_pixels(roi, L.nch, opt, nthreads, res, err,
+    const bool ok = run_pixels(roi, L.nch, opt, report, nthreads, res, err,
                                [&](int x, int y, Samples& out, Faults& f, PixelScratch& sc) {
                                    sc.in.reset(L.nch);
                                    for (size_t i = 0; i < srcs.size(); ++i) {
@@ -236,7 +237,7 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
 }
 
 bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& holdout,
-                  const DeepOptions& opt, int nthreads)
+                  const DeepOptions& opt, DeepRepairs* report, int nthreads)
 {
     std::string err;
     if (!check_deep(src, "deepholdout", true, err) || !check_deep(holdout, "deepholdout (holdout)", true, err)) {
@@ -261,7 +262,7 @@ bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::Im
     const RawDeep raw_src(*src.deepdata()), raw_hold(*holdout.deepdata());
     const std::vector<int> map_src = identity_map(L.nch), map_hold = identity_map(H.nch);
     DeepResult res;
-    const bool ok = run_pixels(src.roi(), L.nch, opt, nthreads, res, err,
+    const bool ok = run_pixels(src.roi(), L.nch, opt, report, nthreads, res, err,
                                [&](int x, int y, Samples& out, Faults& f, PixelScratch& sc) {
                                    Samples &in = sc.in, &tidy = sc.tidy, &hin = sc.hin, &h = sc.h, &cut = sc.cut;
                                    TidyScratch& t = sc.t;
@@ -325,7 +326,8 @@ bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::Im
     return true;
 }
 
-bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt, int nthreads)
+bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt, DeepRepairs* report,
+                  int nthreads)
 {
     std::string err;
     if (!check_deep(src, "flatten", true, err)) {
@@ -396,7 +398,7 @@ bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOpti
             }
         }
     });
-    if (!apply_policy(faults, opt, err)) {
+    if (!apply_policy(faults, opt, report, err)) {
         dst.errorfmt("flatten: {}", err);
         return false;
     }
@@ -449,7 +451,7 @@ bool deep_from_flat(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, float z_with
     DeepResult res;
     std::string err;
     DeepOptions opt;
-    run_pixels(src.roi(), like.nchannels, opt, nthreads, res, err, [&](int x, int y, Samples& out, Faults&, PixelScratch&) {
+    run_pixels(src.roi(), like.nchannels, opt, nullptr, nthreads, res, err, [&](int x, int y, Samples& out, Faults&, PixelScratch&) {
         const float* px = static_cast<const float*>(f->pixeladdr(x, y));
         bool has        = false;
         for (int c = 0; c < nch && !has; ++c)

@@ -389,7 +389,7 @@ bool assemble(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const std::vecto
     return true;
 }
 
-bool apply_policy(const std::vector<Faults>& faults, const DeepOptions& opt, std::string& err)
+bool apply_policy(const std::vector<Faults>& faults, const DeepOptions& opt, DeepRepairs* report, std::string& err)
 {
     DeepRepairs total;
     std::string first;
@@ -400,8 +400,8 @@ bool apply_policy(const std::vector<Faults>& faults, const DeepOptions& opt, std
         if (first.empty())
             first = f.first;
     }
-    if (opt.repairs)
-        *opt.repairs = total;
+    if (report)
+        *report = total;
     if (opt.nonfinite == NonFinitePolicy::Error && total.total() > 0) {
         err = format("{} bad samples ({}; NaN policy 'error')", total.total(), first);
         return false;

@@ -172,15 +172,15 @@ struct DeepResult {
 bool assemble(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const std::vector<OIIO::TypeDesc>& types,
               DeepResult& res, int nthreads);
 
-// The chunks' repairs summed into opt.repairs; under the Error policy, false + `err`
-// naming the count and the first bad sample.
-bool apply_policy(const std::vector<Faults>& faults, const DeepOptions& opt, std::string& err);
+// The chunks' repairs summed into `*report` (when given); under the Error policy, false +
+// `err` naming the count and the first bad sample.
+bool apply_policy(const std::vector<Faults>& faults, const DeepOptions& opt, DeepRepairs* report, std::string& err);
 
 // Run `per_pixel(x, y, Samples& out, Faults&, PixelScratch&)` over `roi`, collecting the samples each
 // pixel gives into `res`; then apply the policy.
 template<class PerPixel>
-bool run_pixels(const OIIO::ROI& roi, int nch, const DeepOptions& opt, int nthreads, DeepResult& res,
-                std::string& err, PerPixel&& per_pixel)
+bool run_pixels(const OIIO::ROI& roi, int nch, const DeepOptions& opt, DeepRepairs* report, int nthreads,
+                DeepResult& res, std::string& err, PerPixel&& per_pixel)
 {
     res.roi = roi;
     res.nch = nch;
@@ -202,7 +202,7 @@ bool run_pixels(const OIIO::ROI& roi, int nch, const DeepOptions& opt, int nthre
                 vals.insert(vals.end(), out.v.begin(), out.v.begin() + size_t(out.n) * size_t(nch));
             }
     });
-    return apply_policy(faults, opt, err);
+    return apply_policy(faults, opt, report, err);
 }
 
 // The checks every deep operation makes on an input.
@@ -215,7 +215,7 @@ int64_t pixel_of(const OIIO::ImageBuf& img, int x, int y);
 // A one-input deep operation: read each pixel (policy applied), `op(in, out, scratch)`.
 template<class Op>
 bool unary_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* what, bool need_alpha,
-                const DeepOptions& opt, int nthreads, Op&& op)
+                const DeepOptions& opt, DeepRepairs* report, int nthreads, Op&& op)
 {
     std::string err;
     if (!check_deep(src, what, need_alpha, err)) {
@@ -226,7 +226,7 @@ bool unary_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const char* what
     const RawDeep raw(*src.deepdata());
     const std::vector<int> map = identity_map(L.nch);
     DeepResult res;
-    const bool ok = run_pixels(src.roi(), L.nch, opt, nthreads, res, err,
+    const bool ok = run_pixels(src.roi(), L.nch, opt, report, nthreads, res, err,
                                [&](int x, int y, Samples& out, Faults& f, PixelScratch& sc) {
                                    sc.in.reset(L.nch);
                                    load_pixel(raw, pixel_of(src, x, y), map, L, sc.in, f, x, y);

@@ -117,8 +117,9 @@ bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
         return false;
     }
     if (o.aperture_views > 1 && o.aperture.shape != KernelShape::Disk && o.aperture.shape != KernelShape::Polygon
-        && o.aperture.shape != KernelShape::Box) {
-        err = "views cut the pupil of a disk, polygon or box aperture; this one has no pupil edge to cut within";
+        && o.aperture.shape != KernelShape::Opening && o.aperture.shape != KernelShape::Box) {
+        err = "views cut the pupil of a disk, polygon, star or box aperture; this one has no pupil edge to cut "
+              "within";
         return false;
     }
     if (o.aperture_views > 1 && o.method == DefocusMethod::Gather) {

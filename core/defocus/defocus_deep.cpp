@@ -611,9 +611,9 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
     DeepOptions dopt;
     DeepRepairs repairs;
     dopt.nonfinite = o.nonfinite;
-    dopt.repairs = &repairs;
     OIIO::ImageBuf tidy, flat;
-    if (!deep_tidy(tidy, src, dopt, nthreads) || !deep_flatten(flat, tidy, dopt, nthreads))
+    // The repairs are the tidy's: the flatten reads the repaired samples.
+    if (!deep_tidy(tidy, src, dopt, &repairs, nthreads) || !deep_flatten(flat, tidy, dopt, nullptr, nthreads))
         return fail(tidy.has_error() ? tidy.geterror() : flat.geterror());
     const OIIO::ImageSpec& spec = tidy.spec();
     DeepChannels ch;
@@ -657,7 +657,7 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         layered_share             = sc.pixels > 0 ? double(sc.layered_pixels) / double(sc.pixels) : 0.0;
         const bool records_hidden = layered_share > kLayeredShare;
         const bool pupil = o.aperture.shape == KernelShape::Disk || o.aperture.shape == KernelShape::Polygon
-                           || o.aperture.shape == KernelShape::Box;
+                           || o.aperture.shape == KernelShape::Opening || o.aperture.shape == KernelShape::Box;
         const bool planner = o.method == DefocusMethod::Auto;
         plan.aperture_views = o.aperture_views > 0 ? o.aperture_views
                               : planner && records_hidden && pupil && !o.deep_output ? 2

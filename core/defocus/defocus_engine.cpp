@@ -283,9 +283,7 @@ void detail::from_iris_space(Plane& p, const IrisSpace& iris)
 // the aperture and its point reflection, which shows with an odd number of blades.
 KernelWeights detail::aperture_weights(const DefocusOptions& o, float coc_px, int s, int nthreads)
 {
-    Kernel k = o.aperture;
-    if (coc_px < 0.0f)
-        k.rotation_deg += 180.0f;
+    Kernel k = coc_px < 0.0f ? point_reflected(o.aperture) : o.aperture;
     k.width_px  = std::abs(coc_px) / float(s);
     k.height_px = std::abs(coc_px) * o.aspect / float(s);
     return kernel_weights(k, nthreads);

@@ -120,7 +120,7 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
         return false;
     }
     CocOptions coc = o.coc;
-    if (!resolve_coc_options(coc, src, err) || !to_work_image(f.img, src, nthreads, err))
+    if (!resolve_coc_options(coc, src, err) || !to_work_image(f.img, src, err, nthreads))
         return false;
     f.lens = coc;
     // The bad-value policy (docs/robustness.md): colour -> 0, depth -> far ("no depth"), counted.

@@ -122,7 +122,7 @@ bool validate_lens(const LensCharacter& l, std::string& err)
         { "fstop", l.fstop, kMinFstop, kMaxFstop },
         { "focal", l.focal_mm, kMinFocalMm, kMaxFocalMm },
         { "pixel pitch (mm)", l.pixel_pitch_mm, 1e-4, 1.0 },
-        { "aspect", l.aspect, 0.05, 20.0 },
+        { "aspect", l.aspect, kMinAspect, kMaxAspect },
         { "monochromatic", l.monochromatic, -20.0, 20.0 },
         { "chromatic", l.chromatic, -20.0, 20.0 },
         { "spherochromatism", l.spherochromatism, -5.0, 5.0 },

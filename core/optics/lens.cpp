@@ -236,7 +236,7 @@ bool focal_plane_view(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocO
     std::vector<float> coc;
     WorkImage w;
     if (!resolve_coc_options(o, src, err) || !signed_coc(coc, src, o, nthreads, err)
-        || !to_work_image(w, src, nthreads, err)) {
+        || !to_work_image(w, src, err, nthreads)) {
         dst.errorfmt("focal plane: {}", err);
         return false;
     }

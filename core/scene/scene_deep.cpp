@@ -184,7 +184,7 @@ bool make_deep_scene(OIIO::ImageBuf& dst, const std::string& name, const SceneOp
         }
     });
     OIIO::ImageBuf tidy;
-    if (!deep_tidy(tidy, deep, {}, nthreads)) {
+    if (!deep_tidy(tidy, deep, {}, nullptr, nthreads)) {
         dst.errorfmt("deep scene: {}", tidy.geterror());
         return false;
     }

@@ -98,7 +98,7 @@ bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneO
 
     OIIO::ImageBuf result(spec);
     detail::require_pixels(result);
-    const ApertureSampler aperture(lo.aperture, lo.aspect);
+    const ApertureSampler aperture = detail::truth_pupil(lo.aperture, lo.aspect);
     const detail::SobolTable& table = detail::sobol_table();
     const double tan_px = scene->tangent_per_px(), lens_tan = tan_px * K;
     const int n_first = (lo.spp + 1) / 2, n_second = lo.spp / 2;

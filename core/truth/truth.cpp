@@ -56,8 +56,6 @@ constexpr double kOpaqueTransmittance = 1.0 / 33554432.0;
 // A pixel whose samples let through at most this share of what lies behind them hides
 // it from the camera: a ray crossing that space meets what the file does not record.
 constexpr float kUnseenBehind = 1e-3f;
-// The inverse CDF of a polygon sector's angle is tabulated at this many steps.
-constexpr int kAngleSteps = 4096;
 // A solid surface is continuous, but a deep image samples it as thin tiles at its pixels'
 // depths: a ray that crosses from one pixel to the next at a depth between their tiles
 // passes between them, through a crack no surface has (a cone of LowResLeftView seen
@@ -497,8 +495,9 @@ void trace(const Scene& sc, float lo, float hi, double px, double py, double sx,
 
 bool detail::check_truth_rays(const Kernel& aperture, float aspect, int spp, std::string& err)
 {
-    if (aperture.shape != KernelShape::Disk && aperture.shape != KernelShape::Polygon) {
-        err = "the aperture must be a disk or a polygon";
+    if (aperture.shape != KernelShape::Disk && aperture.shape != KernelShape::Polygon
+        && aperture.shape != KernelShape::Opening) {
+        err = "the aperture must be a disk, a polygon or a star";
         return false;
     }
     if (!validate_aperture(aperture, aspect, err))
@@ -510,64 +509,12 @@ bool detail::check_truth_rays(const Kernel& aperture, float aspect, int spp, std
     return true;
 }
 
-// --- the aperture --------------------------------------------------------------------
-
-ApertureSampler::ApertureSampler(const Kernel& k, float aspect)
-    : m_polygon(k.shape == KernelShape::Polygon && k.curvature < 1.0f)
-    , m_blades(k.blades)
-    , m_hole2(double(k.hole) * k.hole)
-    , m_aspect(aspect)
+ApertureSampler detail::truth_pupil(const Kernel& aperture, float aspect)
 {
-    double unit_area = kPi;  // at circumradius 1
-    if (m_polygon) {
-        m_sector       = 2.0 * kPi / m_blades;
-        m_first_normal = 0.5 * kPi + k.rotation_deg * kPi / 180.0 + 0.5 * m_sector;
-        m_apothem      = std::cos(0.5 * m_sector);
-        m_curvature    = k.curvature;
-        // Within a sector, the edge distance at angle t from its normal is the aperture's,
-        // polygon_edge_distance: d(t) = (1 - q) A / cos t + q (A the apothem, q the curvature),
-        // so the area up to t is half the integral of d^2:
-        // (1 - q)^2 A^2 tan t + 2 q (1 - q) A asinh(tan t) + q^2 t.
-        const double A = m_apothem, q = m_curvature;
-        auto H = [&](double t) {
-            const double tn = std::tan(t);
-            return (1 - q) * (1 - q) * A * A * tn + 2 * q * (1 - q) * A * std::asinh(tn) + q * q * t;
-        };
-        const double half = 0.5 * m_sector, h0 = H(-half), total = H(half) - h0;
-        m_angle.resize(kAngleSteps + 1);
-        m_angle.front() = -half;
-        m_angle.back()  = half;
-        for (int i = 1; i < kAngleSteps; ++i) {
-            const double target = total * double(i) / kAngleSteps;
-            double lo = -half, hi = half;
-            for (int it = 0; it < 60; ++it) {
-                const double mid = 0.5 * (lo + hi);
-                (H(mid) - h0 < target ? lo : hi) = mid;
-            }
-            m_angle[size_t(i)] = 0.5 * (lo + hi);
-        }
-        unit_area = 0.5 * total * m_blades;
-    }
-    m_area = unit_area * (1.0 - m_hole2) * 0.25 * aspect;
-}
-
-std::array<double, 2> ApertureSampler::operator()(double u1, double u2) const
-{
-    double phi, d = 1.0;
-    if (m_polygon) {
-        const double s = u1 * m_blades;
-        const int j    = std::min(m_blades - 1, int(s));
-        const double f = (s - j) * kAngleSteps;
-        const int i    = std::min(kAngleSteps - 1, int(f));
-        const double t = m_angle[size_t(i)] + (m_angle[size_t(i) + 1] - m_angle[size_t(i)]) * (f - i);
-        phi            = m_first_normal + j * m_sector + t;
-        d              = polygon_edge_distance(m_blades, m_curvature, t + 0.5 * m_sector);  // t from the sector's normal
-    } else {
-        phi = 2.0 * kPi * u1;
-    }
-    const double r = d * std::sqrt(m_hole2 + (1.0 - m_hole2) * u2);
-    // Unit circumradius, v up -> diameter 1 px, y down, height times the aspect.
-    return { 0.5 * r * std::cos(phi), -0.5 * m_aspect * r * std::sin(phi) };
+    Aperture opening;
+    std::string err;
+    Aperture::from_kernel(aperture, opening, err);  // check_truth_rays has accepted it
+    return ApertureSampler(opening, aspect);
 }
 
 // --- the render ----------------------------------------------------------------------
@@ -638,16 +585,15 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     TruthReport rep;
     DeepOptions dopt;
     dopt.nonfinite = opt.nonfinite;
-    dopt.repairs = &rep.repairs;
     OIIO::ImageBuf tidy;
-    if (!deep_tidy(tidy, src, dopt, nthreads))
+    if (!deep_tidy(tidy, src, dopt, &rep.repairs, nthreads))
         return fail(tidy.geterror());
 
     CocOptions coc = opt.coc;
     if (coc.focus_at_pixel) {
         // The focus pixel's depth is that of its nearest visible sample (flatten's Z).
         OIIO::ImageBuf flat;
-        if (!deep_flatten(flat, tidy, dopt, nthreads))
+        if (!deep_flatten(flat, tidy, dopt, nullptr, nthreads))
             return fail(flat.geterror());
         const OIIO::ROI d = flat.roi();
         if (coc.focus_x >= d.xbegin && coc.focus_x < d.xend && coc.focus_y >= d.ybegin && coc.focus_y < d.yend
@@ -679,7 +625,7 @@ bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const TruthOp
     ospec.deep            = false;
     OIIO::ImageBuf result(ospec);
 
-    const ApertureSampler aperture(opt.aperture, opt.aspect);
+    const ApertureSampler aperture = detail::truth_pupil(opt.aperture, opt.aspect);
     // How far from its pixel a ray can go: half the largest CoC (the aperture's offsets are
     // within 1/2 px per px of CoC, times the aspect in y), plus the pixel.
     // The walk's CoC range includes the samples' reach (kConnectedCocPx).

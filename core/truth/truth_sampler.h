@@ -19,9 +19,13 @@
 
 namespace bokeh::detail {
 
-// The rays both truths draw: the aperture a disk or a polygon (validate_aperture, with the
-// anamorphic aspect), 1..2^20 samples a pixel. False + `err` naming the bad one.
+// The rays both truths draw: the aperture a disk, a polygon or an opening
+// (validate_aperture, with the anamorphic aspect), 1..2^20 samples a pixel. False + `err`
+// naming the bad one.
 bool check_truth_rays(const Kernel& aperture, float aspect, int spp, std::string& err);
+
+// The pupil points of an aperture check_truth_rays accepted.
+ApertureSampler truth_pupil(const Kernel& aperture, float aspect);
 
 inline uint32_t reverse_bits(uint32_t x)
 {

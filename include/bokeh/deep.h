@@ -36,17 +36,17 @@ struct DeepRepairs {
     int64_t total() const { return nan_depth + back_before + nonfinite; }
 };
 
-/// Options shared by the deep operations.
+/// Options shared by the deep operations. Each takes a `DeepRepairs* report` (may be null)
+/// for what it repaired, as the defocus and the truth take theirs.
 struct DeepOptions {
     NonFinitePolicy nonfinite = NonFinitePolicy::Zero;  ///< bad samples: repaired and counted, or refused
-    DeepRepairs* repairs      = nullptr;                ///< where to count repairs (may be null)
 };
 
 /// Tidy `src` into `dst`: every volume split where another sample of its pixel starts or
 /// ends, coincident samples merged, samples sorted by Z then ZBack (a point before a
 /// volume that starts at its depth). Flattening is unchanged by tidying.
 bool deep_tidy(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt = {},
-               int nthreads = 0);
+               DeepRepairs* report = nullptr, int nthreads = 0);
 
 /// Merge any number of deep images (their samples pooled per pixel, then tidied). They
 /// must have the same channel names (in any order; the first image's order and types are
@@ -55,7 +55,8 @@ bool deep_tidy(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions
 /// window is the union of theirs. With `cull`, samples behind the depth
 /// where the accumulated opacity rounds to 1 in float (transmittance <= 2^-25) are dropped.
 bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& srcs,
-                bool cull = false, const DeepOptions& opt = {}, int nthreads = 0);
+                bool cull = false, const DeepOptions& opt = {}, DeepRepairs* report = nullptr,
+                int nthreads = 0);
 
 /// Hold `src` out by `holdout`: every sample of `src` (tidied, volumes split where the
 /// holdout's samples start or end) has its colour and alpha multiplied by the holdout's
@@ -66,13 +67,13 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
 /// held-out image, colour and alpha (for a lone sample: alpha times the transmittance).
 /// The result stays deep.
 bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& holdout,
-                  const DeepOptions& opt = {}, int nthreads = 0);
+                  const DeepOptions& opt = {}, DeepRepairs* report = nullptr, int nthreads = 0);
 
 /// Keep the part of every sample inside [znear, zfar): volumes straddling an end are split
 /// there, points kept when znear <= Z < zfar. Slices at consecutive ranges merge back into
 /// the slice of their union.
 bool deep_slice(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, double znear, double zfar,
-                const DeepOptions& opt = {}, int nthreads = 0);
+                const DeepOptions& opt = {}, DeepRepairs* report = nullptr, int nthreads = 0);
 
 /// Flatten (--flatten; OIIO's ImageBufAlgo::flatten): tidy, then composite front to back
 /// with "over" (each colour through its own alpha's transmittance). The flat image has the
@@ -81,7 +82,7 @@ bool deep_slice(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, double znear, do
 /// as 1; all samples when none has alpha), 1e30 (OIIO's value) in pixels without samples;
 /// unsigned-int channels come from the nearest such sample.
 bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt = {},
-                  int nthreads = 0);
+                  DeepRepairs* report = nullptr, int nthreads = 0);
 
 /// Deepen a flat image (--deepen; OIIO's ImageBufAlgo::deepen): one sample a pixel holding its channel values, none where every
 /// non-depth channel is 0 and the depth is 0, not finite or >= 1e30 (OIIO's rule); Z =

@@ -62,15 +62,14 @@ struct WorkImage {
 
 /// Fill `dst` from the data window of `src` (flat images only). Missing G/B copy R (a
 /// grey image), missing alpha is 1, colour is premultiplied if `src` is not. Returns
-/// false, with `err` set, when `src` is deep or has no colour channel.
-bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, int nthreads,
-                   std::string& err);
+/// false, with `err` set, when `src` is deep or has no colour channel (`dst` is no
+/// ImageBuf to hold an error).
+bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, std::string& err, int nthreads = 0);
 
 /// Write a WorkImage back into `dst`'s R, G, B, A (and Z when both have one), converting
 /// to unpremultiplied colour if `dst`'s spec says it stores that. `dst` must already
-/// cover `src.roi`; other channels are left as they are.
-bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads,
-                     std::string& err);
+/// cover `src.roi`; other channels are left as they are. False + `dst.geterror()`.
+bool from_work_image(OIIO::ImageBuf& dst, const WorkImage& src, int nthreads = 0);
 
 /// The spec of an image derived from one with spec `like`: its metadata and display
 /// window, float channels `names` (alpha where one is named "A", no depth channel, stored

@@ -129,29 +129,5 @@ struct TruthReport {
 bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& deep_src, const TruthOptions& opt,
                    TruthReport* report = nullptr, int nthreads = 0);
 
-/// Area-uniform points of an aperture shape (disk or polygon with blades, rotation,
-/// curvature and hole; the Polygon kernel's rules: a polygon's edge distance cos(pi/N) / cos(phi)
-/// blended to the circle by the curvature, the hole the same shape scaled by `hole`).
-/// A point (u1, u2) of the unit square maps by angle (u1; a polygon's sectors take equal
-/// shares, and inside a sector the angle follows the tabulated inverse of the area's
-/// cumulative distribution, exact in closed form at 4097 nodes) and radius (u2, by
-/// sqrt for equal area), so stratified points stay stratified.
-class ApertureSampler {
-public:
-    /// `aperture` must be a valid Disk or Polygon (validate()); its size is ignored.
-    ApertureSampler(const Kernel& aperture, float aspect);
-    /// The offset, in px per px of CoC, of the aperture of diameter 1 px (x right, y down,
-    /// height times the aspect): the kernel of width |c| is the set of offsets times |c|.
-    std::array<double, 2> operator()(double u1, double u2) const;
-    /// The shape's area at diameter 1 (pi/4 times the aspect for a disk without a hole).
-    double area() const { return m_area; }
-
-private:
-    bool m_polygon = false;
-    int m_blades   = 0;
-    double m_sector = 0.0, m_first_normal = 0.0, m_apothem = 1.0, m_curvature = 0.0;
-    double m_hole2 = 0.0, m_aspect = 1.0, m_area = 0.0;
-    std::vector<double> m_angle;  // inverse CDF of the angle within a sector, at equal steps
-};
 
 }  // namespace bokeh

@@ -9,6 +9,7 @@
 
 #include "aperture_options.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <OpenImageIO/strutil.h>
@@ -42,11 +43,11 @@ bool options_apply(const CommandContext& c, const std::string& kernel, std::stri
     if (!bokeh::aperture_options_apply(c.options, kernel, why))
         return false;
     const std::string& method = c.options.get_string("method");
-    const bool shaped = kernel == "polygon" || kernel == "hex" || kernel == "disk" || kernel == "box"
-                        || kernel == "gaussian";
+    const bool shaped = kernel == "polygon" || kernel == "hex" || kernel == "disk" || kernel == "star"
+                        || kernel == "box" || kernel == "gaussian";
     // OIIO's filters are sampled at whole offsets: edge=hard is what they are already.
     if (c.options.given("edge") && !shaped && !(kernel != "image" && c.options.get_string("edge") == "hard")) {
-        why = format("edge does not apply to kernel={}: it is for kernel=box, gaussian, disk, polygon and hex "
+        why = format("edge does not apply to kernel={}: it is for kernel=box, gaussian, disk, polygon, hex and star "
                      "(OIIO's filters: edge=hard, what they are)",
                      kernel);
         return false;
@@ -115,17 +116,17 @@ bool blur_command(CommandContext& c)
         return c.fail(why);
     if (shape == "image")
         return blur_with_image_command(c, k.width_px, k.height_px);
-    k.shape = shape == "box"                            ? bokeh::KernelShape::Box
-              : shape == "gaussian"                     ? bokeh::KernelShape::Gaussian
-              : shape == "disk"                         ? bokeh::KernelShape::Disk
-              : shape == "hex" || shape == "polygon"    ? bokeh::KernelShape::Polygon
-                                                        : bokeh::KernelShape::Filter;
-    k.filter = shape;
-    k.blades       = shape == "hex" ? 6 : c.options.get_int("blades");  // options_apply: not given to hex
-    k.sigma_px     = float(c.options.get_float("sigma"));
-    k.rotation_deg = float(c.options.get_float("rotation"));
-    k.curvature    = float(c.options.get_float("curvature"));
-    k.hole         = float(c.options.get_float("hole"));
+    const std::vector<std::string> apertures = bokeh::aperture_kernel_names();
+    if (std::find(apertures.begin(), apertures.end(), shape) != apertures.end()) {
+        if (!bokeh::aperture_kernel_from(c.options, k, why))
+            return c.fail(why);
+    } else {
+        k.shape  = shape == "box" ? bokeh::KernelShape::Box
+                   : shape == "gaussian" ? bokeh::KernelShape::Gaussian
+                                         : bokeh::KernelShape::Filter;
+        k.filter = shape;
+    }
+    k.sigma_px = float(c.options.get_float("sigma"));
     k.edge = c.options.get_string("edge") == "hard" ? bokeh::KernelEdge::Hard
                                                      : bokeh::KernelEdge::Antialiased;
     bokeh::BlurOptions o = blur_options(c);
@@ -186,7 +187,10 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("iris", 0.0, -1000.0, 1000.0,
                           "highlight emphasis: log(mean(exp(k x))) / k, k = this (0: off)"),
     };
-    std::vector<std::string> kernels = { "gaussian", "box", "disk", "hex", "polygon", "image" };
+    std::vector<std::string> kernels = { "gaussian", "box" };
+    for (const std::string& a : bokeh::aperture_kernel_names())
+        kernels.push_back(a);
+    kernels.push_back("image");
     const std::vector<std::string> oiio_filters = bokeh::oiio_filter_names();
     kernels.insert(kernels.end(), oiio_filters.begin(), oiio_filters.end());
     c.options = {
@@ -203,12 +207,12 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Choice("method",
                            { "auto", "exact", "fast", "reference", "boxes3", "parallelograms",
                              "bands", "taps", "reduced", "spans", "fft", "separable" },
-                           "exact: disk/polygon by spans or fft, gaussian and OIIO's separable filters "
+                           "exact: disk/polygon/star by spans or fft, gaussian and OIIO's separable filters "
                            "separable or fft, whichever is cheaper (other filters: fft); "
                            "fast: the cheapest method measured at >= 40 dB "
                            "(gaussian: boxes3, edge=hard: exact; disk/polygon/hex: reduced from 37.5/45 px, "
                            "below that bands (hex: parallelograms) or exact, whichever costs "
-                           "less, with the fewest bands that keep 40 dB; OIIO's filters and iris: exact); "
+                           "less, with the fewest bands that keep 40 dB; star, OIIO's filters and iris: exact); "
                            "taps: Kawase's 9x9/17x17 "
                            "bilinear-fetch disk; reduced: exact at 1/N size, enlarged "
                            "bilinearly (not for OIIO's filters); reference: brute force"),

@@ -31,12 +31,11 @@ OptionSpec nonfinite_option()
                               "colour: 0), counted and warned; or fail");
 }
 
-bokeh::DeepOptions deep_options(const CommandContext& c, bokeh::DeepRepairs& repairs)
+bokeh::DeepOptions deep_options(const CommandContext& c)
 {
     bokeh::DeepOptions o;
     o.nonfinite = c.options.get_string("nonfinite") == "error" ? bokeh::NonFinitePolicy::Error
                                                                 : bokeh::NonFinitePolicy::Zero;
-    o.repairs   = &repairs;
     return o;
 }
 
@@ -56,19 +55,19 @@ bool finish(CommandContext& c, std::shared_ptr<OIIO::ImageBuf> result, bool ok,
     return true;
 }
 
-// The command's result from `op(dst, options)`, a deep function of deep.h.
+// The command's result from `op(dst, options, report)`, a deep function of deep.h.
 template<class Op> bool run_deep(CommandContext& c, Op&& op)
 {
     bokeh::DeepRepairs rep;
     auto dst      = std::make_shared<OIIO::ImageBuf>();
-    const bool ok = op(*dst, deep_options(c, rep));
+    const bool ok = op(*dst, deep_options(c), &rep);
     return finish(c, dst, ok, rep);
 }
 
 bool tidy(CommandContext& c)
 {
-    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
-        return bokeh::deep_tidy(dst, *c.inputs[0].buf, o, c.nthreads);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o, bokeh::DeepRepairs* rep) {
+        return bokeh::deep_tidy(dst, *c.inputs[0].buf, o, rep, c.nthreads);
     });
 }
 
@@ -91,22 +90,22 @@ bool merge(CommandContext& c)
     if (!bokeh::within_memory_budget(c, 2 * (pixels * (16 + 8 * channels) + samples * 4 * channels),
                                      format("a merge of {} deep samples of {} channels", samples, channels)))
         return false;
-    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
-        return bokeh::deep_merge(dst, srcs, c.options.get_bool("cull"), o, c.nthreads);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o, bokeh::DeepRepairs* rep) {
+        return bokeh::deep_merge(dst, srcs, c.options.get_bool("cull"), o, rep, c.nthreads);
     });
 }
 
 bool holdout(CommandContext& c)
 {
-    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
-        return bokeh::deep_holdout(dst, *c.inputs[0].buf, *c.inputs[1].buf, o, c.nthreads);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o, bokeh::DeepRepairs* rep) {
+        return bokeh::deep_holdout(dst, *c.inputs[0].buf, *c.inputs[1].buf, o, rep, c.nthreads);
     });
 }
 
 bool flatten(CommandContext& c)
 {
-    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
-        return bokeh::deep_flatten(dst, *c.inputs[0].buf, o, c.nthreads);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o, bokeh::DeepRepairs* rep) {
+        return bokeh::deep_flatten(dst, *c.inputs[0].buf, o, rep, c.nthreads);
     });
 }
 
@@ -144,8 +143,8 @@ bool slice(CommandContext& c)
         return c.fail(format("NEAR '{}' is not a depth (a number, or -inf)", c.args[0]));
     if (!parse_depth(c.args[1], zfar))
         return c.fail(format("FAR '{}' is not a depth (a number, or inf)", c.args[1]));
-    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o) {
-        return bokeh::deep_slice(dst, *c.inputs[0].buf, znear, zfar, o, c.nthreads);
+    return run_deep(c, [&](OIIO::ImageBuf& dst, const bokeh::DeepOptions& o, bokeh::DeepRepairs* rep) {
+        return bokeh::deep_slice(dst, *c.inputs[0].buf, znear, zfar, o, rep, c.nthreads);
     });
 }
 

@@ -39,7 +39,7 @@ bool defocus_command(CommandContext& c)
     // The diagnostics of a deep image are those of its flatten (Z: its nearest visible depth).
     const bool diagnostic = what == "coc" || what == "focalplane" || what == "layers";
     OIIO::ImageBuf flat;
-    if (diagnostic && in.buf->deep() && !bokeh::deep_flatten(flat, *in.buf, {}, c.nthreads))
+    if (diagnostic && in.buf->deep() && !bokeh::deep_flatten(flat, *in.buf, {}, nullptr, c.nthreads))
         return c.fail(flat.geterror());
     const OIIO::ImageBuf& src = diagnostic && in.buf->deep() ? flat : *in.buf;
     const std::string& method = bokeh::defocus_method_named(c.options);

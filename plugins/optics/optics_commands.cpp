@@ -29,18 +29,14 @@ using bokeh::OptionSpec;
 using OIIO::Strutil::fmt::format;
 
 
-// The aperture: star and picture here, the rest by the rule --defocus reads its own by.
+// The aperture: a picture here, the rest by the rule every command reads its own by.
 bool aperture_from(CommandContext& c, bokeh::Aperture& out, std::string& err)
 {
     const auto& v            = c.options;
     const std::string& shape = v.get_string("kernel");
-    if (shape == "image" || shape == "star") {
-        if (!bokeh::aperture_options_apply(v, shape, err))
-            return false;
-        return shape == "image"
-                   ? bokeh::Aperture::from_picture(*c.inputs.back().buf, out, err)
-                   : bokeh::Aperture::star(v.get_int("blades"), v.get_float("inner"), v.get_float("rotation"), out, err);
-    }
+    if (shape == "image")
+        return bokeh::aperture_options_apply(v, shape, err)
+               && bokeh::Aperture::from_picture(*c.inputs.back().buf, out, err);
     bokeh::Kernel k;
     return bokeh::aperture_kernel_from(v, k, err) && bokeh::Aperture::from_kernel(k, out, err);
 }
@@ -234,10 +230,10 @@ BOKEH_PLUGIN_EXPORT int bokeh_plugin_abi_version() { return BOKEH_PLUGIN_ABI_VER
 
 BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
 {
+    std::vector<std::string> kernels = bokeh::aperture_kernel_names();
+    kernels.push_back("image");
     std::vector<OptionSpec> options = {
-        OptionSpec::Choice("kernel", { "disk", "hex", "polygon", "star", "image" },
-                           "aperture: disk, bladed polygon, star, or the image on the stack"),
-        OptionSpec::Float("inner", 0.5, 0.1, 1.0, "star: inner vertices' radius, fraction of the outer"),
+        OptionSpec::Choice("kernel", kernels, "aperture: disk, bladed polygon, star, or the image on the stack"),
         OptionSpec::Int("width", 1920, 16, 65536, "image width in px the CoC is measured on"),
         OptionSpec::String("field", "0,0", "field position x,y in half-diagonals (x right, y up)"),
         OptionSpec::Int("size", 0, 0, 8191, "image side px (0: the PSF's own extent)"),
@@ -250,7 +246,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("lateralb", 0.0, -0.1, 0.1, "lateral colour: blue's magnification against green's, minus 1"),
     };
     // The aperture and camera options every command shares (aperture_options.h), after the kernel.
-    std::vector<OptionSpec> shared = bokeh::aperture_shape_option_specs(true);
+    std::vector<OptionSpec> shared = bokeh::aperture_shape_option_specs();
     shared.push_back(bokeh::aspect_option_spec());
     for (OptionSpec& o : bokeh::camera_option_specs(false))
         shared.push_back(std::move(o));

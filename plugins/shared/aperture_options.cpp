@@ -8,20 +8,22 @@
 
 namespace bokeh {
 
-std::vector<OptionSpec> aperture_shape_option_specs(bool with_star)
+std::vector<OptionSpec> aperture_shape_option_specs()
 {
     return {
-        OptionSpec::Int("blades", 6, 3, 64, with_star ? "polygon: aperture blades; star: points" : "polygon: aperture blades"),
-        OptionSpec::Float("rotation", 0.0, -360.0, 360.0,
-                          with_star ? "polygon, hex and star: degrees (0: a vertex up)" : "polygon and hex: degrees (0: a vertex up)"),
+        OptionSpec::Int("blades", 6, 3, 64, "polygon: aperture blades; star: points"),
+        OptionSpec::Float("rotation", 0.0, -360.0, 360.0, "polygon, hex and star: degrees (0: a vertex up)"),
         OptionSpec::Float("curvature", 0.0, 0.0, 1.0, "polygon and hex: 0 straight blades .. 1 circle"),
         OptionSpec::Float("hole", 0.0, 0.0, 0.95, "disk, polygon and hex: catadioptric hole (radius fraction)"),
+        OptionSpec::Float("inner", 0.5, 0.1, 1.0, "star: inner vertices' radius, fraction of the outer"),
     };
 }
 
+std::vector<std::string> aperture_kernel_names() { return { "disk", "hex", "polygon", "star" }; }
+
 OptionSpec aspect_option_spec()
 {
-    return OptionSpec::Float("aspect", 1.0, 0.05, 20.0, "bokeh height / width (anamorphic squeeze)");
+    return OptionSpec::Float("aspect", 1.0, kMinAspect, kMaxAspect, "bokeh height / width (anamorphic squeeze)");
 }
 
 std::vector<OptionSpec> camera_option_specs(bool from_image)
@@ -40,9 +42,6 @@ std::vector<OptionSpec> camera_option_specs(bool from_image)
 bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why)
 {
     const bool polygon = kernel == "polygon" || kernel == "hex";
-    // Only --bokeh draws a star (its option inner= says so): elsewhere the messages do not
-    // name a kernel the command lacks.
-    const bool has_star = v.values.count("inner") > 0;
     struct Rule {
         const char* option;
         bool applies;
@@ -50,11 +49,9 @@ bool aperture_options_apply(const OptionValues& v, const std::string& kernel, st
     };
     const Rule rules[] = {
         { "sigma", kernel == "gaussian", "kernel=gaussian" },
-        { "blades", kernel == "polygon" || kernel == "star",
-          has_star ? "kernel=polygon (and star, its points); kernel=hex has 6" : "kernel=polygon; kernel=hex has 6" },
+        { "blades", kernel == "polygon" || kernel == "star", "kernel=polygon (and star, its points); kernel=hex has 6" },
         { "rotation", polygon || kernel == "star",
-          has_star ? "kernel=polygon, hex and star; a disk's squeeze stays on the frame's axes"
-                   : "kernel=polygon and hex; a disk's squeeze stays on the frame's axes" },
+          "kernel=polygon, hex and star; a disk's squeeze stays on the frame's axes" },
         { "inner", kernel == "star", "kernel=star" },
         { "curvature", polygon, "kernel=polygon and hex" },
         { "hole", polygon || kernel == "disk", "kernel=disk, polygon and hex" },
@@ -73,6 +70,10 @@ bool aperture_kernel_from(const OptionValues& v, Kernel& k, std::string& why)
     const std::string& shape = v.get_string("kernel");
     if (!aperture_options_apply(v, shape, why))
         return false;
+    if (shape == "star") {
+        k.shape = KernelShape::Opening;
+        return Aperture::star(v.get_int("blades"), v.get_float("inner"), v.get_float("rotation"), k.opening, why);
+    }
     k.shape        = shape == "disk" ? KernelShape::Disk : KernelShape::Polygon;
     k.blades       = shape == "hex" ? 6 : v.get_int("blades");
     k.rotation_deg = float(v.get_float("rotation"));

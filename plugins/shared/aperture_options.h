@@ -3,7 +3,7 @@
 // plugins, not in the registry (core/plugin/plugin.cpp), which knows no kernel or algorithm.
 #pragma once
 
-#include <bokeh/blur.h>
+#include <bokeh/aperture.h>
 #include <bokeh/plugin.h>
 
 #include <string>
@@ -11,10 +11,14 @@
 
 namespace bokeh {
 
-/// The aperture's shape options: blades, rotation, curvature, hole (the kernel choice is
-/// the command's: its list of shapes differs). `with_star`: the command draws a star
-/// (--bokeh), whose points `blades` counts; only the help says so.
-std::vector<OptionSpec> aperture_shape_option_specs(bool with_star = false);
+/// The aperture's shape options: blades, rotation, curvature, hole, inner (the kernel
+/// choice is the command's: its list of shapes differs, aperture_kernel_names() in every
+/// command that takes an aperture).
+std::vector<OptionSpec> aperture_shape_option_specs();
+
+/// The apertures every command that takes one draws: disk, hex, polygon, star. A new
+/// shape is one more name here and in aperture_kernel_from, and its Aperture factory.
+std::vector<std::string> aperture_kernel_names();
 
 /// The anamorphic squeeze of a depth-dependent aperture (`aspect`, bokeh height / width,
 /// 0.05..20): --blur has none (its size is WxH).
@@ -30,9 +34,9 @@ std::vector<OptionSpec> camera_option_specs(bool from_image);
 /// rotation=30`), so it is refused rather than dropped unseen.
 bool aperture_options_apply(const OptionValues& v, const std::string& kernel, std::string& why);
 
-/// The disk, hex or polygon aperture `kernel=` names, with `blades`, `rotation`,
-/// `curvature` and `hole` from `v` (size left 0), after aperture_options_apply's check:
-/// the rule --defocus and --bokeh read their aperture by. False + `why`.
+/// The disk, hex, polygon or star aperture `kernel=` names, with `blades`, `rotation`,
+/// `curvature`, `hole` and `inner` from `v` (size left 0), after aperture_options_apply's
+/// check: the rule every command reads its aperture by. False + `why`.
 bool aperture_kernel_from(const OptionValues& v, Kernel& k, std::string& why);
 
 }  // namespace bokeh

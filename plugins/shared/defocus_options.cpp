@@ -82,7 +82,7 @@ std::vector<OptionSpec> thin_lens_option_specs()
 
 std::vector<OptionSpec> defocus_aperture_option_specs()
 {
-    std::vector<OptionSpec> v = { OptionSpec::Choice("kernel", { "disk", "hex", "polygon" }, "aperture shape") };
+    std::vector<OptionSpec> v = { OptionSpec::Choice("kernel", aperture_kernel_names(), "aperture shape") };
     for (OptionSpec& o : aperture_shape_option_specs())
         v.push_back(std::move(o));
     v.push_back(aspect_option_spec());

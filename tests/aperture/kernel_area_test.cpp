@@ -195,3 +195,38 @@ TEST(KernelArea, AntialiasedPolygonWeightsAreExactAreas)
                 1.0 / 64.0, 1.0 / 512.0, "polygon");
         }
 }
+
+// The anti-aliased star (an Opening: the Aperture's own inside test, no convex short cut):
+// every pixel's weight is its area inside the star, the star cut here into its 2N
+// triangles (centre, an outer vertex, the next inner one), each convex and clipped as the
+// polygons are.
+TEST(KernelArea, AntialiasedStarWeightsAreExactAreas)
+{
+    for (int points : { 5, 6, 8 })
+        for (float rotation : { 0.0f, 13.0f }) {
+            const double inner = points == 6 ? 0.7 : 0.45;
+            Kernel k;
+            k.shape = KernelShape::Opening;
+            std::string err;
+            ASSERT_TRUE(Aperture::star(points, inner, rotation, k.opening, err)) << err;
+            k.width_px = k.height_px = 21.0f;
+            const double R = 10.5, half = kPi / points;
+            std::vector<std::vector<Pt>> triangles;
+            for (int j = 0; j < points; ++j) {
+                // Clockwise with y up (counter-clockwise in kernel coordinates, y down).
+                const double a = 0.5 * kPi + rotation * kPi / 180.0 - 2.0 * half * j;
+                auto at = [&](double r, double t) { return Pt{ r * std::cos(t), -r * std::sin(t) }; };
+                triangles.push_back({ { 0, 0 }, at(R, a), at(R * inner, a - half) });
+                triangles.push_back({ { 0, 0 }, at(R * inner, a - half), at(R, a - 2.0 * half) });
+            }
+            expect_weights_are_areas(
+                k,
+                [&triangles](double x0, double x1, double y0, double y1) {
+                    double a = 0.0;
+                    for (const std::vector<Pt>& t : triangles)
+                        a += polygon_pixel_area(t, x0, x1, y0, y1);
+                    return a;
+                },
+                1.0 / 64.0, 1.0 / 512.0, "star");
+        }
+}

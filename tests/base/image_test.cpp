@@ -52,7 +52,7 @@ TEST(WorkImage, RoundTripKeepsValuesAndUnpremultipliedStorage)
     ASSERT_FALSE(is_premultiplied(buf.spec()));
     WorkImage w;
     std::string err;
-    ASSERT_TRUE(to_work_image(w, buf, 2, err)) << err;
+    ASSERT_TRUE(to_work_image(w, buf, err, 2)) << err;
     EXPECT_EQ(w.roi.xbegin, 5);
     EXPECT_EQ(w.roi.ybegin, -2);
     const float* p = w.rgba_at(6, -1);
@@ -62,7 +62,7 @@ TEST(WorkImage, RoundTripKeepsValuesAndUnpremultipliedStorage)
     EXPECT_FLOAT_EQ(w.z[w.index(6, -1)], 6.0f - 10.0f);
 
     OIIO::ImageBuf back(spec);
-    ASSERT_TRUE(from_work_image(back, w, 2, err)) << err;
+    ASSERT_TRUE(from_work_image(back, w, 2)) << back.geterror();
     float q[5];
     back.getpixel(6, -1, q);
     EXPECT_FLOAT_EQ(q[0], 0.5f) << "unpremultiplied again on the way out";
@@ -76,7 +76,7 @@ TEST(WorkImage, GreyAndAlphaLessInput)
     buf.setpixel(1, 1, &v);
     WorkImage w;
     std::string err;
-    ASSERT_TRUE(to_work_image(w, buf, 0, err)) << err;
+    ASSERT_TRUE(to_work_image(w, buf, err, 0)) << err;
     EXPECT_FALSE(w.has_alpha);
     const float* p = w.rgba_at(1, 1);
     EXPECT_FLOAT_EQ(p[0], 0.3f);

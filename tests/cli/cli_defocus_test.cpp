@@ -371,3 +371,65 @@ TEST(CliDefocus, SensorStepSpritesSupersample)
     EXPECT_EQ(ss.spec().full_width, 2 * 192);
     EXPECT_EQ(ss.spec().full_height, 2 * 108);
 }
+
+// kernel=star is one aperture in every command: a white point on an opaque black plane at
+// one depth, defocused with a star, is --blur's star at the CoC --defocus reports (behind
+// focus), and the same star turned half a turn in front of focus (the rays cross before
+// the sensor). Expected from --blur, whose star weights are checked against exact pixel
+// areas (tests/aperture/kernel_area_test.cpp); the odd star's wrong orientation differs.
+TEST(CliDefocus, EveryCommandDrawsTheSameStar)
+{
+    const std::string dir = fresh_dir("cli_defocus_star");
+    constexpr int kN = 61;
+    const std::string star = "kernel=star:blades=5:inner=0.4:rotation=10";
+    for (const float depth : { 9.0f, 4.2f }) {  // behind and in front of focus at 6 m
+        OIIO::ImageSpec spec(kN, kN, 5, OIIO::TypeFloat);
+        spec.channelnames = { "R", "G", "B", "A", "Z" };
+        spec.alpha_channel = 3;
+        spec.z_channel     = 4;
+        OIIO::ImageBuf plane(spec);
+        for (int y = 0; y < kN; ++y)
+            for (int x = 0; x < kN; ++x) {
+                const float v    = x == kN / 2 && y == kN / 2 ? 1.0f : 0.0f;
+                const float px[] = { v, v, v, 1.0f, depth };
+                plane.setpixel(x, y, px);
+            }
+        const std::string in = format("{}/plane_{}.exr", dir, depth);
+        ASSERT_TRUE(plane.write(in));
+        const std::string lens = "focus=6:fstop=2:focal=50:sensor=0.3:method=layers:" + star;
+        RunResult r = bokehtool(format("{} --defocus:{}:output=coc -o {}/coc.exr", in, lens, dir));
+        ASSERT_EQ(r.status, 0) << r.err;
+        OIIO::ImageBuf cocs(dir + "/coc.exr");
+        ASSERT_TRUE(cocs.read(0, 0, true, OIIO::TypeFloat));
+        const float coc = cocs.getchannel(kN / 2, kN / 2, 0, 0);
+        ASSERT_GT(std::abs(coc), 12.0f) << depth;
+        ASSERT_LT(std::abs(coc), 24.0f) << depth;  // under the reduced buffers' first size
+        r = bokehtool(format("{} --defocus:{} -o {}/defocused.exr", in, lens, dir));
+        ASSERT_EQ(r.status, 0) << r.err;
+        auto blurred = [&](float rotation) {
+            RunResult b = bokehtool(format("{} --blur:kernel=star:blades=5:inner=0.4:rotation={}:border=black {} -o "
+                                           "{}/blur.exr",
+                                           in, rotation, std::abs(coc), dir));
+            EXPECT_EQ(b.status, 0) << b.err;
+            OIIO::ImageBuf img(dir + "/blur.exr");
+            EXPECT_TRUE(img.read(0, 0, true, OIIO::TypeFloat));
+            return img;
+        };
+        OIIO::ImageBuf defocused(dir + "/defocused.exr");
+        ASSERT_TRUE(defocused.read(0, 0, true, OIIO::TypeFloat));
+        const OIIO::ImageBuf same = blurred(coc > 0 ? 10.0f : 190.0f), turned = blurred(coc > 0 ? 190.0f : 10.0f);
+        double worst = 0.0, worst_turned = 0.0, peak = 0.0;
+        for (int y = 0; y < kN; ++y)
+            for (int x = 0; x < kN; ++x) {
+                const double d = defocused.getchannel(x, y, 0, 0);
+                peak           = std::max(peak, d);
+                worst          = std::max(worst, std::abs(d - same.getchannel(x, y, 0, 0)));
+                worst_turned   = std::max(worst_turned, std::abs(d - turned.getchannel(x, y, 0, 0)));
+            }
+        std::cout << "depth " << depth << " m, CoC " << coc << " px: peak " << peak << ", largest difference "
+                  << worst << " (the star turned: " << worst_turned << ")\n";
+        // One layer at one depth is the blur with the aperture at the CoC: float rounding.
+        EXPECT_LT(worst, 1e-5 * peak + 1e-7) << depth;
+        EXPECT_GT(worst_turned, 0.3 * peak) << depth;
+    }
+}

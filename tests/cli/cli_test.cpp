@@ -633,7 +633,7 @@ TEST(Cli, BlurMethodsAndConvolve)
     expect_clean_failure(bokehtool(format("{0} {1}/six.exr --convolve -o {2}", in, dir, out)),
                          "the kernel image has 6 channels, the image 5", out);
     expect_clean_failure(bokehtool(format("{0} --blur:kernel=box:method=fft 9 -o {1}", in, out)),
-                         "method=fft is for disk, polygon, gaussian and OIIO's filter kernels", out);
+                         "method=fft is for disk, polygon, star, gaussian and OIIO's filter kernels", out);
     // --blur:kernel=image takes the kernel from the stack too, resized to WxH: at its own
     // size it is --convolve; a flat 3x3 image stretched to 9x9 is the 9x9 box; size 0 is
     // the image itself, as for every kernel.
@@ -688,7 +688,7 @@ TEST(Cli, Blur)
     const std::string out = dir + "/x.exr";
     for (auto [args, what] : { std::pair<std::string, std::string>{ "--blur 3x", "'3x' is not a kernel size" },
                                { "--blur -3", "not a kernel size" },
-                               { "--blur:kernel=star 3", "option 'kernel' = 'star' is not one of" },
+                               { "--blur:kernel=shuriken 3", "option 'kernel' = 'shuriken' is not one of" },
                                { "--blur:blades=2:kernel=polygon 9", "out of range [3, 64]" },
                                { "--blur:kernel=disk:method=parallelograms 9", "needs a hexagon" },
                                { "--blur:kernel=disk:method=taps 11", "9x9 or 17x17" },

@@ -341,9 +341,7 @@ TEST(Deep, PointPassesMergeWithVolumePasses)
     for (const Combo& k : combos) {
         OIIO::ImageBuf merged, flat;
         bokeh::DeepRepairs repairs;
-        bokeh::DeepOptions opt;
-        opt.repairs = &repairs;
-        ASSERT_TRUE(bokeh::deep_merge(merged, { k.first, k.second }, false, opt)) << merged.geterror();
+        ASSERT_TRUE(bokeh::deep_merge(merged, { k.first, k.second }, false, {}, &repairs)) << merged.geterror();
         EXPECT_EQ(repairs.total(), 0) << "a point without ZBack is no fault to repair";
         EXPECT_EQ(merged.spec().channelindex("ZBack") >= 0, k.zback);
         EXPECT_EQ(merged.spec().channelindex("R"), 0) << "colour stays first";
@@ -677,10 +675,8 @@ TEST(Deep, BadSamplesFollowThePolicy)
                       { NAN, 0.1, 0.1, 0.5, 4.0, 4.0 } };
     const auto img = make_deep(1, 1, { p });
     bokeh::DeepRepairs rep;
-    bokeh::DeepOptions zero;
-    zero.repairs = &rep;
     OIIO::ImageBuf out;
-    ASSERT_TRUE(bokeh::deep_tidy(out, img, zero)) << out.geterror();
+    ASSERT_TRUE(bokeh::deep_tidy(out, img, {}, &rep)) << out.geterror();
     EXPECT_EQ(rep.nan_depth, 1);
     EXPECT_EQ(rep.back_before, 1);
     EXPECT_EQ(rep.nonfinite, 1);
@@ -718,16 +714,16 @@ TEST(Deep, ResultsDoNotDependOnTheThreadCount)
     const auto a = make_deep(64, 48, random_pixels(64 * 48, 61));
     const auto b = make_deep(64, 48, random_pixels(64 * 48, 62));
     OIIO::ImageBuf m1, m2, f1, f2, h1, h2;
-    ASSERT_TRUE(bokeh::deep_merge(m1, { &a, &b }, false, {}, 1));
-    ASSERT_TRUE(bokeh::deep_merge(m2, { &a, &b }, false, {}, 2));
+    ASSERT_TRUE(bokeh::deep_merge(m1, { &a, &b }, false, {}, nullptr, 1));
+    ASSERT_TRUE(bokeh::deep_merge(m2, { &a, &b }, false, {}, nullptr, 2));
     ASSERT_EQ(m1.deepdata()->all_data().size(), m2.deepdata()->all_data().size());
     EXPECT_TRUE(std::equal(m1.deepdata()->all_data().begin(), m1.deepdata()->all_data().end(),
                            m2.deepdata()->all_data().begin()));
-    ASSERT_TRUE(bokeh::deep_holdout(h1, a, b, {}, 1));
-    ASSERT_TRUE(bokeh::deep_holdout(h2, a, b, {}, 2));
+    ASSERT_TRUE(bokeh::deep_holdout(h1, a, b, {}, nullptr, 1));
+    ASSERT_TRUE(bokeh::deep_holdout(h2, a, b, {}, nullptr, 2));
     EXPECT_TRUE(std::equal(h1.deepdata()->all_data().begin(), h1.deepdata()->all_data().end(),
                            h2.deepdata()->all_data().begin()));
-    ASSERT_TRUE(bokeh::deep_flatten(f1, m1, {}, 1));
-    ASSERT_TRUE(bokeh::deep_flatten(f2, m1, {}, 2));
+    ASSERT_TRUE(bokeh::deep_flatten(f1, m1, {}, nullptr, 1));
+    ASSERT_TRUE(bokeh::deep_flatten(f2, m1, {}, nullptr, 2));
     EXPECT_EQ(max_difference(f1, f2), 0.0);
 }

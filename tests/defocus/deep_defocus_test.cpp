@@ -811,3 +811,29 @@ TEST(DefocusViews, BadOptionsAreRefused)
     EXPECT_FALSE(defocus(out, flat, g));
     EXPECT_NE(out.geterror().find("the gather method has no layers"), std::string::npos) << out.geterror();
 }
+
+// A deep input's repaired samples reach the report: one NaN colour value and one NaN depth
+// (the tidy repairs both; the flatten after it reads the repaired samples and must not
+// overwrite the count with its own zero), and under the error policy the defocus fails
+// naming them.
+TEST(DeepDefocus, RepairedSamplesAreReported)
+{
+    const auto img = deep_image(8, 8, [](int x, int y) {
+        std::vector<Smp> s = { { 0.2f, 0.2f, 0.2f, 1.0f, 5.0f } };
+        if (x == 2 && y == 3)
+            s.insert(s.begin(), Smp{ std::nanf(""), 0.5f, 0.5f, 0.5f, 3.0f });
+        if (x == 5 && y == 6)
+            s.insert(s.begin(), Smp{ 0.5f, 0.5f, 0.5f, 0.5f, std::nanf("") });
+        return s;
+    });
+    DefocusOptions o = direct_options(DefocusMethod::Reference, Border::Black);
+    OIIO::ImageBuf out;
+    DefocusReport rep;
+    ASSERT_TRUE(defocus(out, img, o, &rep)) << out.geterror();
+    EXPECT_EQ(rep.nonfinite.colour, 1);
+    EXPECT_EQ(rep.nonfinite.depth, 1);
+    o.nonfinite = NonFinitePolicy::Error;
+    OIIO::ImageBuf refused;
+    EXPECT_FALSE(defocus(refused, img, o));
+    EXPECT_NE(refused.geterror().find("bad samples"), std::string::npos) << refused.geterror();
+}

@@ -344,16 +344,16 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     bokeh::DeepOptions strict;
     strict.nonfinite = bokeh::NonFinitePolicy::Error;
     OIIO::ImageBuf scratch;
-    if (bokeh::deep_tidy(scratch, a.buf, strict, 1) == a.needs_repair)
+    if (bokeh::deep_tidy(scratch, a.buf, strict, nullptr, 1) == a.needs_repair)
         finding(a.needs_repair ? "tidy with policy=error passed a damaged input"
                                : "tidy with policy=error refused a sound input",
                 0, 0);
 
     OIIO::ImageBuf d;
-    const OIIO::ImageBuf tidy = must(bokeh::deep_tidy(d, a.buf, {}, 1), d, "deep_tidy");
+    const OIIO::ImageBuf tidy = must(bokeh::deep_tidy(d, a.buf, {}, nullptr, 1), d, "deep_tidy");
     check_values(tidy, a.valid, "tidy: a NaN or infinity");
     check_tidy(tidy);
-    const OIIO::ImageBuf tidy2 = must(bokeh::deep_tidy(d, tidy, {}, 1), d, "deep_tidy (again)");
+    const OIIO::ImageBuf tidy2 = must(bokeh::deep_tidy(d, tidy, {}, nullptr, 1), d, "deep_tidy (again)");
     dump("a", a.buf);
     dump("b", b.buf);
     dump("tidy(a)", tidy);
@@ -363,35 +363,35 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size)
     if (all_finite(tidy) && !same_bits(tidy, tidy2))
         finding("tidy is not idempotent", 0, 0);
 
-    const OIIO::ImageBuf flat_a = must(bokeh::deep_flatten(d, a.buf, {}, 1), d, "flatten");
+    const OIIO::ImageBuf flat_a = must(bokeh::deep_flatten(d, a.buf, {}, nullptr, 1), d, "flatten");
     check_values(flat_a, a.valid, "flatten: a NaN or infinity");
     if (a.valid)
         check_alpha_range(flat_a);
 
-    const OIIO::ImageBuf merged = must(bokeh::deep_merge(d, { &a.buf, &b.buf }, (range & 1) != 0, {}, 1),
+    const OIIO::ImageBuf merged = must(bokeh::deep_merge(d, { &a.buf, &b.buf }, (range & 1) != 0, {}, nullptr, 1),
                                        d, "deep_merge");
     check_values(merged, valid, "merge: a NaN or infinity");
     check_tidy(merged);
     if (valid && !(range & 1)) {
-        const OIIO::ImageBuf flat_b = must(bokeh::deep_flatten(d, b.buf, {}, 1), d, "flatten (b)");
-        const OIIO::ImageBuf flat_m = must(bokeh::deep_flatten(d, merged, {}, 1), d, "flatten (merged)");
+        const OIIO::ImageBuf flat_b = must(bokeh::deep_flatten(d, b.buf, {}, nullptr, 1), d, "flatten (b)");
+        const OIIO::ImageBuf flat_m = must(bokeh::deep_flatten(d, merged, {}, nullptr, 1), d, "flatten (merged)");
         check_alpha_range(flat_m);
         check_alpha_order(flat_a, flat_m, 1, tol, "merge: less opaque than an input");
         check_alpha_order(flat_b, flat_m, 1, tol, "merge: less opaque than an input");
     }
 
     if (!alpha_channels(b.buf).empty()) {
-        const OIIO::ImageBuf held = must(bokeh::deep_holdout(d, a.buf, b.buf, {}, 1), d, "deep_holdout");
+        const OIIO::ImageBuf held = must(bokeh::deep_holdout(d, a.buf, b.buf, {}, nullptr, 1), d, "deep_holdout");
         check_values(held, valid, "holdout: a NaN or infinity");
         if (valid) {
-            const OIIO::ImageBuf flat_h = must(bokeh::deep_flatten(d, held, {}, 1), d, "flatten (held out)");
+            const OIIO::ImageBuf flat_h = must(bokeh::deep_flatten(d, held, {}, nullptr, 1), d, "flatten (held out)");
             check_alpha_range(flat_h);
             check_alpha_order(flat_h, flat_a, 1, tol, "holdout: more opaque than its source");
         }
     }
 
     if (znear < zfar) {
-        const OIIO::ImageBuf slice = must(bokeh::deep_slice(d, a.buf, znear, zfar, {}, 1), d, "deep_slice");
+        const OIIO::ImageBuf slice = must(bokeh::deep_slice(d, a.buf, znear, zfar, {}, nullptr, 1), d, "deep_slice");
         check_values(slice, a.valid, "slice: a NaN or infinity");
         const int z = channel(slice, "Z"), zb = channel(slice, "ZBack");
         const OIIO::DeepData& dd = *slice.deepdata();

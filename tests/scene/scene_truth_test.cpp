@@ -98,7 +98,7 @@ TEST(SceneDeep, FlattenIsTheSharpScene)
         ASSERT_TRUE(make_deep_scene(deep, name, o, 2)) << deep.geterror();
         ASSERT_TRUE(deep.deep());
         ASSERT_EQ(deep.spec().channelnames, (std::vector<std::string>{ "R", "G", "B", "A", "Z" }));
-        ASSERT_TRUE(deep_flatten(flat, deep, {}, 2)) << flat.geterror();
+        ASSERT_TRUE(deep_flatten(flat, deep, {}, nullptr, 2)) << flat.geterror();
         double worst = 0.0, worst_z = 0.0;
         for (int y = 0; y < o.height; ++y)
             for (int x = 0; x < o.width; ++x) {

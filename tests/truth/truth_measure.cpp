@@ -30,7 +30,7 @@ int main(int argc, char** argv)
         std::fprintf(stderr, "truth_measure: %s\n", err.c_str());
         return 1;
     }
-    if (!bokeh::deep_merge(merged, { &b, &l, &t }, false, {}, nthreads)) {
+    if (!bokeh::deep_merge(merged, { &b, &l, &t }, false, {}, nullptr, nthreads)) {
         std::fprintf(stderr, "truth_measure: %s\n", merged.geterror().c_str());
         return 1;
     }
@@ -53,7 +53,7 @@ int main(int argc, char** argv)
     std::printf("rays %lld, cells %lld, %.1f ns a ray (x %d threads)\n", (long long)rep.rays,
                 (long long)rep.cells_visited, rep.seconds * 1e9 / double(rep.rays) * nthreads, nthreads);
     OIIO::ImageBuf flat;
-    if (!bokeh::deep_flatten(flat, merged, {}, nthreads)) {
+    if (!bokeh::deep_flatten(flat, merged, {}, nullptr, nthreads)) {
         std::fprintf(stderr, "truth_measure: %s\n", flat.geterror().c_str());
         return 1;
     }

@@ -67,7 +67,9 @@ std::vector<double> expected_point(const bokeh::Kernel& aperture, float aspect, 
     const bool area = start == bokeh::TruthPixel::Area;
     const int fine  = area ? 8 : 1;
     bokeh::Kernel k = aperture;
-    if (coc < 0.0f)
+    if (coc < 0.0f && k.shape == bokeh::KernelShape::Opening)
+        k.opening = k.opening.point_reflected();
+    else if (coc < 0.0f)
         k.rotation_deg += 180.0f;
     k.width_px                 = std::abs(coc) * fine;
     k.height_px                = std::abs(coc) * aspect * fine;
@@ -208,12 +210,13 @@ TEST(Truth, ApertureSamplerIsAreaUniform)
     struct Case {
         bokeh::KernelShape shape;
         int blades;
-        float rotation, curvature, hole, aspect;
+        float rotation, curvature, hole, aspect, inner = 0.0f;  // inner: a star's (Opening)
     };
     const Case cases[] = {
         { bokeh::KernelShape::Disk, 6, 0, 0, 0, 1 },       { bokeh::KernelShape::Disk, 6, 0, 0, 0.4f, 1.5f },
         { bokeh::KernelShape::Polygon, 5, 10, 0, 0, 1 },   { bokeh::KernelShape::Polygon, 3, 0, 0, 0, 1 },
         { bokeh::KernelShape::Polygon, 6, 0, 0.5f, 0.3f, 0.7f }, { bokeh::KernelShape::Polygon, 9, 33, 0.2f, 0, 2 },
+        { bokeh::KernelShape::Opening, 5, 0, 0, 0, 1, 0.45f },  { bokeh::KernelShape::Opening, 7, 20, 0, 0, 1.4f, 0.7f },
     };
     for (const Case& c : cases) {
         bokeh::Kernel k;
@@ -222,7 +225,13 @@ TEST(Truth, ApertureSamplerIsAreaUniform)
         k.rotation_deg = c.rotation;
         k.curvature    = c.curvature;
         k.hole         = c.hole;
-        const bokeh::ApertureSampler sampler(k, c.aspect);
+        std::string err;
+        if (c.shape == bokeh::KernelShape::Opening) {
+            ASSERT_TRUE(bokeh::Aperture::star(c.blades, c.inner, c.rotation, k.opening, err)) << err;
+        }
+        bokeh::Aperture opening;
+        ASSERT_TRUE(bokeh::Aperture::from_kernel(k, opening, err)) << err;
+        const bokeh::ApertureSampler sampler(opening, c.aspect);
         constexpr float kSize = 48.0f;
         k.width_px            = kSize;
         k.height_px           = kSize * c.aspect;
@@ -249,11 +258,18 @@ TEST(Truth, ApertureSamplerIsAreaUniform)
                   << c.aspect << ": L1 " << l1 << ", outside " << outside << "\n";
         EXPECT_LT(outside, 300);
         EXPECT_LT(l1, 0.015) << "blades " << c.blades;
+        // The areas in closed form: a polygon's N triangles (N/2 sin(2 pi / N)); a star's 2N
+        // triangles between an outer vertex (1) and an inner one (rho) pi/N apart (N rho
+        // sin(pi / N)), whose sum the sampler and Aperture::area integrate at 8192 angles.
         double area = kPi;
         if (c.shape == bokeh::KernelShape::Polygon && c.curvature == 0.0f)
             area = 0.5 * c.blades * std::sin(2.0 * kPi / c.blades);
+        if (c.shape == bokeh::KernelShape::Opening)
+            area = c.blades * c.inner * std::sin(kPi / c.blades);
+        const double tol = c.shape == bokeh::KernelShape::Opening ? 1e-6 * area : 1e-9;
         if (c.curvature == 0.0f) {
-            EXPECT_NEAR(sampler.area(), area * 0.25 * c.aspect * (1.0 - double(c.hole) * c.hole), 1e-9);
+            EXPECT_NEAR(sampler.area(), area * 0.25 * c.aspect * (1.0 - double(c.hole) * c.hole), tol);
+            EXPECT_NEAR(opening.area(), area * (1.0 - double(c.hole) * c.hole), tol * 4.0 / c.aspect);
         }
     }
 }
@@ -308,12 +324,13 @@ TEST(Truth, LonePointIsTheAperture)
     struct Case {
         bokeh::KernelShape shape;
         int blades;
-        float rotation, curvature, hole, aspect, coc;
+        float rotation, curvature, hole, aspect, coc, inner = 0.0f;  // inner: a star's (Opening)
     };
     const Case cases[] = {
         { bokeh::KernelShape::Disk, 6, 0, 0, 0, 1, 14.0f },
         { bokeh::KernelShape::Polygon, 3, 0, 0, 0, 1, -15.0f },
         { bokeh::KernelShape::Polygon, 5, 20, 0.3f, 0.35f, 1.5f, 13.0f },
+        { bokeh::KernelShape::Opening, 5, 10, 0, 0, 1.2f, -16.0f, 0.5f },
     };
     constexpr int kN = 41, kR = 14;
     for (const bokeh::TruthPixel start : { bokeh::TruthPixel::Centre, bokeh::TruthPixel::Area })
@@ -325,6 +342,10 @@ TEST(Truth, LonePointIsTheAperture)
         o.aperture.rotation_deg = c.rotation;
         o.aperture.curvature    = c.curvature;
         o.aperture.hole         = c.hole;
+        if (c.shape == bokeh::KernelShape::Opening) {
+            std::string err;
+            ASSERT_TRUE(bokeh::Aperture::star(c.blades, c.inner, c.rotation, o.aperture.opening, err)) << err;
+        }
         o.aspect                = c.aspect;
         o.grow                  = false;
         OIIO::ImageBuf out;
@@ -333,7 +354,10 @@ TEST(Truth, LonePointIsTheAperture)
         const std::vector<double> e    = expected_point(o.aperture, c.aspect, c.coc, kR, start);
         const std::vector<double> flip = expected_point(o.aperture, c.aspect, -c.coc, kR, start);  // point-reflected
         bokeh::Kernel k = o.aperture;
-        k.rotation_deg += c.coc < 0 ? 180.0f : 0.0f;
+        if (c.coc < 0 && c.shape == bokeh::KernelShape::Opening)
+            k.opening = k.opening.point_reflected();
+        else
+            k.rotation_deg += c.coc < 0 ? 180.0f : 0.0f;
         k.width_px  = std::abs(c.coc);
         k.height_px = std::abs(c.coc) * c.aspect;
         const bokeh::KernelWeights flat = bokeh::kernel_weights(k, 1);
@@ -365,14 +389,14 @@ TEST(Truth, LonePointIsTheAperture)
                   << "kernel " << l1_flat << ", centre (" << mx << ", " << my << ") vs (" << fx << ", " << fy << ")\n";
         // The energy is a sum over the footprint of values whose noise is independent from
         // pixel to pixel: its noise is the values' times sqrt(count). The centre weighs the
-        // rim's pixels, the noisiest, most: its scatter over 8 seeds, these three cases and
+        // rim's pixels, the noisiest, most: its scatter over 8 seeds, the first three cases and
         // both starts was 0.024 px RMS, 0.060 px at most; 0.1 px is allowed.
         const double n_in = double(std::count_if(e.begin(), e.end(), [](double v) { return v > 0.0; }));
         const double sigma_energy = noise * std::sqrt(n_in);
         constexpr double kCentreScatterPx = 0.1;
         EXPECT_NEAR(energy, 1.0, 4.0 * sigma_energy);
         EXPECT_LT(rms, 1.5 * noise + 2e-6);
-        if (c.blades % 2 == 1 && c.shape == bokeh::KernelShape::Polygon) {
+        if (c.blades % 2 == 1 && c.shape != bokeh::KernelShape::Disk) {
             EXPECT_GT(rms_flip, 2.0 * rms) << "orientation";
         }
         EXPECT_NEAR(mx, fx, kCentreScatterPx);
@@ -765,7 +789,7 @@ TEST(Truth, BadInput)
     const OIIO::ImageBuf deep = random_scene(4, 4, 1);
     o.aperture.shape          = bokeh::KernelShape::Box;
     EXPECT_FALSE(bokeh::defocus_truth(out, deep, o));
-    EXPECT_NE(out.geterror().find("disk or a polygon"), std::string::npos) << out.geterror();
+    EXPECT_NE(out.geterror().find("a disk, a polygon or a star"), std::string::npos) << out.geterror();
     o = direct_options(0);
     EXPECT_FALSE(bokeh::defocus_truth(out, deep, o));
     EXPECT_NE(out.geterror().find("spp 0"), std::string::npos) << out.geterror();
@@ -788,6 +812,13 @@ TEST(Truth, BadInput)
     o.nonfinite = bokeh::NonFinitePolicy::Zero;
     bokeh::TruthReport rep;
     EXPECT_TRUE(bokeh::defocus_truth(out, bad, o, &rep));
+    EXPECT_EQ(rep.repairs.nan_depth, 1);
+    // Focused at a pixel, the truth flattens the repaired samples to read its depth: the
+    // count stays the repair's.
+    o.coc.focus_at_pixel = true;
+    o.coc.focus_x = o.coc.focus_y = 0;
+    rep                  = {};
+    EXPECT_TRUE(bokeh::defocus_truth(out, bad, o, &rep)) << out.geterror();
     EXPECT_EQ(rep.repairs.nan_depth, 1);
 }
 

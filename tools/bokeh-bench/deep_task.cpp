@@ -293,8 +293,8 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     const int t = args.threads;
 
     OIIO::ImageBuf merged, flat, tidy_rep;
-    if (!bokeh::deep_merge(merged, { &pass[0], &pass[1], &pass[2] }, false, {}, t)
-        || !bokeh::deep_flatten(flat, merged, {}, t)) {
+    if (!bokeh::deep_merge(merged, { &pass[0], &pass[1], &pass[2] }, false, {}, nullptr, t)
+        || !bokeh::deep_flatten(flat, merged, {}, nullptr, t)) {
         std::fprintf(stderr, "bokeh-bench: deep: %s%s\n", merged.geterror().c_str(), flat.geterror().c_str());
         return false;
     }
@@ -319,25 +319,25 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
         cases.push_back({ std::move(method), std::move(peer), std::move(frame), std::move(fn), reps });
     };
     const std::string lr = "LowResLeftView merged";
-    add("merge 3 passes", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_merge(d, { &pass[0], &pass[1], &pass[2] }, false, {}, t); }, args.reps);
-    add("merge 3 passes (cull)", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_merge(d, { &pass[0], &pass[1], &pass[2] }, true, {}, t); }, args.reps);
+    add("merge 3 passes", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_merge(d, { &pass[0], &pass[1], &pass[2] }, false, {}, nullptr, t); }, args.reps);
+    add("merge 3 passes (cull)", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_merge(d, { &pass[0], &pass[1], &pass[2] }, true, {}, nullptr, t); }, args.reps);
     add("merge 3 passes (cull)", "oiio", lr, [&] {
         OIIO::ImageBuf ab = IBA::deep_merge(pass[0], pass[1], true, {}, t);
         OIIO::ImageBuf abc = IBA::deep_merge(ab, pass[2], true, {}, t);
     }, args.reps);
-    add("tidy", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_tidy(d, merged, {}, t); }, args.reps);
-    add("flatten", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_flatten(d, merged, {}, t); }, args.reps);
+    add("tidy", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_tidy(d, merged, {}, nullptr, t); }, args.reps);
+    add("flatten", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_flatten(d, merged, {}, nullptr, t); }, args.reps);
     add("flatten", "oiio", lr, [&] { OIIO::ImageBuf d = IBA::flatten(merged, {}, t); }, args.reps);
-    add("holdout by Leaves", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_holdout(d, merged, pass[1], {}, t); }, args.reps);
+    add("holdout by Leaves", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_holdout(d, merged, pass[1], {}, nullptr, t); }, args.reps);
     add("holdout by Leaves", "oiio", lr, [&] { OIIO::ImageBuf d = IBA::deep_holdout(merged, pass[1], {}, t); }, args.reps);
-    add("slice 200..600", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_slice(d, merged, 200.0, 600.0, {}, t); }, args.reps);
+    add("slice 200..600", "", lr, [&] { OIIO::ImageBuf d; bokeh::deep_slice(d, merged, 200.0, 600.0, {}, nullptr, t); }, args.reps);
     add("defocus deep auto", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Auto, false), nullptr, t); }, args.reps);
     add("defocus deep auto (deep out)", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Auto, true), nullptr, t); }, args.reps);
     add("defocus flat of the flatten (auto)", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, flat, with(bokeh::DefocusMethod::Auto, false), nullptr, t); }, args.reps);
     add("defocus deep reference", "", lr, [&] { OIIO::ImageBuf d; bokeh::defocus(d, merged, with(bokeh::DefocusMethod::Reference, false), nullptr, t); }, std::min(args.reps, 3));
     if (have_rep) {
-        add("tidy", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::deep_tidy(d, rep_img, {}, t); }, args.reps);
-        add("flatten", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::deep_flatten(d, rep_img, {}, t); }, args.reps);
+        add("tidy", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::deep_tidy(d, rep_img, {}, nullptr, t); }, args.reps);
+        add("flatten", "", "representativeDeepImage", [&] { OIIO::ImageBuf d; bokeh::deep_flatten(d, rep_img, {}, nullptr, t); }, args.reps);
         add("flatten", "oiio", "representativeDeepImage", [&] { OIIO::ImageBuf d = IBA::flatten(rep_img, {}, t); }, args.reps);
     }
     std::vector<std::function<void()>> fns;
@@ -365,7 +365,7 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     bokeh::defocus(ref, merged, with(bokeh::DefocusMethod::Reference, false), nullptr, t);
     bokeh::defocus(auto_flat, merged, with(bokeh::DefocusMethod::Auto, false), nullptr, t);
     bokeh::defocus(auto_deep, merged, with(bokeh::DefocusMethod::Auto, true), nullptr, t);
-    bokeh::deep_flatten(deep_out_flat, auto_deep, {}, t);
+    bokeh::deep_flatten(deep_out_flat, auto_deep, {}, nullptr, t);
     bokeh::defocus(flat_dof, flat, with(bokeh::DefocusMethod::Auto, false), nullptr, t);
     for (size_t i = 0; i < cases.size(); ++i) {
         const Case& c = cases[i];
@@ -397,7 +397,7 @@ bool run_deep_task(const BenchArgs& args, std::vector<std::string>& rows)
     }
     if (have_rep) {
         OIIO::ImageBuf rep_flat;
-        if (!bokeh::deep_flatten(rep_flat, rep_img, {}, t)) {
+        if (!bokeh::deep_flatten(rep_flat, rep_img, {}, nullptr, t)) {
             std::fprintf(stderr, "bokeh-bench: deep: %s\n", rep_flat.geterror().c_str());
             return false;
         }
