@@ -587,6 +587,68 @@ bool layers_alive(LayersAlive& alive, size_t K, int64_t npx, const OIIO::ROI& da
     return true;
 }
 
+// What a deep input refuses of the options (beside check_defocus_options): false + `err`.
+bool check_deep_defocus_options(const DefocusOptions& o, std::string& err)
+{
+    if (!check_defocus_options(o, err))
+        return false;
+    if (o.method == DefocusMethod::Gather)
+        err = "the gather method is for flat images; a deep image takes auto, layers or reference";
+    else if (o.iris != 0.0f)
+        err = "iris mode is not available for deep images yet; flatten first (--flatten) to use it";
+    else if (o.depth_dilate_px > 0)
+        err = "zdilate is a remedy for flat images' filtered depth; a deep sample has its own depth";
+    else if (o.planner == DefocusPlanner::Predicted)
+        err = "planner=predicted weighs a flat frame's plans; a deep image's layers come from its samples "
+              "(leave the planner, or set layers= or ratio=)";
+    else
+        return true;
+    return false;
+}
+
+// The progress shares at which the layers' planes are allocated and filled.
+struct FillShares {
+    float allocated, filled;
+};
+
+// Every layer's plane at once: allocated, then each pixel's pieces composited into the
+// layers they fall in; lens character's highlights (each piece's sprite share, per layer
+// it is drawn in) gathered into `highlights` for take_deep_sprites.
+void fill_every_layer(Frame& f, std::vector<Sprite>& highlights, const OIIO::DeepData& dd, const DeepChannels& ch,
+                      const CocOfDepth& coc_of, const Membership& m, const DefocusOptions& o, bool reference,
+                      const FillShares& shares, int nthreads)
+{
+    const size_t K    = m.coc_px.size();
+    const int64_t npx = dd.pixels();
+    ProgressCounter alloc_progress(o.progress, double(K), 0.0f, shares.allocated);
+    f.layer_rgba.resize(K);
+    f.layer_vis.resize(K);
+    for (size_t k = 0; k < K; ++k) {
+        f.layer_rgba[k].assign(size_t(npx) * 4, 0.0f);
+        f.layer_vis[k].assign(size_t(npx), 1.0f);
+        alloc_progress.add();
+    }
+    std::mutex highlights_mutex;
+    ProgressCounter fill_progress(o.progress, double((npx + 2047) / 2048), shares.allocated, shares.filled);
+    parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
+        std::vector<Sprite> found;
+        std::vector<Piece> pieces;
+        std::vector<double> cuts;
+        LayerScratch scratch(K);
+        for (int64_t p = b; p < e; ++p) {
+            if (dd.samples(p) == 0)
+                continue;
+            pixel_pieces(pieces, cuts, dd, p, ch, coc_of, m, o);
+            pixel_layers(f, found, scratch, p, pieces, m, o, reference, 0, K);
+        }
+        if (!found.empty()) {
+            std::lock_guard<std::mutex> lock(highlights_mutex);
+            highlights.insert(highlights.end(), found.begin(), found.end());
+        }
+        fill_progress.add();
+    });
+}
+
 }  // namespace
 
 bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& o,
@@ -597,17 +659,8 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
         dst.errorfmt("defocus: {}", why);
         return false;
     };
-    if (!check_defocus_options(o, err))
+    if (!check_deep_defocus_options(o, err))
         return fail(err);
-    if (o.method == DefocusMethod::Gather)
-        return fail("the gather method is for flat images; a deep image takes auto, layers or reference");
-    if (o.iris != 0.0f)
-        return fail("iris mode is not available for deep images yet; flatten first (--flatten) to use it");
-    if (o.depth_dilate_px > 0)
-        return fail("zdilate is a remedy for flat images' filtered depth; a deep sample has its own depth");
-    if (o.planner == DefocusPlanner::Predicted)
-        return fail("planner=predicted weighs a flat frame's plans; a deep image's layers come from its samples "
-                    "(leave the planner, or set layers= or ratio=)");
     DeepOptions dopt;
     DeepRepairs repairs;
     dopt.nonfinite = o.nonfinite;
@@ -705,14 +758,6 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             *report = std::move(rep);
         return true;
     }
-    ProgressCounter alloc_progress(o.progress, double(K), 0.0f, kAllocatedShare);
-    f.layer_rgba.resize(K);
-    f.layer_vis.resize(K);
-    for (size_t k = 0; k < K; ++k) {
-        f.layer_rgba[k].assign(size_t(npx) * 4, 0.0f);
-        f.layer_vis[k].assign(size_t(npx), 1.0f);
-        alloc_progress.add();
-    }
     std::vector<double> rung_depth(K, 0.0);
     if (zlo <= zhi) {
         const float c_lo = coc_of(float(zlo)), c_hi = coc_of(float(zhi));
@@ -720,28 +765,9 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
             rung_depth[k] = depth_of_coc(coc_of, zlo, zhi,
                                          std::clamp(m.coc_px[k], std::min(c_lo, c_hi), std::max(c_lo, c_hi)));
     }
-    // Lens character: each piece's sprite share, per layer it is drawn in (taken out of
-    // the layers below, once the brightest are chosen).
     std::vector<Sprite> highlights;
-    std::mutex highlights_mutex;
-    ProgressCounter fill_progress(o.progress, double((npx + 2047) / 2048), kAllocatedShare, kFilledShare);
-    parallel_for_chunks(0, npx, 2048, nthreads, [&](int64_t b, int64_t e) {
-        std::vector<Sprite> found;
-        std::vector<Piece> pieces;
-        std::vector<double> cuts;
-        LayerScratch scratch(K);
-        for (int64_t p = b; p < e; ++p) {
-            if (dd.samples(p) == 0)
-                continue;
-            pixel_pieces(pieces, cuts, dd, p, ch, coc_of, m, o);
-            pixel_layers(f, found, scratch, p, pieces, m, o, reference, 0, K);
-        }
-        if (!found.empty()) {
-            std::lock_guard<std::mutex> lock(highlights_mutex);
-            highlights.insert(highlights.end(), found.begin(), found.end());
-        }
-        fill_progress.add();
-    });
+    fill_every_layer(f, highlights, dd, ch, coc_of, m, o, reference, FillShares{ kAllocatedShare, kFilledShare },
+                     nthreads);
     if (o.lens_character && !take_deep_sprites(f, highlights, o, spec, src.spec(), nthreads, err))
         return fail(err);
     const float sprite_extent_px = f.sprites ? f.sprites->extent_px : 0.0f;

@@ -47,6 +47,13 @@ struct DeepOptions {
 /// volume that starts at its depth). Flattening is unchanged by tidying.
 bool deep_tidy(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt = {},
                DeepRepairs* report = nullptr, int nthreads = 0);
+inline OIIO::ImageBuf deep_tidy(const OIIO::ImageBuf& src, const DeepOptions& opt = {}, DeepRepairs* report = nullptr,
+                                int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    deep_tidy(dst, src, opt, report, nthreads);
+    return dst;
+}
 
 /// Merge any number of deep images (their samples pooled per pixel, then tidied). They
 /// must have the same channel names (in any order; the first image's order and types are
@@ -57,6 +64,13 @@ bool deep_tidy(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions
 bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& srcs,
                 bool cull = false, const DeepOptions& opt = {}, DeepRepairs* report = nullptr,
                 int nthreads = 0);
+inline OIIO::ImageBuf deep_merge(const std::vector<const OIIO::ImageBuf*>& srcs, bool cull = false,
+                                 const DeepOptions& opt = {}, DeepRepairs* report = nullptr, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    deep_merge(dst, srcs, cull, opt, report, nthreads);
+    return dst;
+}
 
 /// Hold `src` out by `holdout`: every sample of `src` (tidied, volumes split where the
 /// holdout's samples start or end) has its colour and alpha multiplied by the holdout's
@@ -68,12 +82,26 @@ bool deep_merge(OIIO::ImageBuf& dst, const std::vector<const OIIO::ImageBuf*>& s
 /// The result stays deep.
 bool deep_holdout(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const OIIO::ImageBuf& holdout,
                   const DeepOptions& opt = {}, DeepRepairs* report = nullptr, int nthreads = 0);
+inline OIIO::ImageBuf deep_holdout(const OIIO::ImageBuf& src, const OIIO::ImageBuf& holdout,
+                                   const DeepOptions& opt = {}, DeepRepairs* report = nullptr, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    deep_holdout(dst, src, holdout, opt, report, nthreads);
+    return dst;
+}
 
 /// Keep the part of every sample inside [znear, zfar): volumes straddling an end are split
 /// there, points kept when znear <= Z < zfar. Slices at consecutive ranges merge back into
 /// the slice of their union.
 bool deep_slice(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, double znear, double zfar,
                 const DeepOptions& opt = {}, DeepRepairs* report = nullptr, int nthreads = 0);
+inline OIIO::ImageBuf deep_slice(const OIIO::ImageBuf& src, double znear, double zfar, const DeepOptions& opt = {},
+                                 DeepRepairs* report = nullptr, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    deep_slice(dst, src, znear, zfar, opt, report, nthreads);
+    return dst;
+}
 
 /// Flatten (--flatten; OIIO's ImageBufAlgo::flatten): tidy, then composite front to back
 /// with "over" (each colour through its own alpha's transmittance). The flat image has the
@@ -83,6 +111,13 @@ bool deep_slice(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, double znear, do
 /// unsigned-int channels come from the nearest such sample.
 bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOptions& opt = {},
                   DeepRepairs* report = nullptr, int nthreads = 0);
+inline OIIO::ImageBuf deep_flatten(const OIIO::ImageBuf& src, const DeepOptions& opt = {}, DeepRepairs* report = nullptr,
+                                   int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    deep_flatten(dst, src, opt, report, nthreads);
+    return dst;
+}
 
 /// Deepen a flat image (--deepen; OIIO's ImageBufAlgo::deepen): one sample a pixel holding its channel values, none where every
 /// non-depth channel is 0 and the depth is 0, not finite or >= 1e30 (OIIO's rule); Z =
@@ -90,5 +125,11 @@ bool deep_flatten(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DeepOpti
 /// image's native spec (half stays half).
 bool deep_from_flat(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, float z_without_depth = 1.0f,
                     int nthreads = 0);
+inline OIIO::ImageBuf deep_from_flat(const OIIO::ImageBuf& src, float z_without_depth = 1.0f, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    deep_from_flat(dst, src, z_without_depth, nthreads);
+    return dst;
+}
 
 }  // namespace bokeh

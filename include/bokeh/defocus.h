@@ -203,17 +203,36 @@ struct DefocusReport {
 /// `deep_output` the result stays deep. False + dst.geterror().
 bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
              DefocusReport* report = nullptr, int nthreads = 0);
+inline OIIO::ImageBuf defocus(const OIIO::ImageBuf& src, const DefocusOptions& opts, DefocusReport* report = nullptr,
+                              int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    defocus(dst, src, opts, report, nthreads);
+    return dst;
+}
 
 /// The signed CoC the defocus draws with, one channel "coc": coc_map's of `opts.coc`, each
 /// pixel then given the nearest CoC within `opts.depth_dilate_px` (zdilate).
 bool defocus_coc_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
                      int nthreads = 0);
+inline OIIO::ImageBuf defocus_coc_map(const OIIO::ImageBuf& src, const DefocusOptions& opts, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    defocus_coc_map(dst, src, opts, nthreads);
+    return dst;
+}
 
 /// The layer map of the Layers method: per pixel the index of the nearer of the two
 /// layers it is shared between, plus its share in the farther one (channel "layer" =
 /// index + share), so a user sees where layer boundaries fall.
 bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
                int nthreads = 0);
+inline OIIO::ImageBuf layer_map(const OIIO::ImageBuf& src, const DefocusOptions& opts, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    layer_map(dst, src, opts, nthreads);
+    return dst;
+}
 
 /// The brute-force reference of lens character: every pixel of a flat `src` scattered with
 /// the lens PSF of its own CoC (exact to `opts.reference_step_px`) and field position,
@@ -227,6 +246,13 @@ bool layer_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOpti
 /// 640x360. Uses opts.lens as `defocus` does (lens_character need not be set).
 bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src,
                                const DefocusOptions& opts, int nthreads = 0);
+inline OIIO::ImageBuf defocus_scatter_reference(const OIIO::ImageBuf& src, const DefocusOptions& opts,
+                                                int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    defocus_scatter_reference(dst, src, opts, nthreads);
+    return dst;
+}
 
 /// Method names for messages ("layers", "gather", ...).
 const char* method_name(DefocusMethod m);

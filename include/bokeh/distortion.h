@@ -58,6 +58,13 @@ enum class DistortDirection {
 /// src's data window), src's display window and metadata. False + dst.geterror().
 bool lens_distort(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const LensDistortion& lens,
                   DistortDirection direction, OIIO::ROI roi = {}, int nthreads = 0);
+inline OIIO::ImageBuf lens_distort(const OIIO::ImageBuf& src, const LensDistortion& lens, DistortDirection direction,
+                                   OIIO::ROI roi = {}, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    lens_distort(dst, src, lens, direction, roi, nthreads);
+    return dst;
+}
 
 /// The STMap of the same warp over `like`'s data window (display window `like`'s): R and G
 /// hold the source position of each output pixel as Nuke's STMap reads it, s = (X - full_x)
@@ -66,5 +73,12 @@ bool lens_distort(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const LensDist
 /// with lateral colour is refused (it moves R and B apart). False + dst.geterror().
 bool distortion_stmap(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const LensDistortion& lens,
                       DistortDirection direction, int nthreads = 0);
+inline OIIO::ImageBuf distortion_stmap(const OIIO::ImageSpec& like, const LensDistortion& lens,
+                                       DistortDirection direction, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    distortion_stmap(dst, like, lens, direction, nthreads);
+    return dst;
+}
 
 }  // namespace bokeh

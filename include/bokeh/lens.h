@@ -110,11 +110,24 @@ bool signed_coc(std::vector<float>& coc, const OIIO::ImageBuf& src, const CocOpt
 /// The CoC map as an image: one float channel "coc" over `src`'s data window.
 bool coc_map(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocOptions& opts,
              int nthreads = 0);
+inline OIIO::ImageBuf coc_map(const OIIO::ImageBuf& src, const CocOptions& opts, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    coc_map(dst, src, opts, nthreads);
+    return dst;
+}
 
 /// The focal-plane view: the image's luminance tinted red in front of focus, green in
 /// focus (|CoC| <= 1 px), blue behind, the tint growing with |CoC| (from 30 % just out of
 /// focus to full at `full_tint_px`).
 bool focal_plane_view(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const CocOptions& opts,
                       float full_tint_px = 32.0f, int nthreads = 0);
+inline OIIO::ImageBuf focal_plane_view(const OIIO::ImageBuf& src, const CocOptions& opts, float full_tint_px = 32.0f,
+                                       int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    focal_plane_view(dst, src, opts, full_tint_px, nthreads);
+    return dst;
+}
 
 }  // namespace bokeh

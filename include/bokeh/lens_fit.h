@@ -108,12 +108,25 @@ bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFit
 /// the crop's windows).
 bool lens_fit_model_image(OIIO::ImageBuf& dst, const LensFit& fit, const std::vector<LensFitCrop>& crops,
                           int index, int nthreads = 0);
+inline OIIO::ImageBuf lens_fit_model_image(const LensFit& fit, const std::vector<LensFitCrop>& crops, int index,
+                                           int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    lens_fit_model_image(dst, fit, crops, index, nthreads);
+    return dst;
+}
 
 /// A comparison sheet: a row per crop of crop | fit | |crop - fit| x 4 | the fitted light
 /// alone (the PSF times its amplitude, no background), each cell the crop's size with a
 /// 2 px black gutter, RGB float (a one-channel crop is shown grey).
 bool lens_fit_sheet(OIIO::ImageBuf& dst, const LensFit& fit, const std::vector<LensFitCrop>& crops,
                     int nthreads = 0);
+inline OIIO::ImageBuf lens_fit_sheet(const LensFit& fit, const std::vector<LensFitCrop>& crops, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    lens_fit_sheet(dst, fit, crops, nthreads);
+    return dst;
+}
 
 /// A crop of a known lens's highlight as a plate would hold it, for round trips and
 /// demos: energy x PSF at an integer offset from the crop's centre, over a background

@@ -144,12 +144,25 @@ bool lens_psf(Psf& out, const LensCharacter& lens, const PsfRequest& req, std::s
 /// make_kernel, so it can serve as `--blur:kernel=image`).
 bool lens_psf_image(OIIO::ImageBuf& dst, const LensCharacter& lens, const PsfRequest& req,
                     int nthreads = 0);
+inline OIIO::ImageBuf lens_psf_image(const LensCharacter& lens, const PsfRequest& req, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    lens_psf_image(dst, lens, req, nthreads);
+    return dst;
+}
 
 /// The light-beam map of Kawase's "Bokeh Deep Dive": U (x) the signed CoC from `coc_min_px`
 /// to `coc_max_px`, V (y, up) the ray height, each column normalised by its own spread (the
 /// largest landing radius) and its peak; RGB from the spectrum.
 bool beam_map_image(OIIO::ImageBuf& dst, const LensCharacter& lens, double coc_min_px,
                     double coc_max_px, int width, int height, int nthreads = 0);
+inline OIIO::ImageBuf beam_map_image(const LensCharacter& lens, double coc_min_px, double coc_max_px, int width,
+                                     int height, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    beam_map_image(dst, lens, coc_min_px, coc_max_px, width, height, nthreads);
+    return dst;
+}
 
 /// The PSF cache's CoC bins per octave of |CoC| (from 1 px; below, bins 1/8 px apart). A
 /// sprite crossfades two points of a finer grid between them (psf_coc_steps_around).
@@ -220,5 +233,12 @@ void clear_shared_psf_caches();
 /// each in a `cell_px` square, RGB, each PSF scaled so its peak is 1 (for viewing).
 bool bokeh_sheet_image(OIIO::ImageBuf& dst, const LensCharacter& lens, double coc_max_px,
                        int columns, int rows, int cell_px, int nthreads = 0);
+inline OIIO::ImageBuf bokeh_sheet_image(const LensCharacter& lens, double coc_max_px, int columns, int rows,
+                                        int cell_px, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    bokeh_sheet_image(dst, lens, coc_max_px, columns, rows, cell_px, nthreads);
+    return dst;
+}
 
 }  // namespace bokeh

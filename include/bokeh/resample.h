@@ -190,6 +190,13 @@ OIIO::ImageBuf reduce(const OIIO::ImageBuf& src, int factor, const ReduceOptions
 /// it touches (Min, Max, NearestDepth).
 bool reduce_to_size(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int width, int height,
                     const ReduceOptions& opts = {}, int nthreads = 0);
+inline OIIO::ImageBuf reduce_to_size(const OIIO::ImageBuf& src, int width, int height, const ReduceOptions& opts = {},
+                                     int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    reduce_to_size(dst, src, width, height, opts, nthreads);
+    return dst;
+}
 
 // --- enlargement -----------------------------------------------------------------------
 
@@ -244,11 +251,25 @@ OIIO::ImageBuf enlarge(const OIIO::ImageBuf& src, double factor, const ResampleO
 /// reducing each axis with `opts.filter` (reducing: stretched to the destination pixel).
 bool resize(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int width, int height,
             const ResampleOptions& opts = {}, int nthreads = 0);
+inline OIIO::ImageBuf resize(const OIIO::ImageBuf& src, int width, int height, const ResampleOptions& opts = {},
+                             int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    resize(dst, src, width, height, opts, nthreads);
+    return dst;
+}
 
 /// Sample the source at the destination pixel centres (IBA::resample's mapping):
 /// bilinear when `interpolate`, else the nearest pixel; never prefiltered.
 bool resample(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int width, int height,
               bool interpolate = true, int nthreads = 0);
+inline OIIO::ImageBuf resample(const OIIO::ImageBuf& src, int width, int height, bool interpolate = true,
+                               int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    resample(dst, src, width, height, interpolate, nthreads);
+    return dst;
+}
 
 // --- depth-aware enlargement (the talk's reduced blend buffer) -----------------------
 
@@ -286,6 +307,13 @@ struct DepthAwareOptions {
 bool enlarge_depth_aware(OIIO::ImageBuf& dst, const OIIO::ImageBuf& low,
                          const OIIO::ImageBuf& full_depth, double factor,
                          const DepthAwareOptions& opts = {}, int nthreads = 0);
+inline OIIO::ImageBuf enlarge_depth_aware(const OIIO::ImageBuf& low, const OIIO::ImageBuf& full_depth, double factor,
+                                          const DepthAwareOptions& opts = {}, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    enlarge_depth_aware(dst, low, full_depth, factor, opts, nthreads);
+    return dst;
+}
 
 // --- the same on planes ----------------------------------------------------------------
 

@@ -53,6 +53,12 @@ std::string scene_description(const std::string& name);
 /// size.
 bool make_scene(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions& opts,
                 int nthreads = 0);
+inline OIIO::ImageBuf make_scene(const std::string& name, const SceneOptions& opts, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    make_scene(dst, name, opts, nthreads);
+    return dst;
+}
 
 /// A scene's camera and the lens setting it is meant to be defocused with.
 struct SceneCamera {
@@ -68,7 +74,7 @@ struct SceneTruthOptions {
     /// must be 1000, the scenes' unit). The CoC is thin_lens_coc_px's for an image as wide
     /// as the scene, with no gains, in-focus range or limit.
     Lens lens;
-    Kernel aperture;      ///< disk or polygon (blades, rotation, curvature, hole); size ignored
+    Kernel aperture;      ///< disk, polygon (blades, rotation, curvature, hole) or an opening; size ignored
     float aspect = 1.0f;  ///< bokeh height / width, 0.05..20
     int spp      = 64;    ///< rays a pixel, 1..1048576; two halves for the noise estimate
     uint32_t seed = 1;    ///< the sampler's scramble (truth.h's; the scene's own seed is SceneOptions')
@@ -98,6 +104,13 @@ struct SceneTruthReport {
 /// on `dst` for an unknown scene, bad size or bad options.
 bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions& opts,
                       const SceneTruthOptions& lens, SceneTruthReport* report = nullptr, int nthreads = 0);
+inline OIIO::ImageBuf make_scene_truth(const std::string& name, const SceneOptions& opts, const SceneTruthOptions& lens,
+                                       SceneTruthReport* report = nullptr, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    make_scene_truth(dst, name, opts, lens, report, nthreads);
+    return dst;
+}
 
 /// A deep image of scene `name` (R, G, B, A, Z float point samples, premultiplied, tidy):
 /// per pixel, the surfaces its aa x aa pinhole rays meet, the visible ones first and then,
@@ -110,5 +123,11 @@ bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneO
 /// visible sample are left out: point samples cannot hold them without showing through.
 bool make_deep_scene(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions& opts,
                      int nthreads = 0);
+inline OIIO::ImageBuf make_deep_scene(const std::string& name, const SceneOptions& opts, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    make_deep_scene(dst, name, opts, nthreads);
+    return dst;
+}
 
 }  // namespace bokeh

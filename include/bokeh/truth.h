@@ -82,8 +82,8 @@ enum class TruthPixel {
 
 struct TruthOptions {
     CocOptions coc;
-    /// The aperture: disk or polygon (blades, rotation, curvature, hole). Its size is
-    /// ignored (each depth's CoC sets it).
+    /// The aperture: disk, polygon (blades, rotation, curvature, hole) or an opening (a
+    /// star). Its size is ignored (each depth's CoC sets it).
     Kernel aperture;
     float aspect = 1.0f;  ///< bokeh height / width (anamorphic squeeze), 0.05..20
     int spp = 64;         ///< rays per pixel (1..1048576); two halves for the noise estimate
@@ -128,6 +128,13 @@ struct TruthReport {
 /// False + dst.geterror() on bad input.
 bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& deep_src, const TruthOptions& opt,
                    TruthReport* report = nullptr, int nthreads = 0);
+inline OIIO::ImageBuf defocus_truth(const OIIO::ImageBuf& deep_src, const TruthOptions& opt,
+                                    TruthReport* report = nullptr, int nthreads = 0)
+{
+    OIIO::ImageBuf dst;
+    defocus_truth(dst, deep_src, opt, report, nthreads);
+    return dst;
+}
 
 
 }  // namespace bokeh
