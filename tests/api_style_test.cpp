@@ -2,6 +2,7 @@
 // forms, `bool f(dst, ...)` with the error on dst and `ImageBuf f(...)` returning the image.
 // Each value form is checked here against its dst form (the same pixels, bit for bit, flat
 // or deep) and to carry a failed call's error on the image it returns.
+#include <bokeh/blur.h>
 #include <bokeh/deep.h>
 #include <bokeh/defocus.h>
 #include <bokeh/distortion.h>
@@ -184,4 +185,71 @@ TEST(ApiStyle, OpticsAndFitForms)
     ASSERT_TRUE(lens_fit_sheet(r, fit, crops, 2)) << r.geterror();
     expect_same_image(r, lens_fit_sheet(fit, crops, 2), "lens_fit_sheet");
     expect_error(lens_fit_model_image(fit, crops, 5), "lens_fit_model_image");
+}
+
+// Each options struct's public check passes its defaults (with what the operation needs
+// set) and refuses a bad value naming it, as the operation itself refuses it.
+TEST(ApiStyle, EveryOptionsStructHasItsCheck)
+{
+    std::string err;
+    auto refused = [&](bool ok, const char* name) {
+        EXPECT_FALSE(ok) << name;
+        EXPECT_NE(err.find(name), std::string::npos) << name << ": " << err;
+        err.clear();
+    };
+    Kernel k;
+    k.width_px = k.height_px = 9.0f;
+    EXPECT_TRUE(check_kernel(k, err)) << err;
+    EXPECT_TRUE(check_blur_options(k, BlurOptions(), err)) << err;
+    BlurOptions bo;
+    bo.iris = 5000.0f;
+    refused(check_blur_options(k, bo, err), "iris");
+    OIIO::ImageBuf src = make_scene("lights", small_scene());
+    EXPECT_FALSE(blur(src, k, bo).geterror().empty()) << "blur refuses what its check refuses";
+    k.blades = 2;
+    refused(check_kernel(k, err), "blades");
+    EXPECT_TRUE(check_aperture(Kernel(), 1.0f, err)) << err;
+    refused(check_aperture(Kernel(), 30.0f, err), "aspect");
+
+    DefocusOptions d;
+    d.coc.lens.focus_distance = 6.0;
+    EXPECT_TRUE(check_defocus_options(d, err)) << err;
+    d.aperture_views = 9;
+    refused(check_defocus_options(d, err), "views");
+    EXPECT_FALSE(defocus(src, d).geterror().empty());
+
+    TruthOptions t;
+    EXPECT_TRUE(check_truth_options(t, err)) << err;
+    t.spp = 0;
+    refused(check_truth_options(t, err), "spp");
+
+    EXPECT_TRUE(check_scene_options("lights", small_scene(), err)) << err;
+    SceneOptions so = small_scene();
+    so.aa           = 40;
+    refused(check_scene_options("lights", so, err), "aa");
+    refused(check_scene_options("nowhere", small_scene(), err), "unknown scene");
+    SceneTruthOptions st;
+    st.lens.focus_distance = 6.0;
+    EXPECT_TRUE(check_scene_truth_options(st, err)) << err;
+    st.lens.focus_distance = 0.01;
+    refused(check_scene_truth_options(st, err), "focus");
+
+    EXPECT_TRUE(check_resample_options(ResampleOptions(), err)) << err;
+    ResampleOptions ro;
+    ro.blur_sigma = 100.0f;
+    refused(check_resample_options(ro, err), "blur_sigma");
+    EXPECT_FALSE(enlarge(src, 2.0, ro).geterror().empty());
+    EXPECT_TRUE(check_depth_aware_options(DepthAwareOptions(), err)) << err;
+    DepthAwareOptions da;
+    da.sigma_depth = 0.0f;
+    refused(check_depth_aware_options(da, err), "sigma_depth");
+
+    EXPECT_TRUE(check_lens(LensCharacter(), err)) << err;
+    LensCharacter lc;
+    lc.fstop = 1000.0;
+    refused(check_lens(lc, err), "f");
+    EXPECT_TRUE(check_lens_fit_options(LensFitOptions(), err)) << err;
+    LensFitOptions fo;
+    fo.max_evaluations = 3;
+    refused(check_lens_fit_options(fo, err), "max_evaluations");
 }

@@ -113,7 +113,7 @@ bool Aperture::from_kernel(const Kernel& k, Aperture& out, std::string& err)
     }
     Kernel unit = k;
     unit.width_px = unit.height_px = 1.0f;
-    if (!validate(unit, err))
+    if (!check_kernel(unit, err))
         return false;
     if (k.shape == KernelShape::Opening) {
         out = k.opening;

@@ -55,7 +55,7 @@ namespace {
 bool binomial_size(float v) { return v == 0.0f || (v == std::floor(v) && int(v) % 2 == 1 && v <= 127.0f); }
 
 // OIIO's make_kernel(name, w, h) (a side of 0 is one pixel) in double, normalised, or none
-// where it has no positive finite sum (validate() names the cause).
+// where it has no positive finite sum (check_kernel() names the cause).
 std::optional<KernelWeights> oiio_kernel(const std::string& name, float w, float h)
 {
     if (name == "binomial" && !(binomial_size(w) && binomial_size(h)))
@@ -103,12 +103,12 @@ std::optional<std::pair<std::vector<double>, std::vector<double>>> filter_factor
 
 }  // namespace
 
-bool validate_aperture(const Kernel& aperture, float aspect, std::string& err)
+bool check_aperture(const Kernel& aperture, float aspect, std::string& err)
 {
     Kernel k    = aperture;
     k.width_px  = 1.0f;
     k.height_px = 1.0f;
-    if (!validate(k, err))
+    if (!check_kernel(k, err))
         return false;
     if (!(aspect >= kMinAspect && aspect <= kMaxAspect)) {
         err = format("aspect {} is outside {}..{}", aspect, kMinAspect, kMaxAspect);
@@ -127,7 +127,7 @@ Kernel point_reflected(const Kernel& k)
     return r;
 }
 
-bool validate(const Kernel& k, std::string& err)
+bool check_kernel(const Kernel& k, std::string& err)
 {
     auto bad_size = [](float v) { return !std::isfinite(v) || v < 0.0f || v > 4096.0f; };
     if (bad_size(k.width_px) || bad_size(k.height_px)) {
@@ -280,7 +280,7 @@ std::pair<std::vector<double>, std::vector<double>> separable_weights(const Kern
         };
         return { gauss(sx, k.width_px), gauss(sy, k.height_px) };
     }
-    if (is_separable(k)) {  // a Filter (validate() has seen its factors made)
+    if (is_separable(k)) {  // a Filter (check_kernel() has seen its factors made)
         if (const auto f = filter_factors(k))
             return *f;
     }
@@ -467,7 +467,7 @@ KernelWeights shape_weights(const Kernel& k, int nthreads)
 }
 
 // A Filter's weights: its factors' product where it is separable (no N^2 make_kernel),
-// else OIIO's whole kernel; validate() has seen them made.
+// else OIIO's whole kernel; check_kernel() has seen them made.
 KernelWeights filter_weights(const Kernel& k)
 {
     if (is_separable(k)) {

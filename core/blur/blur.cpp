@@ -400,7 +400,7 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
 {
     std::string err;
     BlurMethod method = BlurMethod::Exact;
-    if (!validate(k, err) || !resolve_method(k, opts, method, err)
+    if (!check_kernel(k, err) || !resolve_method(k, opts, method, err)
         || !check_blur_options(k, opts, method, nthreads, err)) {
         dst.errorfmt("blur: {}", err);
         return false;
@@ -426,6 +426,13 @@ bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
     if (const std::optional<bool> done = blur_direct(dst, in, roi, plan, k, opts, nthreads))
         return *done;
     return blur_on_plane(dst, in, roi, plan, k, opts, nthreads);
+}
+
+bool check_blur_options(const Kernel& k, const BlurOptions& opts, std::string& err)
+{
+    BlurMethod method = opts.method;
+    return check_kernel(k, err) && resolve_method(k, opts, method, err)
+           && check_blur_options(k, opts, method, 0, err);
 }
 
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts,

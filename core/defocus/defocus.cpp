@@ -61,9 +61,9 @@ std::string fill_summary(const DefocusReport& rep)
 
 }  // namespace
 
-bool detail::check_defocus_options(const DefocusOptions& o, std::string& err)
+bool check_defocus_options(const DefocusOptions& o, std::string& err)
 {
-    if (!validate_aperture(o.aperture, o.aspect, err))
+    if (!check_aperture(o.aperture, o.aspect, err))
         return false;
     if (o.layers < 0 || o.layers > 1024) {
         err = format("layers {} is outside 0..1024 (0: automatic)", o.layers);

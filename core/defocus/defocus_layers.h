@@ -139,9 +139,6 @@ inline void scale_display_window(OIIO::ImageSpec& spec, const OIIO::ImageSpec& l
 bool within_defocus_memory(const DefocusOptions& o, double bytes, const std::string& what, const std::string& remedy,
                            std::string& err);
 
-/// Check the options that do not depend on the image. False + `err` naming the option.
-bool check_defocus_options(const DefocusOptions& o, std::string& err);
-
 /// zdilate: each pixel of the w x h CoC plane takes the nearest (smallest signed) CoC of
 /// the (2r + 1)^2 square about it, cut by the frame's edge.
 void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads);

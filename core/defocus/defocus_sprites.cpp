@@ -280,7 +280,7 @@ bool detail::defocus_lens(const DefocusOptions& o, const OIIO::ImageSpec& spec, 
     lens.focal_mm       = o.coc.lens.focal_mm;
     // At pseudo-high resolution the sprites are drawn on the output's finer pixels.
     lens.pixel_pitch_mm = o.coc.lens.sensor_width_mm / std::max(1, width_px * o.supersample);
-    if (!validate_lens(lens, err)) {
+    if (!check_lens(lens, err)) {
         err = "lens character: " + err;
         return false;
     }

@@ -289,6 +289,15 @@ LensFitCropResult report_crop(const Fitter& f, const CropData& d, size_t i, doub
 
 }  // namespace
 
+bool check_lens_fit_options(const LensFitOptions& opts, std::string& err)
+{
+    if (!(opts.clip_level >= 0.0) || !std::isfinite(opts.clip_level))
+        return err = format("clip level {:g} is not a value >= 0", opts.clip_level), false;
+    if (opts.max_evaluations < 50 || opts.max_evaluations > 1000000)
+        return err = format("max_evaluations {} is outside 50..1000000", opts.max_evaluations), false;
+    return check_lens(opts.camera, err);
+}
+
 bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFitOptions& opts, std::string& err,
               int nthreads)
 {
@@ -298,11 +307,7 @@ bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFit
         return err = "fit_lens: no crop given", false;
     if (crops.size() > 64)
         return err = format("fit_lens: {} crops (at most 64)", crops.size()), false;
-    if (!(opts.clip_level >= 0.0) || !std::isfinite(opts.clip_level))
-        return err = format("fit_lens: clip level {:g} is not a value >= 0", opts.clip_level), false;
-    if (opts.max_evaluations < 50 || opts.max_evaluations > 1000000)
-        return err = format("fit_lens: max_evaluations {} is outside 50..1000000", opts.max_evaluations), false;
-    if (!validate_lens(opts.camera, err))
+    if (!check_lens_fit_options(opts, err))
         return err = "fit_lens: " + err, false;
     std::vector<CropData> data(crops.size());
     for (size_t i = 0; i < crops.size(); ++i)

@@ -112,7 +112,7 @@ const char* lens_preset_name(LensPreset p)
     return "off";
 }
 
-bool validate_lens(const LensCharacter& l, std::string& err)
+bool check_lens(const LensCharacter& l, std::string& err)
 {
     struct Range {
         const char* name;
@@ -169,7 +169,7 @@ bool beam_map_image(OIIO::ImageBuf& dst, const LensCharacter& lens, double coc_m
                     double coc_max_px, int width, int height, int nthreads)
 {
     std::string err;
-    if (!validate_lens(lens, err))
+    if (!check_lens(lens, err))
         return dst.errorfmt("beam_map: {}", err), false;
     if (!(std::isfinite(coc_min_px) && std::isfinite(coc_max_px) && coc_min_px < coc_max_px)
         || width < 2 || height < 2 || width > 8192 || height > 8192)

@@ -204,7 +204,7 @@ bool wavelength_independent(const LensCharacter& lens)
 // The request's checks: CoC, field position and size within what a PSF can be.
 bool check_psf_request(const LensCharacter& lens, const PsfRequest& req, std::string& err)
 {
-    if (!validate_lens(lens, err))
+    if (!check_lens(lens, err))
         return false;
     if (!std::isfinite(req.coc_px) || std::abs(req.coc_px) > 4096.0) {
         err = format("coc {:g} is outside -4096..4096 px", req.coc_px);

@@ -181,9 +181,7 @@ PlaneView make_output(OIIO::ImageBuf& dst, const OIIO::ImageSpec& like, const OI
 
 }  // namespace detail
 
-namespace {
-
-bool check_options(const ResampleOptions& o, std::string& err)
+bool check_resample_options(const ResampleOptions& o, std::string& err)
 {
     auto bad = [](float v) { return !std::isfinite(v) || v < 0.0f || v > 64.0f; };
     if (bad(o.gaussian_sigma) || bad(o.blur_sigma) || bad(o.fused_offset)) {
@@ -193,8 +191,6 @@ bool check_options(const ResampleOptions& o, std::string& err)
     }
     return true;
 }
-
-}  // namespace
 
 // --- filter names ---------------------------------------------------------------------
 
@@ -255,7 +251,7 @@ bool resample_plane(const ConstPlaneView& src, const PlaneView& dst, const AxisM
                     int nthreads, bool prefilter)
 {
     if (!check_planes(src, dst, err) || !check_map(mx, err) || !check_map(my, err)
-        || !check_options(opts, err))
+        || !check_resample_options(opts, err))
         return false;
     AxisTaps wx, wy;
     if (!axis_taps(wx, src.width, dst.width, mx, opts, prefilter, err)
@@ -459,7 +455,7 @@ bool resample_common(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Resam
     if (!check_image(dst, src, what))
         return false;
     std::string err;
-    if (!check_options(opts, err)) {
+    if (!check_resample_options(opts, err)) {
         dst.errorfmt("{}: {}", what, err);
         return false;
     }

@@ -41,6 +41,17 @@ using detail::tent;
 using detail::view_of;
 using OIIO::Strutil::fmt::format;
 
+bool check_depth_aware_options(const DepthAwareOptions& opts, std::string& err)
+{
+    if (!(opts.depth_tolerance >= 0.0f && opts.depth_tolerance <= 10.0f)
+        || !(opts.sigma_depth > 0.0f && opts.sigma_depth <= 10.0f)) {
+        err = format("depth_tolerance {} must be within 0..10 and sigma_depth {} within (0, 10]",
+                     opts.depth_tolerance, opts.sigma_depth);
+        return false;
+    }
+    return true;
+}
+
 bool enlarge_depth_aware_plane(const ConstPlaneView& low, int low_depth_channel,
                                const ConstPlaneView& full_depth, const PlaneView& dst,
                                const AxisMap& mx, const AxisMap& my,
@@ -57,12 +68,8 @@ bool enlarge_depth_aware_plane(const ConstPlaneView& low, int low_depth_channel,
         err = "the full-resolution depth must be one channel of the destination's size";
         return false;
     }
-    if (!(opts.depth_tolerance >= 0.0f && opts.depth_tolerance <= 10.0f)
-        || !(opts.sigma_depth > 0.0f && opts.sigma_depth <= 10.0f)) {
-        err = format("depth_tolerance {} must be within 0..10 and sigma_depth {} within (0, 10]",
-                     opts.depth_tolerance, opts.sigma_depth);
+    if (!check_depth_aware_options(opts, err))
         return false;
-    }
     const int nc = low.nchannels, zc = low_depth_channel;
     const bool pcf = opts.method == DepthAwareMethod::PCF;
     const int reach = pcf ? 2 : 4;  // footprint texels per axis

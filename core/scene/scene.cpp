@@ -567,21 +567,9 @@ std::unique_ptr<SceneGeometry> make_scene_geometry(const std::string& name, cons
 bool scene_spec(const std::string& name, const SceneOptions& opts, const std::vector<std::string>& channels,
                 OIIO::ImageSpec& spec, std::string& err)
 {
+    if (!check_scene_options(name, opts, err))
+        return false;
     const SceneInfo* info = find_scene(name);
-    if (!info) {
-        err = OIIO::Strutil::fmt::format("unknown scene '{}' (known: {})", name,
-                                         OIIO::Strutil::join(scene_names(), ", "));
-        return false;
-    }
-    if (opts.width < 1 || opts.height < 1 || opts.width > 32768 || opts.height > 32768) {
-        err = OIIO::Strutil::fmt::format("scene size {}x{} is outside 1x1 .. 32768x32768", opts.width,
-                                         opts.height);
-        return false;
-    }
-    if (opts.aa < 1 || opts.aa > 16) {
-        err = OIIO::Strutil::fmt::format("scene aa={} is outside 1..16", opts.aa);
-        return false;
-    }
     spec = OIIO::ImageSpec(opts.width, opts.height, int(channels.size()), OIIO::TypeFloat);
     spec.channelnames  = channels;
     spec.alpha_channel = 3;
@@ -599,6 +587,25 @@ bool scene_spec(const std::string& name, const SceneOptions& opts, const std::ve
 }  // namespace detail
 
 // --- the public entry points ---------------------------------------------------------
+
+bool check_scene_options(const std::string& name, const SceneOptions& opts, std::string& err)
+{
+    if (!find_scene(name)) {
+        err = OIIO::Strutil::fmt::format("unknown scene '{}' (known: {})", name,
+                                         OIIO::Strutil::join(scene_names(), ", "));
+        return false;
+    }
+    if (opts.width < 1 || opts.height < 1 || opts.width > 32768 || opts.height > 32768) {
+        err = OIIO::Strutil::fmt::format("scene size {}x{} is outside 1x1 .. 32768x32768", opts.width,
+                                         opts.height);
+        return false;
+    }
+    if (opts.aa < 1 || opts.aa > 16) {
+        err = OIIO::Strutil::fmt::format("scene aa={} is outside 1..16", opts.aa);
+        return false;
+    }
+    return true;
+}
 
 std::vector<std::string> scene_names()
 {

@@ -48,10 +48,7 @@ using detail::Light;
 using detail::SceneRay;
 using OIIO::Strutil::fmt::format;
 
-namespace {
-
-
-bool check_lens(const SceneTruthOptions& o, std::string& err)
+bool check_scene_truth_options(const SceneTruthOptions& o, std::string& err)
 {
     const Lens& l = o.lens;
     if (l.depth_unit_mm != 1000.0) {
@@ -72,15 +69,13 @@ bool check_lens(const SceneTruthOptions& o, std::string& err)
     return detail::check_truth_rays(o.aperture, o.aspect, o.spp, err);
 }
 
-}  // namespace
-
 bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions& opts,
                       const SceneTruthOptions& lo, SceneTruthReport* report, int nthreads)
 {
     const auto start = std::chrono::steady_clock::now();
     OIIO::ImageSpec spec;
     std::string err;
-    if (!detail::scene_spec(name, opts, { "R", "G", "B", "A" }, spec, err) || !check_lens(lo, err)) {
+    if (!detail::scene_spec(name, opts, { "R", "G", "B", "A" }, spec, err) || !check_scene_truth_options(lo, err)) {
         dst.errorfmt("scene truth: {}", err);
         return false;
     }

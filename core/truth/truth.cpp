@@ -500,13 +500,18 @@ bool detail::check_truth_rays(const Kernel& aperture, float aspect, int spp, std
         err = "the aperture must be a disk, a polygon or a star";
         return false;
     }
-    if (!validate_aperture(aperture, aspect, err))
+    if (!check_aperture(aperture, aspect, err))
         return false;
     if (spp < 1 || spp > (1 << 20)) {
         err = format("spp {} is outside 1..1048576", spp);
         return false;
     }
     return true;
+}
+
+bool check_truth_options(const TruthOptions& opt, std::string& err)
+{
+    return detail::check_truth_rays(opt.aperture, opt.aspect, opt.spp, err);
 }
 
 ApertureSampler detail::truth_pupil(const Kernel& aperture, float aspect)
@@ -532,7 +537,7 @@ bool check_truth_input(const OIIO::ImageBuf& src, const TruthOptions& opt, std::
         err = "needs a deep image, this one is flat (--deepen makes one)";
         return false;
     }
-    if (!detail::check_truth_rays(opt.aperture, opt.aspect, opt.spp, err))
+    if (!check_truth_options(opt, err))
         return false;
     const OIIO::ImageSpec& spec = src.spec();
     if (channel_named(spec, { "Z" }) < 0) {

@@ -20,7 +20,7 @@
 namespace bokeh::detail {
 
 // The rays both truths draw: the aperture a disk, a polygon or an opening
-// (validate_aperture, with the anamorphic aspect), 1..2^20 samples a pixel. False + `err`
+// (check_aperture, with the anamorphic aspect), 1..2^20 samples a pixel. False + `err`
 // naming the bad one.
 bool check_truth_rays(const Kernel& aperture, float aspect, int spp, std::string& err);
 

@@ -188,12 +188,12 @@ struct KernelWeights {
 std::pair<double, double> gaussian_sigma(const Kernel& k);
 
 /// Check a kernel's parameters; false + `err` naming the bad one.
-bool validate(const Kernel& k, std::string& err);
+bool check_kernel(const Kernel& k, std::string& err);
 
 /// Check an aperture as the depth-defocus methods take it: the kernel's shape at unit size
 /// (each depth's CoC sets the size) and the anamorphic aspect (bokeh height / width,
 /// kMinAspect..kMaxAspect). False + `err` naming the bad one.
-bool validate_aperture(const Kernel& aperture, float aspect, std::string& err);
+bool check_aperture(const Kernel& aperture, float aspect, std::string& err);
 
 /// The kernel's bokeh in front of focus, where the rays cross before the sensor: its
 /// aperture turned half a turn (a polygon's rotation + 180 degrees, an opening's

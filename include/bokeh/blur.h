@@ -107,6 +107,9 @@ KernelWeights three_box_weights(const Kernel& k);
 /// data's), whatever the method (they are looked for in one pass over the source).
 bool blur(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const Kernel& k,
           const BlurOptions& opts = {}, OIIO::ROI roi = {}, int nthreads = 0);
+/// What blur() checks before it reads an image: the kernel (check_kernel), the method
+/// against the kernel, bands, iris and reduction. False + `err` naming the option.
+bool check_blur_options(const Kernel& k, const BlurOptions& opts, std::string& err);
 OIIO::ImageBuf blur(const OIIO::ImageBuf& src, const Kernel& k, const BlurOptions& opts = {},
                     OIIO::ROI roi = {}, int nthreads = 0);
 

@@ -203,6 +203,9 @@ struct DefocusReport {
 /// `deep_output` the result stays deep. False + dst.geterror().
 bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& opts,
              DefocusReport* report = nullptr, int nthreads = 0);
+/// What defocus() checks before it reads an image: the lens, the aperture, the method's
+/// and the planner's options. False + `err` naming the option.
+bool check_defocus_options(const DefocusOptions& opts, std::string& err);
 inline OIIO::ImageBuf defocus(const OIIO::ImageBuf& src, const DefocusOptions& opts, DefocusReport* report = nullptr,
                               int nthreads = 0)
 {

@@ -103,6 +103,9 @@ struct LensFit {
 /// a crop with no highlight, one all clipped, one smaller than its bokeh, or bad options.
 bool fit_lens(LensFit& fit, const std::vector<LensFitCrop>& crops, const LensFitOptions& opts,
               std::string& err, int nthreads = 0);
+/// What fit_lens() checks of its options: the clip level, the evaluation budget, the
+/// camera (check_lens). False + `err` naming the option.
+bool check_lens_fit_options(const LensFitOptions& opts, std::string& err);
 
 /// The fit's PSF for crop `index` rendered as that crop: A PSF + background (RGB float,
 /// the crop's windows).

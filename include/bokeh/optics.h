@@ -113,7 +113,7 @@ const char* lens_preset_name(LensPreset p);
 
 /// Check the description (f-stop, pitch, knobs and their ranges); false + `err` naming
 /// the bad value.
-bool validate_lens(const LensCharacter& lens, std::string& err);
+bool check_lens(const LensCharacter& lens, std::string& err);
 
 /// The longitudinal aberration LSA(s, l) of the lens in mm (positive: the ray focuses
 /// behind the paraxial focus of the reference wavelength 587.6 nm).

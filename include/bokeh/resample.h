@@ -251,6 +251,9 @@ OIIO::ImageBuf enlarge(const OIIO::ImageBuf& src, double factor, const ResampleO
 /// reducing each axis with `opts.filter` (reducing: stretched to the destination pixel).
 bool resize(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, int width, int height,
             const ResampleOptions& opts = {}, int nthreads = 0);
+/// What enlarge() and resize() check of their options: the sigmas and the fused offset
+/// within 0..64 px. False + `err` naming them.
+bool check_resample_options(const ResampleOptions& opts, std::string& err);
 inline OIIO::ImageBuf resize(const OIIO::ImageBuf& src, int width, int height, const ResampleOptions& opts = {},
                              int nthreads = 0)
 {
@@ -307,6 +310,9 @@ struct DepthAwareOptions {
 bool enlarge_depth_aware(OIIO::ImageBuf& dst, const OIIO::ImageBuf& low,
                          const OIIO::ImageBuf& full_depth, double factor,
                          const DepthAwareOptions& opts = {}, int nthreads = 0);
+/// What enlarge_depth_aware() checks of its options: depth_tolerance 0..10, sigma_depth
+/// (0, 10]. False + `err` naming them.
+bool check_depth_aware_options(const DepthAwareOptions& opts, std::string& err);
 inline OIIO::ImageBuf enlarge_depth_aware(const OIIO::ImageBuf& low, const OIIO::ImageBuf& full_depth, double factor,
                                           const DepthAwareOptions& opts = {}, int nthreads = 0)
 {

@@ -53,6 +53,8 @@ std::string scene_description(const std::string& name);
 /// size.
 bool make_scene(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions& opts,
                 int nthreads = 0);
+/// What make_scene() checks: a known name, 1..32768 px a side, aa 1..16. False + `err`.
+bool check_scene_options(const std::string& name, const SceneOptions& opts, std::string& err);
 inline OIIO::ImageBuf make_scene(const std::string& name, const SceneOptions& opts, int nthreads = 0)
 {
     OIIO::ImageBuf dst;
@@ -104,6 +106,10 @@ struct SceneTruthReport {
 /// on `dst` for an unknown scene, bad size or bad options.
 bool make_scene_truth(OIIO::ImageBuf& dst, const std::string& name, const SceneOptions& opts,
                       const SceneTruthOptions& lens, SceneTruthReport* report = nullptr, int nthreads = 0);
+/// What make_scene_truth() checks of the lens before it renders: metres, a positive
+/// focal length, f-number and film back, focus beyond the focal length, the aperture and
+/// the rays a pixel. False + `err` naming the option.
+bool check_scene_truth_options(const SceneTruthOptions& lens, std::string& err);
 inline OIIO::ImageBuf make_scene_truth(const std::string& name, const SceneOptions& opts, const SceneTruthOptions& lens,
                                        SceneTruthReport* report = nullptr, int nthreads = 0)
 {

@@ -128,6 +128,9 @@ struct TruthReport {
 /// False + dst.geterror() on bad input.
 bool defocus_truth(OIIO::ImageBuf& dst, const OIIO::ImageBuf& deep_src, const TruthOptions& opt,
                    TruthReport* report = nullptr, int nthreads = 0);
+/// What defocus_truth() checks before it reads an image: the aperture and its aspect, the
+/// rays a pixel. False + `err` naming the option.
+bool check_truth_options(const TruthOptions& opt, std::string& err);
 inline OIIO::ImageBuf defocus_truth(const OIIO::ImageBuf& deep_src, const TruthOptions& opt,
                                     TruthReport* report = nullptr, int nthreads = 0)
 {

@@ -75,7 +75,7 @@ bool blur_with_image_command(CommandContext& c, float width_px, float height_px)
     size.width_px  = width_px;
     size.height_px = height_px;
     std::string err;
-    if (!bokeh::validate(size, err))
+    if (!bokeh::check_kernel(size, err))
         return c.fail(err);
     const std::string& method = c.options.get_string("method");
     if (method != "auto" && method != "exact" && method != "fft")

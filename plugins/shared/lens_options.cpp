@@ -80,7 +80,7 @@ bool lens_character_from(const OptionValues& v, LensCharacter& lens, std::string
     lens.field_curvature_px  = v.get_float("fieldcurvature");
     lens.astigmatism_px      = v.get_float("astigmatism");
     lens.anamorphic_focus_px = v.get_float("anamorphicfocus");
-    return validate_lens(lens, err);
+    return check_lens(lens, err);
 }
 
 }  // namespace bokeh

@@ -437,7 +437,7 @@ TEST(Blur, LargeBinomialIsPascalsRow)
     k.width_px  = 101.0f;
     k.height_px = 3.0f;
     std::string err;
-    ASSERT_TRUE(validate(k, err)) << err;
+    ASSERT_TRUE(check_kernel(k, err)) << err;
     const auto [wx, wy] = separable_weights(k);
     ASSERT_EQ(wy.size(), 3u);
     EXPECT_NEAR(wy[1], 0.5, 1e-7);
