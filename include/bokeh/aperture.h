@@ -134,7 +134,9 @@ private:
     int m_blades   = 0;
     double m_sector = 0.0, m_first_normal = 0.0, m_apothem = 1.0, m_curvature = 0.0;
     double m_hole2 = 0.0, m_aspect = 1.0, m_area = 0.0;
-    std::vector<double> m_angle;  ///< inverse CDF of the angle (a polygon: within a sector), at equal steps
+    /// A polygon: the inverse CDF of the angle within a sector, at equal steps of area;
+    /// another edge: the cumulative area at equal steps of angle.
+    std::vector<double> m_angle;
 };
 
 enum class KernelShape {
