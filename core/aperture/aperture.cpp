@@ -323,19 +323,14 @@ Aperture Aperture::point_reflected() const
 
 ApertureSampler::ApertureSampler(const Aperture& a, float aspect)
     : m_aperture(a)
-    , m_polygon(a.m_kind == Aperture::Kind::Polygon)
-    , m_round(a.m_kind == Aperture::Kind::Round)
-    , m_blades(a.m_blades)
     , m_hole2(a.m_hole * a.m_hole)
     , m_aspect(aspect)
+    , m_area(a.area() * 0.25 * aspect)
 {
-    double unit_area = kPi;  // at circumradius 1
-    if (m_polygon) {
-        m_sector       = 2.0 * kPi / m_blades;
+    if (a.m_kind == Aperture::Kind::Polygon) {
+        m_sector       = 2.0 * kPi / a.m_blades;
         m_first_normal = a.m_vertex_rad + 0.5 * m_sector;
-        m_apothem      = std::cos(0.5 * m_sector);
-        m_curvature    = a.m_curvature;
-        const double A = m_apothem, q = m_curvature;
+        const double A = a.m_apothem, q = a.m_curvature;
         const double half = 0.5 * m_sector, h0 = sector_area2(A, q, -half), total = sector_area2(A, q, half) - h0;
         m_angle.resize(kSectorSteps + 1);
         m_angle.front() = -half;
@@ -349,34 +344,32 @@ ApertureSampler::ApertureSampler(const Aperture& a, float aspect)
             }
             m_angle[size_t(i)] = 0.5 * (lo + hi);
         }
-        unit_area = 0.5 * total * m_blades;
-    } else if (!m_round) {
+    } else if (a.m_kind != Aperture::Kind::Round) {
         // The cumulative area at the edges of kEdgeSteps equal angle cells, each cell's
-        // share from its middle's edge distance.
+        // share from its middle's edge distance (Aperture::area's sum, kept cell by cell).
         const double step = 2.0 * kPi / kEdgeSteps;
         m_angle.resize(kEdgeSteps + 1);
         m_angle.front() = 0.0;
         for (int i = 0; i < kEdgeSteps; ++i) {
-            const double e       = a.edge((i + 0.5) * step);
+            const double e         = a.edge((i + 0.5) * step);
             m_angle[size_t(i) + 1] = m_angle[size_t(i)] + 0.5 * e * e * step;
         }
-        unit_area = m_angle.back();
     }
-    m_area = unit_area * (1.0 - m_hole2) * 0.25 * aspect;
 }
 
 std::array<double, 2> ApertureSampler::operator()(double u1, double u2) const
 {
+    const Aperture& a = m_aperture;
     double phi, d = 1.0;
-    if (m_polygon) {
-        const double s = u1 * m_blades;
-        const int j    = std::min(m_blades - 1, int(s));
+    if (a.m_kind == Aperture::Kind::Polygon) {
+        const double s = u1 * a.m_blades;
+        const int j    = std::min(a.m_blades - 1, int(s));
         const double f = (s - j) * kSectorSteps;
         const int i    = std::min(kSectorSteps - 1, int(f));
         const double t = m_angle[size_t(i)] + (m_angle[size_t(i) + 1] - m_angle[size_t(i)]) * (f - i);
         phi            = m_first_normal + j * m_sector + t;
-        d              = polygon_edge_distance(m_blades, m_curvature, t + 0.5 * m_sector);  // t from the sector's normal
-    } else if (m_round) {
+        d              = polygon_edge_distance(a.m_blades, a.m_curvature, t + 0.5 * m_sector);  // t from the sector's normal
+    } else if (a.m_kind == Aperture::Kind::Round) {
         phi = 2.0 * kPi * u1;
     } else {
         // The cell holding the share u1 of the area, then uniform in angle inside it.
@@ -386,7 +379,7 @@ std::array<double, 2> ApertureSampler::operator()(double u1, double u2) const
         const double cell = m_angle[i + 1] - m_angle[i];
         const double f    = cell > 0.0 ? std::clamp((target - m_angle[i]) / cell, 0.0, 1.0) : 0.5;
         phi               = (double(i) + f) * (2.0 * kPi / kEdgeSteps);
-        d                 = m_aperture.edge(phi);
+        d                 = a.edge(phi);
     }
     const double r = d * std::sqrt(m_hole2 + (1.0 - m_hole2) * u2);
     // Unit circumradius, v up -> diameter 1 px, y down, height times the aspect.

@@ -130,9 +130,7 @@ public:
 
 private:
     Aperture m_aperture;
-    bool m_polygon = false, m_round = false;
-    int m_blades   = 0;
-    double m_sector = 0.0, m_first_normal = 0.0, m_apothem = 1.0, m_curvature = 0.0;
+    double m_sector = 0.0, m_first_normal = 0.0;  ///< a polygon's sector angle, its first normal
     double m_hole2 = 0.0, m_aspect = 1.0, m_area = 0.0;
     /// A polygon: the inverse CDF of the angle within a sector, at equal steps of area;
     /// another edge: the cumulative area at equal steps of angle.
