@@ -8,6 +8,8 @@
 #include <bokeh/deep.h>
 #include <bokeh/parallel.h>
 
+#include "base/numbers.h"
+
 #include <algorithm>
 #include <cstdint>
 #include <initializer_list>
@@ -19,9 +21,6 @@
 #include <OpenImageIO/imagebuf.h>
 
 namespace bokeh::detail {
-
-
-inline constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // The depth OIIO gives a flat pixel without samples (IBA::flatten), kept for files that
 // go back and forth between the two tools.

@@ -14,6 +14,7 @@
 #include <bokeh/lens.h>
 #include <bokeh/parallel.h>
 
+#include "base/numbers.h"
 #include "base/plane.h"
 
 #include <algorithm>
@@ -26,7 +27,7 @@ namespace bokeh {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+using detail::kInf;
 
 // The depth channel's value at data-window pixel (x, y) of a float local image.
 float depth_at(const OIIO::ImageBuf& img, int zc, int x, int y)

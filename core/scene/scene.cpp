@@ -33,6 +33,7 @@
 #include <bokeh/parallel.h>
 #include <bokeh/scene.h>
 
+#include "base/numbers.h"
 #include "base/plane.h"
 #include "scene/scene_geometry.h"
 
@@ -56,7 +57,7 @@ namespace {
 
 constexpr double kFocalMm       = 50.0;
 constexpr double kSensorWidthMm = 36.0;
-constexpr double kInf           = std::numeric_limits<double>::infinity();
+using detail::kInf;
 
 // The lens each scene is meant to be defocused with. Thin-lens CoC diameter in pixels
 // (docs/methods/optics.md, "The thin lens"), f = 50 mm, d0 = focus, F = f-number, at

@@ -31,6 +31,7 @@
 #include <bokeh/parallel.h>
 #include <bokeh/truth.h>
 
+#include "base/numbers.h"
 #include "base/progress.h"
 #include "truth/truth_sampler.h"
 
@@ -48,8 +49,8 @@ namespace bokeh {
 namespace {
 
 using OIIO::Strutil::fmt::format;
+using detail::kInf;
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
 // Transmittance at or below which float stores the accumulated opacity as 1 (1 - 2^-25
 // rounds to 1.0f): a ray stops there (deep.h's cull threshold).
 constexpr double kOpaqueTransmittance = 1.0 / 33554432.0;
