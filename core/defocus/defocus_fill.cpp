@@ -71,23 +71,46 @@ constexpr float kCountedLoss = 1e-3f;
 
 }  // namespace
 
-BackgroundPlate::BackgroundPlate(const Frame& f, int nthreads) : f_(f), x0_(f.data.xbegin), y0_(f.data.ybegin)
+// A frame pixel as a cell. An empty pixel (coverage 0) is nothing at any depth: it lies
+// behind everything, so a foreground over empty space continues over emptiness and its
+// silhouette thins out as a lens makes it (the layers' own transparency).
+void BackgroundPlate::frame_cell(int x, int y, Cell& c) const
 {
-    const int w0 = f.data.width(), h0 = f.data.height();
-    const std::vector<float>& rgba = f.linear();
-    // A frame pixel as a cell. An empty pixel (coverage 0) is nothing at any depth: it
-    // lies behind everything, so a foreground over empty space continues over emptiness
-    // and its silhouette thins out as a lens makes it (the layers' own transparency).
-    auto frame_cell = [&](int x, int y, Cell& c) {
-        const size_t i = size_t(y) * size_t(w0) + size_t(x);
-        const float* p = rgba.data() + i * 4;
-        c.w            = 1.0f;
-        c.a            = std::clamp(p[3], 0.0f, 1.0f);
-        c.z            = c.a > 0.0f ? f.coc[i] : std::numeric_limits<float>::infinity();
-        for (int k = 0; k < 3 && c.a > 0.0f; ++k)
-            c.t[k] = tone(p[k] / p[3]);
-    };
-    int w = w0, h = h0;
+    const size_t i = size_t(y) * size_t(w0_) + size_t(x);
+    const float* p = f_.linear().data() + i * 4;
+    c.w            = 1.0f;
+    c.a            = std::clamp(p[3], 0.0f, 1.0f);
+    c.z            = c.a > 0.0f ? f_.coc[i] : std::numeric_limits<float>::infinity();
+    for (int k = 0; k < 3 && c.a > 0.0f; ++k)
+        c.t[k] = tone(p[k] / p[3]);
+}
+
+void BackgroundPlate::level1_cell(int i, int j, Cell& c) const
+{
+    Cell kids[4];
+    int n = 0;
+    for (int dy = 0; dy < 2; ++dy)
+        for (int dx = 0; dx < 2; ++dx) {
+            const int x = 2 * i + dx, y = 2 * j + dy;
+            if (x < w0_ && y < h0_)
+                frame_cell(x, y, kids[n++]);
+        }
+    c = Cell{};
+    pull(kids, n, c);
+}
+
+// Level 1 is not stored: its cells are a quarter of the frame's pixels at 24 bytes each,
+// three quarters of the pyramid (50 of 66 MB at 3840x2160), held while the defocus's
+// working frame and result are (the fill is the defocus's peak, docs/defocus.md "Memory");
+// a read pulls 4 frame pixels, for the few pixels a fill continues.
+BackgroundPlate::BackgroundPlate(const Frame& f, int nthreads)
+    : f_(f), w0_(f.data.width()), h0_(f.data.height()), w1_((w0_ + 1) / 2), h1_((h0_ + 1) / 2),
+      x0_(f.data.xbegin), y0_(f.data.ybegin)
+{
+    if (w0_ <= 1 && h0_ <= 1)
+        return;  // one pixel: no level
+    nlevels_ = 1;
+    int w = w1_, h = h1_;
     while (w > 1 || h > 1) {
         const int cw = (w + 1) / 2, ch = (h + 1) / 2;
         Level next{ cw, ch, std::vector<Cell>(size_t(cw) * size_t(ch)) };
@@ -105,13 +128,14 @@ BackgroundPlate::BackgroundPlate(const Frame& f, int nthreads) : f_(f), x0_(f.da
                             if (below)
                                 kids[n] = below->cells[size_t(y) * size_t(w) + size_t(x)];
                             else
-                                frame_cell(x, y, kids[n]);
+                                level1_cell(x, y, kids[n]);
                             ++n;
                         }
                     pull(kids, n, next.cells[size_t(j) * size_t(cw) + size_t(i)]);
                 }
         });
         levels_.push_back(std::move(next));
+        ++nlevels_;
         w = cw, h = ch;
     }
 }
@@ -152,11 +176,12 @@ bool BackgroundPlate::behind(int x, int y, float coc_px, float rgba[4]) const
     const float farther = farther_than(coc_px);
     // The coarsest level whose cells span the pixel's blur radius (and a cell more).
     const int span  = int(std::ceil(std::log2(0.5f * std::abs(coc_px) + 2.0f))) + 1;
-    const int top   = std::min(int(levels_.size()), std::max(span, 1));
+    const int top   = std::min(nlevels_, std::max(span, 1));
     bool have       = false;
     float v[4]      = { 0, 0, 0, 0 };  // tone-mapped colour, coverage
     for (int L = top; L >= 1; --L) {
-        const Level& lv   = levels_[size_t(L - 1)];
+        const Level* lv   = L >= 2 ? &levels_[size_t(L - 2)] : nullptr;
+        const int lw = lv ? lv->w : w1_, lh = lv ? lv->h : h1_;
         const float scale = float(1 << L);
         const float u = (float(x - x0_) + 0.5f) / scale - 0.5f, t = (float(y - y0_) + 0.5f) / scale - 0.5f;
         const float fu = std::floor(u), ft = std::floor(t);
@@ -165,12 +190,15 @@ bool BackgroundPlate::behind(int x, int y, float coc_px, float rgba[4]) const
         for (int dy = 0; dy < 2; ++dy)
             for (int dx = 0; dx < 2; ++dx) {
                 const int i = int(fu) + dx, j = int(ft) + dy;
-                const bool past = i < 0 || j < 0 || i >= lv.w || j >= lv.h;
+                const bool past = i < 0 || j < 0 || i >= lw || j >= lh;
                 // Past the data window: empty by a black border, else the edge's cells.
+                const int ci = std::clamp(i, 0, lw - 1), cj = std::clamp(j, 0, lh - 1);
+                Cell pulled;
+                if (!lv && !(past && f_.border == Border::Black))
+                    level1_cell(ci, cj, pulled);
                 const Cell& c = past && f_.border == Border::Black
                                     ? kEmpty
-                                    : lv.cells[size_t(std::clamp(j, 0, lv.h - 1)) * size_t(lv.w)
-                                               + size_t(std::clamp(i, 0, lv.w - 1))];
+                                    : (lv ? lv->cells[size_t(cj) * size_t(lw) + size_t(ci)] : pulled);
                 if (c.w <= 0.0f || c.z <= farther)
                     continue;
                 const float b = (dx ? bx : 1.0f - bx) * (dy ? by : 1.0f - by) * c.w;

@@ -34,12 +34,21 @@ private:
         float w = 0.0f;            // share of the children known (0: nothing known)
     };
     static void pull(const Cell* kids, int n, Cell& c);
+    // A frame pixel (from the data window's origin) as a cell, and a level-1 cell pulled
+    // from its 2 x 2 frame pixels.
+    void frame_cell(int x, int y, Cell& c) const;
+    void level1_cell(int i, int j, Cell& c) const;
     struct Level {
         int w = 0, h = 0;
         std::vector<Cell> cells;
     };
-    std::vector<Level> levels_;  // level L (cells of 2^L x 2^L pixels) at [L - 1]
-    int x0_ = 0, y0_ = 0;        // the data window's origin
+    // Level L (cells of 2^L x 2^L pixels) at [L - 2], from level 2 up; level 1 is pulled
+    // from the frame where it is read (defocus_fill.cpp says why).
+    std::vector<Level> levels_;
+    int nlevels_ = 0;        // levels in all, level 1 included
+    int w0_ = 0, h0_ = 0;    // the data window's size
+    int w1_ = 0, h1_ = 0;    // level 1's size
+    int x0_ = 0, y0_ = 0;    // the data window's origin
 };
 
 /// Which continuation fill_disocclusions draws from a plate.

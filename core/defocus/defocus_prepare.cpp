@@ -155,12 +155,15 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
     }
     const int width_px = src.spec().full_width > 0 ? src.spec().full_width : f.img.width();
     const CocOfDepth coc_of(coc, width_px);
-    f.coc.resize(size_t(npx));
+    // The CoC stands for the depth from here on: computed in the depth's own plane, so the
+    // frame never holds both while the input is still alive (the defocus's memory peak:
+    // docs/defocus.md, "Memory").
     parallel_for_chunks(0, npx, 1 << 14, nthreads, [&](int64_t b, int64_t e) {
         for (int64_t i = b; i < e; ++i)
-            f.coc[size_t(i)] = coc_of(f.img.z[size_t(i)]);
+            f.img.z[size_t(i)] = coc_of(f.img.z[size_t(i)]);
     });
-    std::vector<float>().swap(f.img.z);  // the CoC stands for it from here on
+    f.coc = std::move(f.img.z);
+    f.img.z.clear();
     f.data   = f.img.roi;
     f.border = o.border;
     f.up     = o.supersample;

@@ -180,23 +180,24 @@ static bool write_exr_deflated(const OIIO::ImageBuf& img, const OIIO::ImageSpec&
         err = first_line(out->geterror());
         return false;
     }
-    std::vector<unsigned char> packed;
-    std::string why;
-    if (detail::deflate_exr_file(file, compression, kExrDeflateLevel, packed, why)
-        != detail::DeflateResult::Written) {
-        declined = true;
-        return false;
-    }
-    file = std::vector<unsigned char>();
     std::FILE* f = std::fopen(tmp.c_str(), "wb");
     if (!f) {
         err = std::strerror(errno);
         return false;
     }
-    const bool wrote = std::fwrite(packed.data(), 1, packed.size(), f) == packed.size();
-    const int saved  = errno;
-    if (std::fclose(f) != 0 || !wrote) {
-        err = std::strerror(wrote ? errno : saved);
+    std::string why;
+    const detail::DeflateResult done = detail::deflate_exr_file(file, compression, kExrDeflateLevel, f, why);
+    const int saved                  = errno;
+    if (std::fclose(f) != 0 && done == detail::DeflateResult::Written) {
+        err = std::strerror(errno);
+        return false;
+    }
+    if (done == detail::DeflateResult::Declined) {
+        declined = true;  // the caller writes the file with OpenEXR's own codec
+        return false;
+    }
+    if (done == detail::DeflateResult::WriteFailed) {
+        err = std::strerror(saved);
         return false;
     }
     return true;
