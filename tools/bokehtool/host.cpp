@@ -147,10 +147,20 @@ static Command host_command(std::string name, std::string arguments, int inputs,
     return c;
 }
 
+// The host's own commands, in the order --help lists them. Global options are applied in
+// pass 1, wherever they stand on the line; stack commands in pass 2, in order.
 void Host::register_host_commands()
 {
+    register_run_options();
+    register_sequence_options();
+    register_report_and_policy_options();
+    register_stack_commands();
+}
+
+// What a run reads and how it is bounded: help, version, frames, threads, memory, views, time.
+void Host::register_run_options()
+{
     auto nothing = [](CommandContext&) { return true; };
-    // Global options: applied in pass 1, wherever they stand on the line.
     add_host_command(host_command("--help", "", 0, 0,
                                   "Print this help; --help COMMAND for one command", nothing),
                      true);
@@ -226,6 +236,11 @@ void Host::register_host_commands()
                                       return true;
                                   }),
                      true);
+}
+
+// How a sequence runs: dry run, update, bad and missing frames, padding, overlap, statistics.
+void Host::register_sequence_options()
+{
     add_host_command(host_command("-n", "", 0, 0,
                                   "Dry run: read and compute every frame, write nothing; print "
                                   "the files that would be written",
@@ -286,6 +301,12 @@ void Host::register_host_commands()
                                       return true;
                                   }),
                      true);
+}
+
+// What the run reports (verbosity, --info, progress) and its policies for existing outputs,
+// colour and non-finite pixels.
+void Host::register_report_and_policy_options()
+{
     add_host_command(host_command("-v", "", 0, 0, "Verbose: timings and details",
                                   [this](CommandContext&) { return m_verbosity = 2, true; }),
                      true);
@@ -333,8 +354,11 @@ void Host::register_host_commands()
     nan.options = { OptionSpec::Choice("policy", { "zero", "error" },
                                        "zero: replace and warn; error: fail") };
     add_host_command(std::move(nan), true);
+}
 
-    // Stack commands of the host itself.
+// Stack commands of the host itself: read (-i), write (-o) and the type outputs take (-d).
+void Host::register_stack_commands()
+{
     add_host_command(host_command("-i", "FILE", 0, 1,
                                   "Read an image (a bare file name does the same)",
                                   [this](CommandContext& c) { return read_input(c.args[0]); }),

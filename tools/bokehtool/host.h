@@ -51,6 +51,10 @@ private:
     enum class MissingFile { Error, Black, Checker };
 
     void register_host_commands();
+    void register_run_options();
+    void register_sequence_options();
+    void register_report_and_policy_options();
+    void register_stack_commands();
     void add_host_command(bokeh::Command cmd, bool global);
     bool load_plugins();
     std::string plugin_dir() const;
