@@ -107,9 +107,8 @@ BackgroundPlate::BackgroundPlate(const Frame& f, int nthreads)
     : f_(f), w0_(f.data.width()), h0_(f.data.height()), w1_((w0_ + 1) / 2), h1_((h0_ + 1) / 2),
       x0_(f.data.xbegin), y0_(f.data.ybegin)
 {
-    if (w0_ <= 1 && h0_ <= 1)
+    if (level_count() == 0)
         return;  // one pixel: no level
-    nlevels_ = 1;
     int w = w1_, h = h1_;
     while (w > 1 || h > 1) {
         const int cw = (w + 1) / 2, ch = (h + 1) / 2;
@@ -135,7 +134,6 @@ BackgroundPlate::BackgroundPlate(const Frame& f, int nthreads)
                 }
         });
         levels_.push_back(std::move(next));
-        ++nlevels_;
         w = cw, h = ch;
     }
 }
@@ -176,7 +174,7 @@ bool BackgroundPlate::behind(int x, int y, float coc_px, float rgba[4]) const
     const float farther = farther_than(coc_px);
     // The coarsest level whose cells span the pixel's blur radius (and a cell more).
     const int span  = int(std::ceil(std::log2(0.5f * std::abs(coc_px) + 2.0f))) + 1;
-    const int top   = std::min(nlevels_, std::max(span, 1));
+    const int top   = std::min(level_count(), std::max(span, 1));
     bool have       = false;
     float v[4]      = { 0, 0, 0, 0 };  // tone-mapped colour, coverage
     for (int L = top; L >= 1; --L) {
@@ -194,11 +192,16 @@ bool BackgroundPlate::behind(int x, int y, float coc_px, float rgba[4]) const
                 // Past the data window: empty by a black border, else the edge's cells.
                 const int ci = std::clamp(i, 0, lw - 1), cj = std::clamp(j, 0, lh - 1);
                 Cell pulled;
-                if (!lv && !(past && f_.border == Border::Black))
-                    level1_cell(ci, cj, pulled);
-                const Cell& c = past && f_.border == Border::Black
-                                    ? kEmpty
-                                    : (lv ? lv->cells[size_t(cj) * size_t(lw) + size_t(ci)] : pulled);
+                const Cell* cell = &kEmpty;
+                if (!(past && f_.border == Border::Black)) {
+                    if (lv) {
+                        cell = &lv->cells[size_t(cj) * size_t(lw) + size_t(ci)];
+                    } else {
+                        level1_cell(ci, cj, pulled);
+                        cell = &pulled;
+                    }
+                }
+                const Cell& c = *cell;
                 if (c.w <= 0.0f || c.z <= farther)
                     continue;
                 const float b = (dx ? bx : 1.0f - bx) * (dy ? by : 1.0f - by) * c.w;

@@ -45,7 +45,8 @@ private:
     // Level L (cells of 2^L x 2^L pixels) at [L - 2], from level 2 up; level 1 is pulled
     // from the frame where it is read (defocus_fill.cpp says why).
     std::vector<Level> levels_;
-    int nlevels_ = 0;        // levels in all, level 1 included
+    // Levels in all, level 1 included (a frame of one pixel has none).
+    int level_count() const { return w0_ > 1 || h0_ > 1 ? int(levels_.size()) + 1 : 0; }
     int w0_ = 0, h0_ = 0;    // the data window's size
     int w1_ = 0, h1_ = 0;    // level 1's size
     int x0_ = 0, y0_ = 0;    // the data window's origin
