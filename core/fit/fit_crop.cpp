@@ -453,13 +453,13 @@ void residual_noise(const std::vector<CropData>& crops, const Model& model, cons
         if (!model.psf(p, s, i, true, 0))
             continue;
         std::vector<float> smp;
-        Model::sample(smp, p, d, s.cx[i], s.cy[i]);
+        Model::sample_fitted(smp, p, d, s.cx[i], s.cy[i]);
         Linear lin;
         Model::fit_linear(d, smp, lin);
-        const size_t m = d.fit_k.size(), npix = size_t(d.w) * d.h;
+        const size_t m = d.fit_k.size();
         for (int ch = 0; ch < d.channels; ++ch)
             for (size_t n = 0; n < m; ++n) {
-                const double mod = lin.a[ch] * smp[size_t(ch) * npix + d.fit_k[n]] + lin.b0[ch]
+                const double mod = lin.a[ch] * smp[size_t(ch) * m + n] + lin.b0[ch]
                                    + lin.bx[ch] * d.fit_x[n] + lin.by[ch] * d.fit_y[n];
                 const double r  = d.fit_v[size_t(ch) * m + n] - mod;
                 const double iv = d.inv_var[size_t(d.fit_k[n]) * d.channels + ch];

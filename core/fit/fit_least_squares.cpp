@@ -20,7 +20,7 @@ std::vector<double> crop_residuals(const Model& model, const State& s, size_t i,
     if (!model.psf(p, s, i, coarse, 1))
         return r;
     std::vector<float> smp;
-    Model::sample(smp, p, model.crops()[i], s.cx[i], s.cy[i]);
+    Model::sample_fitted(smp, p, model.crops()[i], s.cx[i], s.cy[i]);
     Linear lin;
     Model::fit_linear(model.crops()[i], smp, lin, &r);
     return r;
@@ -98,6 +98,36 @@ std::vector<double> stacked_residuals(const Model& model, const State& s, bool c
     return r;
 }
 
+// The rows of the residuals parameter k moves: a crop's own parameter its crop's block,
+// a shared one all of them.
+std::pair<size_t, size_t> rows_moved(size_t k, const CropOf& crop_of, const std::vector<size_t>& offset)
+{
+    const size_t crop = crop_of(k);
+    return crop == kEvery ? std::pair<size_t, size_t>(0, offset.back())
+                          : std::pair<size_t, size_t>(offset[crop], offset[crop + 1]);
+}
+
+// J^T J (p x p), each product summed over the rows both columns move: two crops' own
+// parameters share none, so the eight-crop fit's 29 x 29 products skip seven eighths of
+// the rows (the skipped terms are zeros: the same sums).
+std::vector<double> normal_matrix(const std::vector<std::vector<double>>& J, const CropOf& crop_of,
+                                  const std::vector<size_t>& offset)
+{
+    const size_t p = J.size();
+    std::vector<double> jtj(p * p, 0.0);
+    for (size_t a = 0; a < p; ++a) {
+        const std::pair<size_t, size_t> ra = rows_moved(a, crop_of, offset);
+        for (size_t b = a; b < p; ++b) {
+            const std::pair<size_t, size_t> rb = rows_moved(b, crop_of, offset);
+            double acc = 0.0;
+            for (size_t i = std::max(ra.first, rb.first); i < std::min(ra.second, rb.second); ++i)
+                acc += J[a][i] * J[b][i];
+            jtj[a * p + b] = jtj[b * p + a] = acc;
+        }
+    }
+    return jtj;
+}
+
 }  // namespace
 
 // Levenberg-Marquardt on the weighted residuals [Marquardt, "An algorithm for least-squares
@@ -127,17 +157,12 @@ void levenberg_marquardt(const Model& model, State& s, const std::vector<double 
     std::vector<double> r0 = stacked_residuals(model, s, true, nthreads, offset);
     double c0 = chi2(r0), lambda = 1e-3;
     for (int it = 0; it < iterations; ++it) {
-        const size_t n = r0.size();
         const std::vector<std::vector<double>> J = jacobian(model, s, p, value, crop_of, 1e-4, r0, offset, true, nthreads);
-        std::vector<double> jtj(p * p, 0.0), jtr(p, 0.0);
+        const std::vector<double> jtj = normal_matrix(J, crop_of, offset);
+        std::vector<double> jtr(p, 0.0);
         for (size_t a = 0; a < p; ++a) {
-            for (size_t b = a; b < p; ++b) {
-                double acc = 0.0;
-                for (size_t i = 0; i < n; ++i)
-                    acc += J[a][i] * J[b][i];
-                jtj[a * p + b] = jtj[b * p + a] = acc;
-            }
-            for (size_t i = 0; i < n; ++i)
+            const std::pair<size_t, size_t> ra = rows_moved(a, crop_of, offset);
+            for (size_t i = ra.first; i < ra.second; ++i)
                 jtr[a] += J[a][i] * r0[i];
         }
         bool improved = false;
@@ -196,14 +221,7 @@ std::vector<double> uncertainties(const Model& model, const State& s, const std:
     for (double r : r0)
         chi2 += r * r;
     const double s2 = chi2 / std::max<double>(1.0, double(n) - double(p));
-    std::vector<double> a(p * p, 0.0);
-    for (size_t i = 0; i < p; ++i)
-        for (size_t j = 0; j < p; ++j) {
-            double acc = 0.0;
-            for (size_t m = 0; m < n; ++m)
-                acc += J[i][m] * J[j][m];
-            a[i * p + j] = acc;
-        }
+    const std::vector<double> a = normal_matrix(J, crop_of, offset);
     std::vector<double> sigma(p, 0.0);
     for (size_t c = 0; c < p; ++c) {  // column c of the inverse
         std::vector<double> m = a, b(p, 0.0), x(p, 0.0);

@@ -27,9 +27,11 @@ struct CropData {
     double coc0 = 0, cx0 = 0, cy0 = 0;
     int clipped = 0, nonfinite = 0;
     int others = 0;              // pixels of other highlights (a neighbour), left out
-    // The fitted pixels, compact (prepare_fit_arrays): index, plane coordinates, values
-    // channel-major; the weights and the plane's normal sums for a noise floor, cached.
+    // The fitted pixels, compact (prepare_fit_arrays): index, column and row, plane
+    // coordinates, values channel-major; the weights and the plane's normal sums for a
+    // noise floor, cached.
     std::vector<uint32_t> fit_k;
+    std::vector<int> fit_i, fit_j;
     std::vector<float> fit_x, fit_y, fit_v;
     mutable std::vector<float> fit_iv;
     mutable double base[3][9] = {};
@@ -83,14 +85,18 @@ public:
     /// The PSF sampled at crop d's pixels, centred at (cx, cy) (bilinear; zero outside the
     /// PSF), channel-major.
     static void sample(std::vector<float>& dst, const Psf& p, const CropData& d, double cx, double cy);
-    /// Solve the linear part for the sampled PSF `s` (inverse-variance weights, then the
+    /// The same at the crop's fitted pixels only, in their compact order (fit_k), channel-major.
+    static void sample_fitted(std::vector<float>& dst, const Psf& p, const CropData& d, double cx, double cy,
+                              int nthreads = 1);
+    /// Solve the linear part for the PSF `s` sampled at the fitted pixels (sample_fitted:
+    /// inverse-variance weights, then the
     /// Cauchy weights of their residuals) and return the Cauchy cost over the crop's pixels;
     /// `residuals` gets the weighted residuals sqrt(w) r, `outliers` the pixels past the
     /// scale; `floor_of_level` adds (floor_of_level x the crop's light level)^2 to each
-    /// variance.
+    /// variance. The sums run in fixed chunks of pixels, so any `nthreads` gives the same bits.
     static double fit_linear(const CropData& d, const std::vector<float>& s, Linear& lin,
                              std::vector<double>* residuals = nullptr, int* outliers = nullptr,
-                             double floor_of_level = 0.0);
+                             double floor_of_level = 0.0, int nthreads = 1);
     /// The cost of the crops in `which` (all when empty).
     double cost(const State& s, bool coarse, const std::vector<size_t>& which = {}) const;
     int evaluations() const { return m_evaluations; }

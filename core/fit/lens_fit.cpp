@@ -251,10 +251,11 @@ LensFitCropResult report_crop(const Fitter& f, const CropData& d, size_t i, doub
     Psf p;
     if (!f.model().psf(p, s, i, false, nthreads))
         return r;
-    std::vector<float> smp;
+    std::vector<float> smp, fitted;
     Model::sample(smp, p, d, s.cx[i], s.cy[i]);
+    Model::sample_fitted(fitted, p, d, s.cx[i], s.cy[i]);
     Linear lin;
-    Model::fit_linear(d, smp, lin, nullptr, &r.outlier_px);
+    Model::fit_linear(d, fitted, lin, nullptr, &r.outlier_px);
     r.outlier_px += d.others;
     const size_t n = size_t(d.w) * d.h;
     double peak = 0.0, se = 0.0;
