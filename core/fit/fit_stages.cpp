@@ -1,5 +1,5 @@
 // fit_stages.cpp — the lens fit's stages (fit/fit_stages.h): each crop's CoC and centre,
-// a stage's grid and polish and its price, the aperture's blade counts, a revisit; the
+// a stage's grid and polish and its price, the aperture's blade counts; the
 // minimiser is fit_model.cpp's (NLopt's BOBYQA).
 
 #include <bokeh/base.h>
@@ -156,20 +156,31 @@ bool Fitter::stage(const char* name, const std::vector<StageParam>& params)
     return keep;
 }
 
-// A kept parameter searched again from its grid with everything kept since (the
-// spherical aberration found before the axial colour took a rim's colour for its
-// profile); the better of the two states is kept.
-void Fitter::revisit(const char* name, const StageParam& p)
+bool Fitter::joint_stage(const char* name, const StageParam& added, const StageParam& again)
 {
     const double c0    = polish({}, 20);
     const State before = m_s;
-    best_start(p, before, 1e300, 6);
-    polish({}, 40);
+    double best        = 1e300;
+    State best_state   = before;
+    for (double v : added.starts) {
+        m_s             = before;
+        m_s.*added.field = v;
+        best_start(again, m_s, 1e300, 6);
+        polish({ added }, 40);
+        m_model.set_floor(0.0);
+        const double c = polish({ added }, 30);
+        if (c < best)
+            best = c, best_state = m_s;
+    }
     m_model.set_floor(0.0);
-    const double c1 = polish({}, 30);
-    m_log.push_back(format("{} again: cost {:.1f} -> {:.1f}: {}", name, c0, c1, c1 < c0 ? "taken" : "not taken"));
-    if (!(c1 < c0))
-        m_s = before;
+    const bool moved = std::abs(best_state.*added.field) > 1e-3 * (added.hi - added.lo);
+    const bool keep  = moved && c0 - best > price(1);
+    m_log.push_back(format("{}: cost {:.1f} -> {:.1f} (price of 1 parameter {:.1f}): {}", name, c0, best, price(1),
+                           keep ? "kept" : "not shown by the crops"));
+    m_s = keep ? best_state : before;
+    if (keep)
+        m_kept.push_back(added);
+    return keep;
 }
 
 // The crops' centres, free while a field effect is fitted (a cut pupil's light is

@@ -81,12 +81,12 @@ public:
     // falls by more than the parameters' price.
     bool stage(const char* name, const std::vector<StageParam>& params);
 
-    const std::vector<StageParam>& kept() const { return m_kept; }
+    // A stage for `added` with the kept parameter `again` searched from its grid at each
+    // of `added`'s starts (the CoCs refitted): for a parameter whose effect a kept one's
+    // other basin mimics (onion rings and a larger CoC with less spherical aberration).
+    bool joint_stage(const char* name, const StageParam& added, const StageParam& again);
 
-    // A kept parameter searched again from its grid with everything kept since (the
-    // spherical aberration found before the axial colour took a rim's colour for its
-    // profile); the better of the two states is kept.
-    void revisit(const char* name, const StageParam& p);
+    const std::vector<StageParam>& kept() const { return m_kept; }
 
     // The crops' centres, free while a field effect is fitted (a cut pupil's light is
     // not centred where a round one's is), within 4 px of the crop's first estimate.
