@@ -165,7 +165,9 @@ bool Fitter::joint_stage(const char* name, const StageParam& added, const StageP
     for (double v : added.starts) {
         m_s             = before;
         m_s.*added.field = v;
-        best_start(again, m_s, 1e300, 6);
+        m_model.set_floor(kSearchFloorOfLevel);
+        const double here = polish_cocs(6);  // the current value of `again` is a start too
+        best_start(again, m_s, here, 6);
         polish({ added }, 40);
         m_model.set_floor(0.0);
         const double c = polish({ added }, 30);
@@ -184,14 +186,17 @@ bool Fitter::joint_stage(const char* name, const StageParam& added, const StageP
 }
 
 // The crops' centres, free while a field effect is fitted (a cut pupil's light is
-// not centred where a round one's is), within 4 px of the crop's first estimate.
+// not centred where a round one's is), within 0.3 of its first CoC (at least 4 px) of the
+// crop's first estimate: at field height 0.92 a cat's eye of 0.6 put a crop's first
+// estimate 6.7 px from the light's centre, a fifth of its first CoC (tests/fit).
 void Fitter::add_centres(std::vector<Free>& f)
 {
     if (!m_free_centres)
         return;
     for (size_t i : m_active) {
-        f.push_back({ &m_s.cx[i], m_crops[i].cx0 - 4.0, m_crops[i].cx0 + 4.0, 0.3 });
-        f.push_back({ &m_s.cy[i], m_crops[i].cy0 - 4.0, m_crops[i].cy0 + 4.0, 0.3 });
+        const double reach = std::max(4.0, 0.3 * m_crops[i].coc0);
+        f.push_back({ &m_s.cx[i], m_crops[i].cx0 - reach, m_crops[i].cx0 + reach, 0.3 });
+        f.push_back({ &m_s.cy[i], m_crops[i].cy0 - reach, m_crops[i].cy0 + reach, 0.3 });
     }
 }
 

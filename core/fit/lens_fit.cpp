@@ -73,6 +73,7 @@ CropsShow what_crops_show(const std::vector<CropData>& data, const State& s)
 
 const StageParam kSphericalStage { "monochromatic", &State::mono, -8.0, 8.0, 0.2,
                                    { -1.5, -0.8, -0.4, -0.15, 0.15, 0.4, 0.8, 1.2, 2.0 } };
+const StageParam kCatsEyeStage { "catseye", &State::catseye, 0.0, 1.5, 0.1, { 0.3, 0.7, 1.1 } };
 const StageParam kOnionStage { "onion", &State::onion, 0.0, 1.0, 0.05, { 0.15, 0.4, 0.8 } };
 
 // The stages (2-7 of fit_stages.h's order) not kept yet.
@@ -109,10 +110,11 @@ void run_stages(Fitter& f, const LensFitOptions& opts, const CropsShow& show, Ke
         f.free_centres(true);
         const double a = std::max(4.0, show.mean_coc);
         if (!kept.cats)
-            kept.cats = f.stage("cat's eye", { { "catseye", &State::catseye, 0.0, 1.5, 0.1, { 0.3, 0.7, 1.1 } } });
+            kept.cats = f.stage("cat's eye", { kCatsEyeStage });
+        const StageParam astig { "astigmatism", &State::astig, -a, a, 0.05 * a, { -0.3 * a, 0.3 * a } };
         if (!kept.astig)
-            kept.astig = f.stage("astigmatism",
-                                 { { "astigmatism", &State::astig, -a, a, 0.05 * a, { -0.3 * a, 0.3 * a } } });
+            kept.astig = kept.cats ? f.joint_stage("astigmatism (with the cat's eye searched again)", astig, kCatsEyeStage)
+                                   : f.stage("astigmatism", { astig });
     }
 }
 
