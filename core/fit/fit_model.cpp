@@ -255,6 +255,17 @@ double Model::fit_linear(const CropData& d, const std::vector<float>& s, Linear&
     constexpr double inv_c2 = 1.0 / (kCauchyScale * kCauchyScale);
     const float* fx = d.fit_x.data();
     const float* fy = d.fit_y.data();
+    // One channel's compact arrays: the pixels' values, their inverse variances, the PSF.
+    struct Channel {
+        const float *v, *iv, *p;
+    };
+    const auto channel = [&](int ch) {
+        return Channel { &d.fit_v[size_t(ch) * m], &d.fit_iv[size_t(ch) * m], &s[size_t(ch) * m] };
+    };
+    // The residual of pixel n under a channel's linear part x (amplitude, plane).
+    const auto residual = [&](const Channel& c, const double* x, int64_t n) {
+        return double(c.v[n]) - (x[0] * c.p[n] + x[1] + x[2] * fx[n] + x[3] * fy[n]);
+    };
 
     // Pass 1: inverse-variance weights; per channel the PSF's sums (pp, p1, px, py, pv),
     // the plane's precomputed.
@@ -264,13 +275,11 @@ double Model::fit_linear(const CropData& d, const std::vector<float>& s, Linear&
         [&](int64_t b, int64_t e) {
             Pass1 part {};
             for (int ch = 0; ch < nch; ++ch) {
-                const float* v  = &d.fit_v[size_t(ch) * m];
-                const float* iv = &d.fit_iv[size_t(ch) * m];
-                const float* p  = &s[size_t(ch) * m];
+                const Channel c = channel(ch);
                 double pp = 0, p1 = 0, px = 0, py = 0, pv = 0;
                 for (int64_t n = b; n < e; ++n) {
-                    const double wp = double(iv[n]) * p[n];
-                    pp += wp * p[n], p1 += wp, px += wp * fx[n], py += wp * fy[n], pv += wp * v[n];
+                    const double wp = double(c.iv[n]) * c.p[n];
+                    pp += wp * c.p[n], p1 += wp, px += wp * fx[n], py += wp * fy[n], pv += wp * c.v[n];
                 }
                 double* o = &part[size_t(ch) * 5];
                 o[0] = pp, o[1] = p1, o[2] = px, o[3] = py, o[4] = pv;
@@ -292,15 +301,12 @@ double Model::fit_linear(const CropData& d, const std::vector<float>& s, Linear&
         [&](int64_t b, int64_t e) {
             Pass2 part {};
             for (int ch = 0; ch < nch; ++ch) {
-                const float* v  = &d.fit_v[size_t(ch) * m];
-                const float* iv = &d.fit_iv[size_t(ch) * m];
-                const float* p  = &s[size_t(ch) * m];
-                const double* xc = x[ch];
-                double q[14] = {};
+                const Channel c = channel(ch);
+                double q[14]    = {};
                 for (int64_t n = b; n < e; ++n) {
-                    const double xx = fx[n], yy = fy[n], vn = v[n], pn = p[n];
-                    const double r  = vn - (xc[0] * pn + xc[1] + xc[2] * xx + xc[3] * yy);
-                    const double w  = iv[n] / (1.0 + r * r * iv[n] * inv_c2);
+                    const double xx = fx[n], yy = fy[n], vn = c.v[n], pn = c.p[n];
+                    const double r  = residual(c, x[ch], n);
+                    const double w  = c.iv[n] / (1.0 + r * r * c.iv[n] * inv_c2);
                     const double wp = w * pn;
                     q[0] += wp * pn, q[1] += wp, q[2] += wp * xx, q[3] += wp * yy, q[4] += wp * vn;
                     q[5] += w, q[6] += w * xx, q[7] += w * yy, q[8] += w * xx * xx, q[9] += w * xx * yy;
@@ -328,11 +334,8 @@ double Model::fit_linear(const CropData& d, const std::vector<float>& s, Linear&
         [&](int64_t b, int64_t e) {
             Pass3 part {};
             for (int ch = 0; ch < nch; ++ch) {
-                const float* v  = &d.fit_v[size_t(ch) * m];
-                const float* iv = &d.fit_iv[size_t(ch) * m];
-                const float* p  = &s[size_t(ch) * m];
-                const double* xc = x[ch];
-                double* res = residuals ? &(*residuals)[first + size_t(ch) * m] : nullptr;
+                const Channel c = channel(ch);
+                double* res     = residuals ? &(*residuals)[first + size_t(ch) * m] : nullptr;
                 // sum ln(1 + u) as the ln of a running product, taken when the product
                 // passes 1e150: one logarithm for thousands of pixels, where a log1p a
                 // pixel was a sixth of an eight-crop fit (perf record, the bench's speed
@@ -341,13 +344,13 @@ double Model::fit_linear(const CropData& d, const std::vector<float>& s, Linear&
                 // costs of ~1e4 compared to 1e-3 by the minimiser.
                 double cost = 0.0, product = 1.0;
                 for (int64_t n = b; n < e; ++n) {
-                    const double r  = v[n] - (xc[0] * p[n] + xc[1] + xc[2] * fx[n] + xc[3] * fy[n]);
-                    const double u2 = r * r * iv[n] * inv_c2;
+                    const double r  = residual(c, x[ch], n);
+                    const double u2 = r * r * c.iv[n] * inv_c2;
                     product *= 1.0 + u2;
                     if (product > 1e150)
                         cost += std::log(product), product = 1.0;
                     if (res)
-                        res[n] = r * std::sqrt(iv[n] / (1.0 + u2));
+                        res[n] = r * std::sqrt(c.iv[n] / (1.0 + u2));
                     if (ch == 0 && u2 > 1.0)
                         part[1] += 1.0;
                 }
