@@ -20,7 +20,9 @@ std::vector<double> crop_residuals(const Model& model, const State& s, size_t i,
     if (!model.psf(p, s, i, coarse, 1))
         return r;
     std::vector<float> smp;
-    Model::sample_fitted(smp, p, model.crops()[i], s.cx[i], s.cy[i]);
+    double cx, cy;
+    model.place(p, s, i, cx, cy);
+    Model::sample_fitted(smp, p, model.crops()[i], cx, cy);
     Linear lin;
     Model::fit_linear(model.crops()[i], smp, lin, &r);
     return r;

@@ -178,6 +178,23 @@ void Model::sample_fitted(std::vector<float>& dst, const Psf& p, const CropData&
     });
 }
 
+void Model::place(const Psf& p, const State& s, size_t i, double& cx, double& cy) const
+{
+    cx = s.cx[i], cy = s.cy[i];
+    if (!m_centres_at_light)
+        return;
+    double sum = 0.0, sx = 0.0, sy = 0.0;
+    const double hw = 0.5 * (p.width - 1), hh = 0.5 * (p.height - 1);
+    for (int y = 0; y < p.height; ++y)
+        for (int x = 0; x < p.width; ++x) {
+            const float* t = &p.rgb[(size_t(y) * p.width + x) * 3];
+            const double l = luminance(t, 3);
+            sum += l, sx += l * (x - hw), sy += l * (y - hh);
+        }
+    if (sum > 0.0)
+        cx -= sx / sum, cy -= sy / sum;
+}
+
 void prepare_fit_arrays(CropData& d)
 {
     d.fit_k.clear(), d.fit_i.clear(), d.fit_j.clear(), d.fit_x.clear(), d.fit_y.clear();
@@ -382,7 +399,9 @@ double Model::cost(const State& s, bool coarse, const std::vector<size_t>& which
             return;
         }
         std::vector<float> smp;
-        sample_fitted(smp, p, m_crops[i], s.cx[i], s.cy[i], inner);
+        double cx, cy;
+        place(p, s, i, cx, cy);
+        sample_fitted(smp, p, m_crops[i], cx, cy, inner);
         Linear lin;
         costs[n] = fit_linear(m_crops[i], smp, lin, nullptr, nullptr, m_floor, inner);
     };

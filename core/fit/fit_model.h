@@ -105,6 +105,15 @@ public:
     /// optimum, where a noise-free crop's landscape is all outliers (graduated
     /// non-convexity, Blake & Zisserman 1987).
     void set_floor(double floor_of_level) { m_floor = floor_of_level; }
+    /// A crop's centre names where its light's centroid is, not where the chief ray lands.
+    /// Off the axis a cut pupil moves the light away from the chief ray's image: with the
+    /// centres free as chief-ray positions, the cat's eye and astigmatism traded against
+    /// them and a lens with both was not found (docs/methods/lens-fit.md); as centroids
+    /// they stay where the crops show the light while the field effects change.
+    void set_centres_at_light(bool on) { m_centres_at_light = on; }
+    /// Where crop i's PSF is centred for a State: its centre, less the PSF's light
+    /// centroid when the centres name the light.
+    void place(const Psf& p, const State& s, size_t i, double& cx, double& cy) const;
     const std::vector<CropData>& crops() const { return m_crops; }
 
 private:
@@ -113,6 +122,7 @@ private:
     int m_nthreads;
     mutable int m_evaluations = 0;
     double m_floor = 0.0;
+    bool m_centres_at_light = false;
 };
 
 /// The noise model sigma^2 = read2 + photon * max(value, 0), estimated from the crops'

@@ -186,17 +186,14 @@ bool Fitter::joint_stage(const char* name, const StageParam& added, const StageP
 }
 
 // The crops' centres, free while a field effect is fitted (a cut pupil's light is
-// not centred where a round one's is), within 0.3 of its first CoC (at least 4 px) of the
-// crop's first estimate: at field height 0.92 a cat's eye of 0.6 put a crop's first
-// estimate 6.7 px from the light's centre, a fifth of its first CoC (tests/fit).
+// not centred where a round one's is), within 4 px of the crop's first estimate.
 void Fitter::add_centres(std::vector<Free>& f)
 {
     if (!m_free_centres)
         return;
     for (size_t i : m_active) {
-        const double reach = std::max(4.0, 0.3 * m_crops[i].coc0);
-        f.push_back({ &m_s.cx[i], m_crops[i].cx0 - reach, m_crops[i].cx0 + reach, 0.3 });
-        f.push_back({ &m_s.cy[i], m_crops[i].cy0 - reach, m_crops[i].cy0 + reach, 0.3 });
+        f.push_back({ &m_s.cx[i], m_crops[i].cx0 - 4.0, m_crops[i].cx0 + 4.0, 0.3 });
+        f.push_back({ &m_s.cy[i], m_crops[i].cy0 - 4.0, m_crops[i].cy0 + 4.0, 0.3 });
     }
 }
 

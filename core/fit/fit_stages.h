@@ -89,11 +89,10 @@ public:
     const std::vector<StageParam>& kept() const { return m_kept; }
 
     // The crops' centres, free while a field effect is fitted (a cut pupil's light is
-    // not centred where a round one's is), within 0.3 of its first CoC (at least 4 px) of the
-    // crop's first estimate: at field height 0.92 a cat's eye of 0.6 put a crop's first
-    // estimate 6.7 px from the light's centre, a fifth of its first CoC (tests/fit).
+    // not centred where a round one's is), within 4 px of the crop's first estimate.
     void add_centres(std::vector<Free>& f);
     void free_centres(bool on) { m_free_centres = on; }
+    void centres_at_light(bool on) { m_model.set_centres_at_light(on); }
 
     // Only the CoCs free, a few evaluations a crop; the best cost.
     double polish_cocs(int evaluations_each);

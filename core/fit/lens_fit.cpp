@@ -108,6 +108,7 @@ void run_stages(Fitter& f, const LensFitOptions& opts, const CropsShow& show, Ke
     }
     if (opts.fit_field && show.off_axis()) {
         f.free_centres(true);
+        f.centres_at_light(true);
         const double a = std::max(4.0, show.mean_coc);
         if (!kept.cats)
             kept.cats = f.stage("cat's eye", { kCatsEyeStage });
@@ -275,8 +276,9 @@ LensFitCropResult report_crop(const Fitter& f, const CropData& d, size_t i, doub
     if (!f.model().psf(p, s, i, false, nthreads))
         return r;
     std::vector<float> smp, fitted;
-    Model::sample(smp, p, d, s.cx[i], s.cy[i]);
-    Model::sample_fitted(fitted, p, d, s.cx[i], s.cy[i]);
+    f.model().place(p, s, i, r.centre_x, r.centre_y);
+    Model::sample(smp, p, d, r.centre_x, r.centre_y);
+    Model::sample_fitted(fitted, p, d, r.centre_x, r.centre_y);
     Linear lin;
     Model::fit_linear(d, fitted, lin, nullptr, &r.outlier_px);
     r.outlier_px += d.others;

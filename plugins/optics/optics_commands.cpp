@@ -271,7 +271,7 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
         OptionSpec::Float("clip", 0.0, 0.0, 1e30, "pixels at or above this are clipped (0: found per crop)"),
         OptionSpec::Bool("front", false, "the highlights are in front of focus (their CoC negative)"),
         OptionSpec::Bool("field", false,
-                         "also fit cat's eye and astigmatism from crops off the axis (experimental: see the docs)"),
+                         "also fit cat's eye and astigmatism from crops off the axis (about twice the time)"),
     };
     for (OptionSpec& o : bokeh::camera_option_specs(false))
         fit_options.push_back(std::move(o));
