@@ -73,7 +73,7 @@ LensCharacter Model::lens_of(const State& s, bool coarse_spectrum) const
 {
     LensCharacter l = m_opts.camera;
     l.preset        = LensPreset::Uncorrected;
-    l.correction    = 0.0;
+    l.correction    = s.zonal;
     l.monochromatic = s.mono;
     l.chromatic     = s.chroma;
     l.spherochromatism = 0.0;

@@ -47,6 +47,7 @@ struct State {
     int blades = 0;                   // 0: round
     double rotation = 0, curvature = 0, hole = 0;
     double mono = 0, chroma = 0, onion = 0, catseye = 0, astig = 0;
+    double zonal = 0;                 // the zonal correction (LensCharacter::correction)
 };
 
 /// A crop's linear part, per channel: amplitude, the plane's level and slopes.

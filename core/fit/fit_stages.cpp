@@ -156,7 +156,7 @@ bool Fitter::stage(const char* name, const std::vector<StageParam>& params)
     return keep;
 }
 
-bool Fitter::joint_stage(const char* name, const StageParam& added, const StageParam& again)
+bool Fitter::joint_stage(const char* name, const StageParam& added, const StageParam& again, double min_gain)
 {
     const double c0    = polish({}, 20);
     const State before = m_s;
@@ -176,7 +176,7 @@ bool Fitter::joint_stage(const char* name, const StageParam& added, const StageP
     }
     m_model.set_floor(0.0);
     const bool moved = std::abs(best_state.*added.field) > 1e-3 * (added.hi - added.lo);
-    const bool keep  = moved && c0 - best > price(1);
+    const bool keep  = moved && c0 - best > std::max(price(1), min_gain * c0);
     m_log.push_back(format("{}: cost {:.1f} -> {:.1f} (price of 1 parameter {:.1f}): {}", name, c0, best, price(1),
                            keep ? "kept" : "not shown by the crops"));
     m_s = keep ? best_state : before;

@@ -84,7 +84,8 @@ public:
     // A stage for `added` with the kept parameter `again` searched from its grid at each
     // of `added`'s starts (the CoCs refitted): for a parameter whose effect a kept one's
     // other basin mimics (onion rings and a larger CoC with less spherical aberration).
-    bool joint_stage(const char* name, const StageParam& added, const StageParam& again);
+    // `min_gain`: kept only when the cost also falls by this fraction of itself.
+    bool joint_stage(const char* name, const StageParam& added, const StageParam& again, double min_gain = 0.0);
 
     const std::vector<StageParam>& kept() const { return m_kept; }
 
