@@ -535,7 +535,7 @@ PYBIND11_MODULE(openbokeh, m)
         },
         py::arg("crops"), py::kw_only(), py::arg("fstop") = 2.8, py::arg("focal") = 50.0,
         py::arg("sensor") = py::float_(36.0), py::arg("width") = 1920, py::arg("clip") = 0.0,
-        py::arg("front") = false, py::arg("field") = false, py::arg("threads") = 0,
+        py::arg("front") = false, py::arg("field") = true, py::arg("threads") = 0,
         "fit_lens(crops, *, fstop=2.8, focal=50, sensor=36, width=1920, clip=0, front=False, field=False) -> "
         "dict: the lens model fitted to crops of defocused highlights (a list of arrays or ImageBufs; an "
         "ImageBuf cut from a frame with its origin kept knows its field position), as bokehtool --fitlens. "

@@ -1,7 +1,7 @@
 // lens_fit.h — fit the lens model of optics.h to photographed bokeh: crops of defocused
 // highlights from a plate give back the aperture (round or bladed, rotation, curvature,
 // hole), the rim profile (spherical aberration's sign and amount), axial colour and onion
-// rings (and, asked for, the cat's eye and astigmatism across the field),
+// rings (and, from crops across the frame, the cat's eye and astigmatism),
 // as the LensCharacter that `--defocus` and `--bokeh` take (docs/methods/lens-fit.md has
 // the method, its checks and its limits).
 //
@@ -54,11 +54,11 @@ struct LensFitOptions {
     bool fit_spherical = true;   ///< the rim profile: monochromatic (signed)
     bool fit_colour   = true;    ///< axial colour: chromatic (signed)
     bool fit_onion    = true;    ///< onion-ring contrast
-    /// Cat's eye and astigmatism from crops off the axis (three crops centre to corner: a
-    /// cat's eye of 0.6 with an astigmatism of 6 px read 0.598 and 5.92 px; either alone,
-    /// and neither, read right). Off by default: it roughly doubles a fit of crops from
-    /// across the frame (docs/methods/lens-fit.md, "The stages").
-    bool fit_field    = false;
+    /// Cat's eye and astigmatism, when crops off the axis (0.3 half-diagonals or more) have
+    /// known field positions (three crops centre to corner: a cat's eye of 0.6 with an
+    /// astigmatism of 6 px read 0.598 and 5.92 px; either alone, and neither, read right).
+    /// It about doubles the time of a fit of crops from across the frame.
+    bool fit_field    = true;
     int max_evaluations = 4000;  ///< PSF evaluations over all stages
 };
 

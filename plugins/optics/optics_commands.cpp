@@ -270,8 +270,8 @@ BOKEH_PLUGIN_EXPORT void bokeh_plugin_register(bokeh::Registry& r)
                         "the plate's width in px (0: the crop's display window when it is the frame, else 1920)"),
         OptionSpec::Float("clip", 0.0, 0.0, 1e30, "pixels at or above this are clipped (0: found per crop)"),
         OptionSpec::Bool("front", false, "the highlights are in front of focus (their CoC negative)"),
-        OptionSpec::Bool("field", false,
-                         "also fit cat's eye and astigmatism from crops off the axis (about twice the time)"),
+        OptionSpec::Bool("field", true,
+                         "fit cat's eye and astigmatism from crops off the axis (0: skip it, about half the time)"),
     };
     for (OptionSpec& o : bokeh::camera_option_specs(false))
         fit_options.push_back(std::move(o));
