@@ -453,9 +453,7 @@ void residual_noise(const std::vector<CropData>& crops, const Model& model, cons
         if (!model.psf(p, s, i, true, 0))
             continue;
         std::vector<float> smp;
-        double cx, cy;
-        model.place(p, s, i, cx, cy);
-        Model::sample_fitted(smp, p, d, cx, cy);
+        model.sample_crop(smp, p, s, i);
         Linear lin;
         Model::fit_linear(d, smp, lin);
         const size_t m = d.fit_k.size();

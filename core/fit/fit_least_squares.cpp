@@ -20,9 +20,7 @@ std::vector<double> crop_residuals(const Model& model, const State& s, size_t i,
     if (!model.psf(p, s, i, coarse, 1))
         return r;
     std::vector<float> smp;
-    double cx, cy;
-    model.place(p, s, i, cx, cy);
-    Model::sample_fitted(smp, p, model.crops()[i], cx, cy);
+    model.sample_crop(smp, p, s, i);
     Linear lin;
     Model::fit_linear(model.crops()[i], smp, lin, &r);
     return r;

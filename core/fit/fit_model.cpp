@@ -195,6 +195,13 @@ void Model::place(const Psf& p, const State& s, size_t i, double& cx, double& cy
         cx -= sx / sum, cy -= sy / sum;
 }
 
+void Model::sample_crop(std::vector<float>& dst, const Psf& p, const State& s, size_t i, int nthreads) const
+{
+    double cx, cy;
+    place(p, s, i, cx, cy);
+    sample_fitted(dst, p, m_crops[i], cx, cy, nthreads);
+}
+
 void prepare_fit_arrays(CropData& d)
 {
     d.fit_k.clear(), d.fit_i.clear(), d.fit_j.clear(), d.fit_x.clear(), d.fit_y.clear();
@@ -399,9 +406,7 @@ double Model::cost(const State& s, bool coarse, const std::vector<size_t>& which
             return;
         }
         std::vector<float> smp;
-        double cx, cy;
-        place(p, s, i, cx, cy);
-        sample_fitted(smp, p, m_crops[i], cx, cy, inner);
+        sample_crop(smp, p, s, i, inner);
         Linear lin;
         costs[n] = fit_linear(m_crops[i], smp, lin, nullptr, nullptr, m_floor, inner);
     };

@@ -115,6 +115,9 @@ public:
     /// Where crop i's PSF is centred for a State: its centre, less the PSF's light
     /// centroid when the centres name the light.
     void place(const Psf& p, const State& s, size_t i, double& cx, double& cy) const;
+    /// Crop i's PSF `p` placed for `s` (place) and sampled at its fitted pixels
+    /// (sample_fitted): what fit_linear takes.
+    void sample_crop(std::vector<float>& dst, const Psf& p, const State& s, size_t i, int nthreads = 1) const;
     const std::vector<CropData>& crops() const { return m_crops; }
 
 private:

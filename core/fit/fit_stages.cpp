@@ -26,6 +26,14 @@ void wrap_rotation(State& s)
     s.rotation          = std::fmod(std::fmod(s.rotation, period) + period, period);
 }
 
+namespace {
+
+// A parameter at its "none" value (0) buys nothing, whatever the CoCs' polish gained
+// beside it: a stage counts only when it moved one off it.
+bool off_none(const StageParam& p, const State& s) { return std::abs(s.*p.field) > 1e-3 * (p.hi - p.lo); }
+
+}  // namespace
+
 Free Fitter::coc_free(size_t i, double step_of_coc)
 {
     const double c0 = m_crops[i].coc0;
@@ -141,11 +149,7 @@ bool Fitter::stage(const char* name, const std::vector<StageParam>& params)
     m_model.set_floor(0.0);
     const double c1   = polish(params, 30);
     const int k       = int(params.size());
-    // A parameter left at its "none" value (0) buys nothing, whatever the CoCs' polish
-    // gained beside it.
-    const bool moved = std::any_of(params.begin(), params.end(), [&](const StageParam& p) {
-        return std::abs(m_s.*p.field) > 1e-3 * (p.hi - p.lo);
-    });
+    const bool moved = std::any_of(params.begin(), params.end(), [&](const StageParam& p) { return off_none(p, m_s); });
     const bool keep   = moved && c0 - c1 > price(k);
     m_log.push_back(format("{}: cost {:.1f} -> {:.1f} (price of {} parameter{} {:.1f}): {}", name, c0, c1, k,
                            k == 1 ? "" : "s", price(k), keep ? "kept" : "not shown by the crops"));
@@ -175,8 +179,7 @@ bool Fitter::joint_stage(const char* name, const StageParam& added, const StageP
             best = c, best_state = m_s;
     }
     m_model.set_floor(0.0);
-    const bool moved = std::abs(best_state.*added.field) > 1e-3 * (added.hi - added.lo);
-    const bool keep  = moved && c0 - best > std::max(price(1), min_gain * c0);
+    const bool keep = off_none(added, best_state) && c0 - best > std::max(price(1), min_gain * c0);
     m_log.push_back(format("{}: cost {:.1f} -> {:.1f} (price of 1 parameter {:.1f}): {}", name, c0, best, price(1),
                            keep ? "kept" : "not shown by the crops"));
     m_s = keep ? best_state : before;
