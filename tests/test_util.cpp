@@ -174,12 +174,31 @@ bokeh::DefocusOptions plane_lens(bokeh::DefocusMethod m)
     return o;
 }
 
+bokeh::DefocusOptions scene_lens(const OIIO::ImageSpec& scene)
+{
+    bokeh::DefocusOptions o;
+    o.coc.mode                 = bokeh::DepthMode::Depth;
+    o.coc.lens.focus_distance  = scene.get_float_attribute("bokeh:focus_m", 6.0f);
+    o.coc.lens.fstop           = scene.get_float_attribute("bokeh:fstop", 2.0f);
+    o.coc.lens.focal_mm        = scene.get_float_attribute("bokeh:focal_mm", 50.0f);
+    o.coc.lens.sensor_width_mm = scene.get_float_attribute("bokeh:sensor_width_mm", 36.0f);
+    return o;
+}
+
 OIIO::ImageBuf run_defocus(const OIIO::ImageBuf& src, const bokeh::DefocusOptions& o, bokeh::DefocusReport* rep,
                            int nthreads)
 {
     OIIO::ImageBuf dst;
     EXPECT_TRUE(bokeh::defocus(dst, src, o, rep, nthreads)) << dst.geterror();
     return dst;
+}
+
+bokeh::ImageError error_of(const OIIO::ImageBuf& result, const OIIO::ImageBuf& reference)
+{
+    bokeh::ImageError e;
+    std::string err;
+    EXPECT_TRUE(bokeh::compare(e, result, reference, err)) << err;
+    return e;
 }
 
 OIIO::ImageBuf make_deep(int w, int h, const std::vector<DeepPixel>& px, bool half_colour, int x0, int y0)

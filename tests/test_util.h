@@ -3,6 +3,7 @@
 
 #include <bokeh/aperture.h>
 #include <bokeh/defocus.h>
+#include <bokeh/metrics.h>
 
 #include <array>
 #include <functional>
@@ -89,9 +90,17 @@ bokeh::DefocusOptions direct_options(bokeh::DefocusMethod m, bokeh::Border borde
 /// metres (the focus left to the test).
 bokeh::DefocusOptions plane_lens(bokeh::DefocusMethod m);
 
+/// Defocus options for a built-in scene (make_scene): depth in metres and the lens and
+/// focus its metadata records.
+bokeh::DefocusOptions scene_lens(const OIIO::ImageSpec& scene);
+
 /// The defocus of `src` with `o` (a test failure if it fails), its report in `rep`.
 OIIO::ImageBuf run_defocus(const OIIO::ImageBuf& src, const bokeh::DefocusOptions& o,
                            bokeh::DefocusReport* rep = nullptr, int nthreads = 0);
+
+/// bokeh::compare of `result` against `reference` over their data windows (a test
+/// failure if they cannot be compared).
+bokeh::ImageError error_of(const OIIO::ImageBuf& result, const OIIO::ImageBuf& reference);
 
 /// One sample of a deep R, G, B, A, Z, ZBack image (zb == z: a point).
 struct DeepSample {

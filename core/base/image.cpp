@@ -133,7 +133,7 @@ bool is_premultiplied(const OIIO::ImageSpec& spec)
     return spec.get_int_attribute("oiio:UnassociatedAlpha", 0) == 0;
 }
 
-bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, std::string& err, int nthreads)
+bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, std::string& err, int nthreads, OIIO::ROI region)
 {
     if (src.deep()) {
         err = "a deep image cannot be used here; flatten it first (--flatten)";
@@ -146,6 +146,16 @@ bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, std::string& err, 
         return false;
     }
     dst.roi = src.roi();
+    if (region.defined()) {
+        const OIIO::ROI inside = OIIO::roi_intersection(region, dst.roi);
+        if (inside.xbegin != region.xbegin || inside.xend != region.xend || inside.ybegin != region.ybegin
+            || inside.yend != region.yend || region.npixels() == 0) {
+            err = "the region to read is not within the image's data window";
+            return false;
+        }
+        dst.roi.xbegin = region.xbegin, dst.roi.xend = region.xend;
+        dst.roi.ybegin = region.ybegin, dst.roi.yend = region.yend;
+    }
     dst.roi.chbegin = 0;
     dst.roi.chend   = 4;
     dst.roi.zbegin  = 0;

@@ -12,6 +12,8 @@
 //   layer of their depth; sub-aperture views (core/defocus/defocus_views.cpp): the layers
 //   composited once a cell of the pupil; a deep image (core/defocus/defocus_deep.cpp): the layers
 //   come ready made from its samples.
+// * Past the memory budget, a flat frame is drawn in bands of output rows
+//   (core/defocus/defocus_bands.cpp), the same plan for every band.
 //
 // Known limits of the model: a flat image holds no background behind its foreground, so
 // the hidden background is extrapolated from its visible neighbours (deep images remove
@@ -39,17 +41,7 @@ namespace {
 
 using OIIO::Strutil::fmt::format;
 
-// The disocclusion fill the options ask for (defocus_fill.h), counted in the report.
-void fill_uncovered(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads)
-{
-    std::unique_ptr<BackgroundPlate> plate;
-    if (o.fill != DisocclusionFill::Foreground)
-        plate = std::make_unique<BackgroundPlate>(f, nthreads);
-    const PlateFill how = o.fill == DisocclusionFill::Mirror ? PlateFill::Mirror : PlateFill::Smooth;
-    const FillCount n      = fill_disocclusions(out, f, rep.max_coc_px, plate.get(), how, nthreads);
-    rep.fill_continued_px  = n.continued;
-    rep.fill_foreground_px = n.foreground;
-}
+constexpr const char* kDeepResultNeedsDeep = "a deep result needs a deep image (--deepen makes one)";
 
 std::string fill_summary(const DefocusReport& rep)
 {
@@ -60,6 +52,31 @@ std::string fill_summary(const DefocusReport& rep)
 }
 
 }  // namespace
+
+void detail::fill_uncovered(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads)
+{
+    std::unique_ptr<BackgroundPlate> plate;
+    if (o.fill != DisocclusionFill::Foreground)
+        plate = std::make_unique<BackgroundPlate>(f, nthreads);
+    const PlateFill how = o.fill == DisocclusionFill::Mirror ? PlateFill::Mirror : PlateFill::Smooth;
+    const FillCount n      = fill_disocclusions(out, f, rep.max_coc_px, plate.get(), how, nthreads);
+    rep.fill_continued_px += n.continued;
+    rep.fill_foreground_px += n.foreground;
+}
+
+void detail::summarise_defocus(DefocusReport& rep, int width, int height)
+{
+    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}{}{}", method_name(rep.method),
+                         rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), width, height,
+                         rep.bands > 1 ? format(", in {} bands of {} rows (memory budget)", rep.bands,
+                                                rep.band_rows)
+                                       : std::string(),
+                         fill_summary(rep),
+                         rep.nonfinite.total() ? format(", {} non-finite values replaced",
+                                                        rep.nonfinite.total())
+                                               : std::string(),
+                         sprite_summary(rep));
+}
 
 bool check_defocus_options(const DefocusOptions& o, std::string& err)
 {
@@ -151,26 +168,31 @@ const char* method_name(DefocusMethod m)
 
 namespace {
 
-// The result plane (RGBA over f.out) into dst: R, G, B(, A) as float, src's metadata.
 void release_pixels(Frame& f)
 {
     for (std::vector<float>* v : { &f.img.rgba, &f.img.z, &f.coc, &f.linear_rgba })
         std::vector<float>().swap(*v);
 }
 
-void write_result(OIIO::ImageBuf& dst, const OIIO::ImageSpec& src_spec, const Frame& f, const Plane& out, int nthreads)
+}  // namespace
+
+void detail::begin_result(OIIO::ImageBuf& dst, const OIIO::ImageSpec& src_spec, const CocOptions& lens,
+                          const OIIO::ROI& region, int up, bool alpha)
 {
-    const int nc = f.img.has_alpha ? 4 : 3;
-    const OIIO::ROI region = scaled_roi(f.out, f.up);
-    OIIO::ImageSpec spec   = derived_spec(src_spec, nc == 4 ? std::vector<std::string>{ "R", "G", "B", "A" }
-                                                            : std::vector<std::string>{ "R", "G", "B" },
-                                          region);
-    scale_display_window(spec, src_spec, f.up);
-    record_lens(spec, f.lens);
+    OIIO::ImageSpec spec = derived_spec(src_spec, alpha ? std::vector<std::string>{ "R", "G", "B", "A" }
+                                                        : std::vector<std::string>{ "R", "G", "B" },
+                                        region);
+    scale_display_window(spec, src_spec, up);
+    record_lens(spec, lens);
     reset_uninitialised(dst, spec);
-    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t y0, int64_t y1) {
-        for (int y = int(y0); y < int(y1); ++y) {
-            float* d       = static_cast<float*>(dst.pixeladdr(region.xbegin, region.ybegin + y));
+}
+
+void detail::write_result_rows(OIIO::ImageBuf& dst, const Plane& out, int x0, int y0, int nthreads)
+{
+    const int nc = dst.nchannels();
+    parallel_for_chunks(0, out.h, 16, nthreads, [&](int64_t r0, int64_t r1) {
+        for (int y = int(r0); y < int(r1); ++y) {
+            float* d       = static_cast<float*>(dst.pixeladdr(x0, y0 + y));
             const float* s = out.row(y);
             for (int x = 0; x < out.w; ++x)
                 for (int c = 0; c < nc; ++c)
@@ -178,8 +200,6 @@ void write_result(OIIO::ImageBuf& dst, const OIIO::ImageSpec& src_spec, const Fr
         }
     });
 }
-
-}  // namespace
 
 bool detail::within_defocus_memory(const DefocusOptions& o, double bytes, const std::string& what,
                                    const std::string& remedy, std::string& err)
@@ -214,10 +234,23 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         const double up2     = double(opts.supersample) * double(opts.supersample);
         const double bytes   = double(data.npixels()) * (26.0 + (opts.iris != 0.0f ? 16.0 : 0.0))
                              + double(out.npixels()) * up2 * 32.0;
-        if (!within_defocus_memory(opts, bytes, format("the defocus of {}x{} pixels into {}x{}", data.width(),
-                                                       data.height(), out.width() * opts.supersample,
-                                                       out.height() * opts.supersample),
-                                   "", err)) {
+        if (!within_defocus_memory(opts, bytes, "", "", err)) {
+            // Over the budget at once: in bands of output rows when the options allow it.
+            std::string why;
+            if (!check_defocus_options(opts, err)) {
+                dst.errorfmt("defocus: {}", err);
+                return false;
+            }
+            if (opts.deep_output) {
+                dst.errorfmt("defocus: {}", kDeepResultNeedsDeep);
+                return false;
+            }
+            if (defocus_bands_allowed(opts, why))
+                return defocus_in_bands(dst, src, opts, report, nthreads);
+            within_defocus_memory(opts, bytes, format("the defocus of {}x{} pixels into {}x{}", data.width(),
+                                                      data.height(), out.width() * opts.supersample,
+                                                      out.height() * opts.supersample),
+                                  why, err);
             dst.errorfmt("defocus: {}", err);
             return false;
         }
@@ -227,7 +260,7 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         return false;
     }
     if (opts.deep_output) {
-        dst.errorfmt("defocus: a deep result needs a deep image (--deepen makes one)");
+        dst.errorfmt("defocus: {}", kDeepResultNeedsDeep);
         return false;
     }
     // The frame holds the pixels from here on: the source's spec is all the result needs.
@@ -264,15 +297,10 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
     // The frame's pixels are done with: given back before the result is allocated, the
     // peak is the larger of the two, not their sum.
     release_pixels(f);
-    rep.summary = format("{}: CoC {:.1f} .. {:.1f} px, {} layers, output {}x{}{}{}{}", method_name(rep.method),
-                         rep.min_coc_px, rep.max_coc_px, rep.layer_coc_px.size(), f.out.width() * f.up,
-                         f.out.height() * f.up, fill_summary(rep),
-                         rep.nonfinite.total() ? format(", {} non-finite values replaced",
-                                                        rep.nonfinite.total())
-                                               : std::string(),
-                         sprite_summary(rep));
-
-    write_result(dst, src_spec, f, out, nthreads);
+    summarise_defocus(rep, out.w, out.h);
+    const OIIO::ROI region = scaled_roi(f.out, f.up);
+    begin_result(dst, src_spec, f.lens, region, f.up, f.img.has_alpha);
+    write_result_rows(dst, out, region.xbegin, region.ybegin, nthreads);
     if (report)
         *report = std::move(rep);
     return true;
@@ -302,7 +330,9 @@ bool defocus_scatter_reference(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, c
         return false;
     }
     fill_uncovered(out, f, o, rep, nthreads);  // as the layered method ends
-    write_result(dst, src.spec(), f, out, nthreads);
+    const OIIO::ROI region = scaled_roi(f.out, f.up);
+    begin_result(dst, src.spec(), f.lens, region, f.up, f.img.has_alpha);
+    write_result_rows(dst, out, region.xbegin, region.ybegin, nthreads);
     return true;
 }
 

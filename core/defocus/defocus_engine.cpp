@@ -50,7 +50,7 @@ int reach_y(float coc_px, float aspect) { return int(std::ceil(0.5f * std::abs(c
 // Layers are computed in tiles of kTile x kTile reduced pixels, only where the layer has
 // pixels within reach: sparse layers (a few lights, a thin band of floor) cost what they
 // hold, not their bounding box. Tiles are independent, so they run in parallel.
-constexpr int kTile = 64;
+constexpr int kTile = kLayerTilePx;
 // A layer blurred with the lens's PSF goes by FFT, whose every call transforms its four
 // kernels and pays a margin of the kernel's reach: its tiles are 4 times wider.
 constexpr int kLensTile = 256;
@@ -75,9 +75,13 @@ std::vector<std::vector<uint8_t>> layer_tiles(const Frame& f, const Membership& 
         rows[k] = (f.out.height() + size[k] - 1) / size[k];
         tiles[k].assign(size_t(cols[k]) * size_t(rows[k]), 0);
     }
+    // A pixel past the output (a band's reach: defocus_bands.cpp) marks the nearest tile:
+    // its neighbours within reach then hold all it reaches, and more.
     auto mark = [&](size_t k, int x0, int x1, int y) {  // pixels [x0, x1] of row y
-        const int t = size[k], ty = (y - f.out.ybegin) / t;
-        for (int tx = (x0 - f.out.xbegin) / t; tx <= (x1 - f.out.xbegin) / t; ++tx)
+        const int t = size[k], ty = std::clamp(floor_div(y - f.out.ybegin, t), 0, rows[k] - 1);
+        const int tx0 = std::clamp(floor_div(x0 - f.out.xbegin, t), 0, cols[k] - 1);
+        const int tx1 = std::clamp(floor_div(x1 - f.out.xbegin, t), 0, cols[k] - 1);
+        for (int tx = tx0; tx <= tx1; ++tx)
             tiles[k][size_t(ty) * size_t(cols[k]) + size_t(tx)] = 1;
     };
     for (int y = f.data.ybegin; y < f.data.yend && f.deep(); ++y)

@@ -143,12 +143,23 @@ bool within_defocus_memory(const DefocusOptions& o, double bytes, const std::str
 /// the (2r + 1)^2 square about it, cut by the frame's edge.
 void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads);
 
+/// A band of a flat frame's output drawn on its own under a memory budget
+/// (core/defocus/defocus_bands.cpp): the source pixels it reads (its output rows and the
+/// layers' reach about them), its output rows, the source rows whose non-finite values it
+/// counts (each row counted by one band) and the whole frame's CoC range.
+struct FrameBand {
+    OIIO::ROI read, out;
+    int counted_ybegin = 0, counted_yend = 0;
+    float min_coc_px = 0.0f, max_coc_px = 0.0f;
+};
+
 /// A flat image made ready for a method (core/defocus/defocus_prepare.cpp): the options checked,
 /// the pixels premultiplied and scrubbed (counted in `rep`), each pixel's signed CoC, the
 /// depth dilation, bloom, the sprites taken out, iris space, the output region; the
-/// report's CoC range. False + `err`.
+/// report's CoC range. With `band`, only its part of the frame, its output rows and the
+/// frame's CoC range. False + `err`.
 bool prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport& rep,
-                   int nthreads, std::string& err);
+                   int nthreads, std::string& err, const FrameBand* band = nullptr);
 
 /// Iris-space colour (4 or more channels, premultiplied) back to linear, in place (no-op
 /// when iris mode is off).
@@ -200,6 +211,13 @@ int reduction_for(float c, float q, int max_reduction);
 /// at full resolution; each pixel shared between the two around its CoC.
 Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step, int nthreads);
 
+/// The Reference's rungs for CoCs `cocs` spanning [lo, hi]: each CoC when there are few,
+/// else the points of a grid `step` apart around them.
+std::vector<float> reference_rungs(const std::vector<float>& cocs, float lo, float hi, float step);
+
+/// Every pixel of `f` shared between the rungs of `plan` (share_between), with its reductions.
+Membership layer_membership(const Frame& f, LayerPlan plan, int nthreads);
+
 /// The Reference method (core/defocus/defocus_reference.cpp): one layer a distinct CoC over the
 /// report's CoC range, composited into `out`; the layers into `rep`. False + `err` when
 /// the range holds more than 65535 steps.
@@ -230,6 +248,11 @@ OIIO::ROI defocus_output_bound(const OIIO::ImageSpec& spec, const OIIO::ROI& dat
 /// the spill of a reduced buffer), within the display window joined to the data window.
 OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& data, float extreme_px,
                                 const DefocusOptions& o);
+
+/// The side of a layer's tile in its reduced pixels (core/defocus/defocus_engine.cpp): a
+/// layer reduced by s is computed in tiles of kLayerTilePx * s frame pixels from the
+/// output's origin.
+constexpr int kLayerTilePx = 64;
 
 /// Blur every layer of `m` with the aperture at its CoC (with lens character, the lens's
 /// PSF at focus: lens_layer_kernels) and composite them, front over back, into `out`
@@ -324,6 +347,30 @@ void draw_layer_sprites(Plane& target, const Frame& f, const Membership& m, int 
 /// part (", N sprites, CoC a .. b px, t s"; empty when off).
 void report_sprites(DefocusReport& rep, const SpriteSet* set);
 std::string sprite_summary(const DefocusReport& rep);
+
+/// The disocclusion fill the options ask for (core/defocus/defocus_fill.h) over `out` (RGBA
+/// over f.out), its counts added to `rep`.
+void fill_uncovered(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads);
+
+/// The report's one-line summary, for an output of width x height pixels.
+void summarise_defocus(DefocusReport& rep, int width, int height);
+
+/// `dst` made the result of a flat defocus of an image of spec `src_spec`: float R, G, B
+/// (and A with `alpha`) over `region` (the output region times `up`), the display window
+/// times `up`, the lens recorded; its pixels not yet written.
+void begin_result(OIIO::ImageBuf& dst, const OIIO::ImageSpec& src_spec, const CocOptions& lens,
+                  const OIIO::ROI& region, int up, bool alpha);
+
+/// Rows of `out` (RGBA) into `dst` (begin_result's), its top-left pixel at (x0, y0).
+void write_result_rows(OIIO::ImageBuf& dst, const Plane& out, int x0, int y0, int nthreads);
+
+/// Whether a flat defocus with options `o` can be drawn in bands; else `why` not.
+bool defocus_bands_allowed(const DefocusOptions& o, std::string& why);
+
+/// A flat defocus drawn in bands of output rows, each band's working planes within the
+/// options' memory budget (core/defocus/defocus_bands.cpp). False + the error on `dst`.
+bool defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOptions& o,
+                      DefocusReport* report, int nthreads);
 
 /// The brute-force reference (defocus_scatter_reference) over a prepared flat frame: grows
 /// f.out by the PSFs' reach and fills `out` (RGBA over f.out). False + `err`.

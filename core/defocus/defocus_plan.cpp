@@ -133,8 +133,20 @@ LayerSettings settings_for_budget(float budget_db)
 // all at full resolution.
 Membership detail::one_layer_per_coc(const Frame& f, float lo, float hi, float step, int nthreads)
 {
-    Membership m = share_between_rungs(f, exact_rungs(f.coc, lo, hi, step), nthreads);
+    Membership m = share_between_rungs(f, reference_rungs(f.coc, lo, hi, step), nthreads);
     m.reduction.assign(m.coc_px.size(), 1);
+    return m;
+}
+
+std::vector<float> detail::reference_rungs(const std::vector<float>& cocs, float lo, float hi, float step)
+{
+    return exact_rungs(cocs, lo, hi, step);
+}
+
+Membership detail::layer_membership(const Frame& f, LayerPlan plan, int nthreads)
+{
+    Membership m = share_between_rungs(f, std::move(plan.coc_px), nthreads);
+    m.reduction  = std::move(plan.reduction);
     return m;
 }
 
@@ -145,9 +157,7 @@ Membership detail::layer_plan(const Frame& f, const DefocusOptions& o, float lo,
     LayerPlan plan = choose_layer_plan(f, o, lo, hi, nthreads, weighed);
     if (considered)
         *considered = std::move(weighed);
-    Membership m = share_between_rungs(f, std::move(plan.coc_px), nthreads);
-    m.reduction  = std::move(plan.reduction);
-    return m;
+    return layer_membership(f, std::move(plan), nthreads);
 }
 
 std::vector<float> detail::coc_ladder(float lo, float hi, double ratio)

@@ -111,7 +111,7 @@ void detail::dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nt
 
 // Everything but the method: the scrubbed, premultiplied pixels, their CoC, the regions.
 bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOptions& o, DefocusReport& rep,
-                           int nthreads, std::string& err)
+                           int nthreads, std::string& err, const FrameBand* band)
 {
     if (!check_defocus_options(o, err))
         return false;
@@ -120,25 +120,31 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
         return false;
     }
     CocOptions coc = o.coc;
-    if (!resolve_coc_options(coc, src, err) || !to_work_image(f.img, src, err, nthreads))
+    if (!resolve_coc_options(coc, src, err)
+        || !to_work_image(f.img, src, err, nthreads, band ? band->read : OIIO::ROI()))
         return false;
     f.lens = coc;
     // The bad-value policy (docs/robustness.md): colour -> 0, depth -> far ("no depth"), counted.
     using Counts  = std::array<int64_t, 2>;
     const int64_t npx = int64_t(f.img.z.size());
+    // A band counts its own rows only (its reach about them is another band's).
+    const int64_t row_px        = int64_t(f.img.width());
+    const int64_t counted_begin = band ? (band->counted_ybegin - f.img.roi.ybegin) * row_px : 0;
+    const int64_t counted_end   = band ? (band->counted_yend - f.img.roi.ybegin) * row_px : npx;
     const Counts bad  = parallel_reduce_chunks(
         0, npx, 1 << 14, nthreads, Counts{ 0, 0 },
         [&](int64_t b, int64_t e) {
             Counts n{ 0, 0 };
             for (int64_t i = b; i < e; ++i) {
-                float* px = f.img.rgba.data() + size_t(i) * 4;
+                const bool counted = i >= counted_begin && i < counted_end;
+                float* px          = f.img.rgba.data() + size_t(i) * 4;
                 for (int c = 0; c < 4; ++c)
                     if (!std::isfinite(px[c])) {
                         px[c] = 0.0f;
-                        ++n[0];
+                        n[0] += counted;
                     }
                 const float z = f.img.z[size_t(i)];
-                n[1] += std::isnan(z) || z == -std::numeric_limits<float>::infinity();
+                n[1] += counted && (std::isnan(z) || z == -std::numeric_limits<float>::infinity());
             }
             return n;
         },
@@ -177,6 +183,12 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
     if (o.iris != 0.0f && !to_iris_space(f, o.iris, nthreads, err))
         return false;
 
+    if (band) {  // the frame's range and the band's rows (bands refuse sprites)
+        rep.min_coc_px = band->min_coc_px;
+        rep.max_coc_px = band->max_coc_px;
+        f.out          = band->out;
+        return true;
+    }
     const auto [lo, hi] = std::minmax_element(f.coc.begin(), f.coc.end());
     rep.min_coc_px      = f.coc.empty() ? 0.0f : *lo;
     rep.max_coc_px      = f.coc.empty() ? 0.0f : *hi;

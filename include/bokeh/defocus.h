@@ -180,6 +180,9 @@ struct DefocusReport {
     /// the continued background, and with the foreground's own colour (nothing behind it
     /// within reach, or fill Foreground).
     int64_t fill_continued_px = 0, fill_foreground_px = 0;
+    /// A flat frame over the memory budget is drawn in bands of output rows: how many, and
+    /// the rows of each (1 and 0: at once).
+    int bands = 1, band_rows = 0;
     /// Lens character: how many sprites were scattered, their CoC range, the seconds their
     /// selection, PSFs and scatter took, and the distinct PSFs they use (built, or taken from
     /// the process's PSF cache: shared_psf_cache, optics.h).

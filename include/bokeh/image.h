@@ -60,11 +60,13 @@ struct WorkImage {
     const float* rgba_at(int x, int y) const { return &rgba[index(x, y) * 4]; }
 };
 
-/// Fill `dst` from the data window of `src` (flat images only). Missing G/B copy R (a
-/// grey image), missing alpha is 1, colour is premultiplied if `src` is not. Returns
-/// false, with `err` set, when `src` is deep or has no colour channel (`dst` is no
-/// ImageBuf to hold an error).
-bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, std::string& err, int nthreads = 0);
+/// Fill `dst` from the data window of `src` (flat images only), or from the part of it
+/// `region` names (x and y; default: all of it). Missing G/B copy R (a grey image),
+/// missing alpha is 1, colour is premultiplied if `src` is not. Returns false, with `err`
+/// set, when `src` is deep or has no colour channel, or `region` is not within the data
+/// window (`dst` is no ImageBuf to hold an error).
+bool to_work_image(WorkImage& dst, const OIIO::ImageBuf& src, std::string& err, int nthreads = 0,
+                   OIIO::ROI region = {});
 
 /// Write a WorkImage back into `dst`'s R, G, B, A (and Z when both have one), converting
 /// to unpremultiplied colour if `dst`'s spec says it stores that. `dst` must already

@@ -34,11 +34,7 @@ Shot shot(const std::string& name)
     so.width  = 480;
     so.height = 270;
     EXPECT_TRUE(make_scene(s.image, name, so)) << s.image.geterror();
-    const OIIO::ImageSpec& spec     = s.image.spec();
-    s.o.coc.lens.focus_distance     = spec.get_float_attribute("bokeh:focus_m", 6.0f);
-    s.o.coc.lens.fstop              = spec.get_float_attribute("bokeh:fstop", 2.0f);
-    s.o.coc.lens.focal_mm           = spec.get_float_attribute("bokeh:focal_mm", 50.0f);
-    s.o.coc.lens.sensor_width_mm    = spec.get_float_attribute("bokeh:sensor_width_mm", 36.0f);
+    s.o = bokeh_test::scene_lens(s.image.spec());
     return s;
 }
 

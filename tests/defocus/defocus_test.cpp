@@ -38,6 +38,8 @@ using bokeh_test::plane_lens;
 using bokeh_test::make_image;
 using bokeh_test::Px;
 using bokeh_test::run_defocus;
+using bokeh_test::error_of;
+using bokeh_test::scene_lens;
 
 namespace {
 
@@ -68,14 +70,6 @@ bool all_finite(const OIIO::ImageBuf& img)
                 if (!std::isfinite(at(img, x, y, c)))
                     return false;
     return true;
-}
-
-ImageError error_of(const OIIO::ImageBuf& result, const OIIO::ImageBuf& reference)
-{
-    ImageError e;
-    std::string err;
-    EXPECT_TRUE(compare(e, result, reference, err)) << err;
-    return e;
 }
 
 const DefocusMethod kMethods[] = { DefocusMethod::Layers, DefocusMethod::Reference, DefocusMethod::Gather };
@@ -308,14 +302,8 @@ TEST(DefocusAccuracy, LayersMatchReferenceOnLights)
     so.height = 270;
     OIIO::ImageBuf scene;
     ASSERT_TRUE(make_scene(scene, "lights", so)) << scene.geterror();
-    const OIIO::ImageSpec& s = scene.spec();
-    DefocusOptions o;
-    o.coc.mode                 = DepthMode::Depth;
-    o.coc.lens.focus_distance  = s.get_float_attribute("bokeh:focus_m", 6.0f);
-    o.coc.lens.fstop           = s.get_float_attribute("bokeh:fstop", 2.0f);
-    o.coc.lens.focal_mm        = s.get_float_attribute("bokeh:focal_mm", 50.0f);
-    o.coc.lens.sensor_width_mm = s.get_float_attribute("bokeh:sensor_width_mm", 36.0f);
-    o.method                   = DefocusMethod::Reference;
+    DefocusOptions o = scene_lens(scene.spec());
+    o.method         = DefocusMethod::Reference;
     DefocusReport rref, rlay;
     const OIIO::ImageBuf ref = run_defocus(scene, o, &rref);
     o.method                 = DefocusMethod::Layers;

@@ -1,0 +1,141 @@
+// A flat defocus over its memory budget drawn in bands of output rows
+// (core/defocus/defocus_bands.cpp), against the same defocus drawn at once: the same bits
+// where no background is continued, the continuation close, the counts the same, and what
+// cannot be banded refused with the reason.
+
+#include "test_util.h"
+
+#include <bokeh/defocus.h>
+#include <bokeh/scene.h>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+using namespace bokeh;
+using namespace bokeh_test;
+
+namespace {
+
+OIIO::ImageBuf lights_scene(int w, int h)
+{
+    SceneOptions so;
+    so.width  = w;
+    so.height = h;
+    so.aa     = 1;
+    OIIO::ImageBuf s;
+    EXPECT_TRUE(make_scene(s, "lights", so)) << s.geterror();
+    return s;
+}
+
+// The scene's own lens and focus, and a budget that holds the result and a band of about
+// a third of the frame's rows (the frame at once needs 58 bytes a pixel: 26 a source
+// pixel, 32 an output pixel; the result alone 16).
+DefocusOptions banded_options(const OIIO::ImageBuf& s)
+{
+    DefocusOptions o      = scene_lens(s.spec());
+    o.memory_budget_bytes = int64_t(s.spec().width) * s.spec().height * 40;
+    return o;
+}
+
+}  // namespace
+
+TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
+{
+    OIIO::ImageBuf s = lights_scene(480, 270);
+    // Non-finite values in a band's reach and in its own rows: each counted once.
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    for (int y : { 5, 131, 140, 266 }) {
+        s.setpixel(100, y, std::vector<float>{ nan, 0.5f, 0.5f, 1.0f, 8.0f }.data());
+        s.setpixel(300, y, std::vector<float>{ 0.5f, 0.5f, 0.5f, 1.0f, nan }.data());
+    }
+    struct Case {
+        const char* name;
+        DefocusMethod method;
+        int supersample, dilate_px;
+    };
+    for (const Case& c : { Case{ "layers", DefocusMethod::Layers, 1, 0 },
+                           Case{ "layers, supersample 2, dilation 2", DefocusMethod::Layers, 2, 2 },
+                           Case{ "reference", DefocusMethod::Reference, 1, 0 } }) {
+        SCOPED_TRACE(c.name);
+        DefocusOptions o   = banded_options(s);
+        o.fill             = DisocclusionFill::Foreground;
+        o.method           = c.method;
+        o.supersample      = c.supersample;
+        o.depth_dilate_px  = c.dilate_px;
+        if (c.supersample == 2)  // the result is 4 times larger (64 bytes a source pixel)
+            o.memory_budget_bytes = int64_t(480) * 270 * 120;
+        DefocusReport banded, whole;
+        const OIIO::ImageBuf b = run_defocus(s, o, &banded);
+        o.memory_budget_bytes  = 0;
+        const OIIO::ImageBuf a = run_defocus(s, o, &whole);
+        std::printf("[ figures  ] %s: %d bands of %d rows, %zu layers\n", c.name, banded.bands, banded.band_rows,
+                    banded.layer_coc_px.size());
+        EXPECT_GE(banded.bands, 2) << banded.summary;
+        EXPECT_EQ(whole.bands, 1);
+        EXPECT_EQ(a.roi(), b.roi());
+        EXPECT_EQ(error_of(b, a).max_abs, 0.0) << "the same bits";
+        EXPECT_EQ(banded.layer_coc_px, whole.layer_coc_px);
+        EXPECT_EQ(banded.layer_reduction, whole.layer_reduction);
+        EXPECT_EQ(banded.nonfinite.colour, 4);
+        EXPECT_EQ(banded.nonfinite.depth, 4);
+        EXPECT_EQ(banded.fill_foreground_px, whole.fill_foreground_px);
+        EXPECT_NE(banded.summary.find(" bands of "), std::string::npos) << banded.summary;
+    }
+}
+
+TEST(DefocusBands, TheContinuedBackgroundStaysCloseToTheFrameAtOnce)
+{
+    // Each band's plate is built from its own rows, so a continuation may differ from the
+    // frame's where a coarse cell reaches past them.
+    const OIIO::ImageBuf s = lights_scene(480, 270);
+    for (DisocclusionFill fill : { DisocclusionFill::Smooth, DisocclusionFill::Mirror }) {
+        DefocusOptions o = banded_options(s);
+        o.fill           = fill;
+        DefocusReport banded, whole;
+        const OIIO::ImageBuf b = run_defocus(s, o, &banded);
+        o.memory_budget_bytes  = 0;
+        const OIIO::ImageBuf a = run_defocus(s, o, &whole);
+        const ImageError e     = error_of(b, a);
+        std::printf("[ figures  ] fill %d: %d bands, banded against at once %.1f dB, max %.3g; continued %lld "
+                    "against %lld px\n",
+                    int(fill), banded.bands, e.psnr_db, e.max_abs, (long long)banded.fill_continued_px,
+                    (long long)whole.fill_continued_px);
+        EXPECT_GE(banded.bands, 2);
+        EXPECT_GT(whole.fill_continued_px, 0) << "the scene has background to continue";
+        EXPECT_GE(e.psnr_db, 60.0);
+        EXPECT_EQ(banded.fill_continued_px + banded.fill_foreground_px,
+                  whole.fill_continued_px + whole.fill_foreground_px);
+    }
+}
+
+TEST(DefocusBands, WhatCannotBeBandedIsRefusedWithTheReason)
+{
+    const OIIO::ImageBuf s = lights_scene(240, 135);
+    auto refused = [&](DefocusOptions o, const std::string& why) {
+        OIIO::ImageBuf dst;
+        EXPECT_FALSE(defocus(dst, s, o)) << why;
+        const std::string err = dst.geterror();
+        EXPECT_NE(err.find("over the memory budget of"), std::string::npos) << err;
+        EXPECT_NE(err.find(why), std::string::npos) << err;
+    };
+    DefocusOptions o = banded_options(s);
+    DefocusOptions lc = o;
+    lc.lens_character = true;
+    refused(lc, "lens character chooses its highlights over the whole frame");
+    DefocusOptions iris = o;
+    iris.iris           = 2.0f;
+    refused(iris, "iris mode's exp space");
+    DefocusOptions gather = o;
+    gather.method         = DefocusMethod::Gather;
+    refused(gather, "the gather method");
+    DefocusOptions predicted = o;
+    predicted.planner        = DefocusPlanner::Predicted;
+    refused(predicted, "the predicted planner");
+    // Less than the result itself: no band fits.
+    DefocusOptions tiny     = o;
+    tiny.memory_budget_bytes = int64_t(240) * 135 * 8;
+    refused(tiny, "the defocus of 240x135 pixels in bands of ");
+}
