@@ -101,12 +101,20 @@ struct DeepChannels {
 // truth on held pixels (bokeh-bench --task deep, 256 rays; two truths agree to 65.6 dB on
 // LowResLeftView, 62.1 on representativeDeepImage): on LowResLeftView's merged passes (point
 // samples, forests recorded behind defocused leaves) the default ladder (r = 1.5) scored
-// 60.2 dB, 2 x 2 views 61.0, r = 1.24 (30 layers) 62.5, both 65.1 in 0.55 s; on
-// representativeDeepImage (a stack of volumes) 2 x 2 views took 54.2 to 57.0 dB while a
-// finer ladder lost (r = 1.125 with views: 53.5), so volumes keep the budget's ladder.
+// 60.2 dB, 2 x 2 views 61.0, r = 1.24 (30 layers) 62.5, both 65.1 in 0.55 s. On
+// representativeDeepImage (a stack of volumes, 150 x 100; 2 threads, best of 3) no ladder
+// reaches the truth with 2 x 2 views (r = 1.5: 57.0 dB, 1.125: 57.5) nor without a finer
+// ladder (r = 1.5, 3 x 3 to 8 x 8 views: 56.1-57.2): both are needed. 3 x 3 views with
+// r = 1.25 60.1 dB (92 ms), 1.15 60.8 (118 ms), 1.125 60.8 (124 ms), 1.1 60.2 (161 ms);
+// 4 x 4 with 1.125 60.2, 8 x 8 61.0 (347 ms). A volume runs over CoCs where a point sits
+// at one, so a ladder step splits each volume's light between rungs; the pupil's centre,
+// which a 2 x 2 grid leaves out, sees through the stack along the axis.
 constexpr float kHiddenSpreadPx   = 1.0f;   // samples this far apart in CoC: one behind the other
 constexpr double kLayeredShare    = 0.01;   // of the pixels with samples: the image records what it hides
 constexpr double kRecordedRatio   = 1.25;   // the ladder ratio for point samples that do
+constexpr int kRecordedViews      = 2;      // and their views a side
+constexpr double kVolumeRatio     = 1.15;   // the ladder ratio for volumes that do
+constexpr int kVolumeViews        = 3;      // and their views a side
 
 // Every sample's CoC at its ends: the range, and the CoCs the rungs are fitted to.
 struct SampleCocs {
@@ -713,9 +721,12 @@ bool detail::defocus_deep(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const 
                            || o.aperture.shape == KernelShape::Opening || o.aperture.shape == KernelShape::Box;
         const bool planner = o.method == DefocusMethod::Auto;
         plan.aperture_views = o.aperture_views > 0 ? o.aperture_views
-                              : planner && records_hidden && pupil && !o.deep_output ? 2
-                                                                                     : 1;
-        const double ladder_ratio = planner && records_hidden && !sc.continuous && o.layers == 0 ? kRecordedRatio : 0.0;
+                              : planner && records_hidden && pupil && !o.deep_output
+                                  ? (sc.continuous ? kVolumeViews : kRecordedViews)
+                                  : 1;
+        const double ladder_ratio = planner && records_hidden && o.layers == 0
+                                        ? (sc.continuous ? kVolumeRatio : kRecordedRatio)
+                                        : 0.0;
         if (!deep_layer_plan(m, sc, plan, ladder_ratio, rep, err))
             return fail(err);
     }
