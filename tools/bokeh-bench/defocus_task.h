@@ -19,11 +19,13 @@ struct BenchArgs {
 bool run_defocus_task(const BenchArgs& args, std::vector<std::string>& rows);
 
 /// The flat planner's plans on each shot: the steps' default, and the predicted planner's
-/// plans predicted against measured (PSNR against the reference, in-process median ms), a
-/// grid of them and its choice; kPlansCsvHeader's columns (chosen: steps, predicted or
-/// empty; ladder_ratio 0: the steps').
+/// plans predicted against measured (PSNR against the reference and, on the built-in
+/// scenes, against the thin-lens truth; in-process median ms), a grid of them and its
+/// choice; kPlansCsvHeader's columns (chosen: steps, predicted, floor (two truths' PSNR in
+/// truth_psnr_db) or empty; ladder_ratio 0: the steps').
 constexpr const char* kPlansCsvHeader
-    = "scene,ladder_ratio,min_reduced_coc_px,layers,predicted_psnr_db,psnr_db,predicted_ms,median_ms,threads,chosen";
+    = "scene,ladder_ratio,min_reduced_coc_px,layers,predicted_psnr_db,psnr_db,predicted_ms,median_ms,threads,chosen,"
+      "truth_psnr_db";
 bool run_plans_task(const BenchArgs& args, std::vector<std::string>& rows);
 
 }  // namespace bokeh_bench
