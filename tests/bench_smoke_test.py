@@ -129,16 +129,20 @@ check(r.returncode == 0, "bokeh-bench --task plans ran: " + r.stderr[-2000:])
 with open(plans_csv, newline="") as f:
     plan_rows = list(csv.DictReader(f))
 for scene in ("lights", "edges"):
-    mine = [p for p in plan_rows if p["scene"] == scene]
+    floor = [p for p in plan_rows if p["scene"] == scene and p["chosen"] == "floor"]
+    mine = [p for p in plan_rows if p["scene"] == scene and p["chosen"] != "floor"]
+    check(len(floor) == 1 and float(floor[0]["truth_psnr_db"]) > 0, f"{scene}: the two truths' row")
     check(sum(p["chosen"] == "steps" for p in mine) == 1, f"{scene}: the default's row")
     check(sum(p["chosen"] == "predicted" for p in mine) == 1, f"{scene}: planner=predicted's row")
     check(len(mine) > 6, f"{scene}: a grid of plans ({len(mine)} rows)")
-    check(all(float(p["psnr_db"]) > 0 and float(p["median_ms"]) > 0 for p in mine), f"{scene}: measured")
+    check(all(float(p["psnr_db"]) > 0 and float(p["median_ms"]) > 0 and float(p["truth_psnr_db"]) > 0
+              for p in mine), f"{scene}: measured, against the reference and the truth")
 plans_chart = os.path.join(os.path.dirname(chart), "plans_chart.py")
 r = run([sys.executable, plans_chart, plans_csv, charts])
 check(r.returncode == 0, "plans_chart.py ran: " + r.stderr[-2000:])
 check(os.path.exists(os.path.join(charts, "plans.png")), "plans.png written")
 check("lights: default (steps" in r.stdout, "plans_chart.py printed the default's figures: " + r.stdout)
+check("lights: against the truth: default" in r.stdout, "and against the truth: " + r.stdout)
 
 if failures:
     print(f"{len(failures)} check(s) failed")

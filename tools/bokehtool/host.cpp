@@ -197,8 +197,10 @@ void Host::register_run_options()
     add_host_command(host_command("--maxmemory", "SIZE", 0, 0,
                                   "Memory one input file may take once read, and what a command "
                                   "may make from the sizes given (a scene, a resize target): 4G, "
-                                  "512M, 100K or bytes; more is refused before it is allocated. "
-                                  "Default: half the physical memory",
+                                  "512M, 100K or bytes; more is refused before it is allocated, "
+                                  "but a defocus draws a deep frame's layers in groups and a flat "
+                                  "frame's output in bands of rows to fit. Default: half the "
+                                  "physical memory",
                                   [this](CommandContext& c) {
                                       int64_t bytes = 0;
                                       if (!parse_memory_size(c.args[0], bytes))
