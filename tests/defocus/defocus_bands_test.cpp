@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include <OpenImageIO/imagebufalgo.h>
+
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -51,14 +53,21 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         s.setpixel(100, y, std::vector<float>{ nan, 0.5f, 0.5f, 1.0f, 8.0f }.data());
         s.setpixel(300, y, std::vector<float>{ 0.5f, 0.5f, 0.5f, 1.0f, nan }.data());
     }
+    // A data window inside the display window: the output grows past it, and the bands
+    // start on the output's rows, not the data's.
+    const OIIO::ImageBuf inner = OIIO::ImageBufAlgo::copy(s, OIIO::TypeUnknown, OIIO::ROI(37, 451, 21, 250));
     struct Case {
         const char* name;
+        const OIIO::ImageBuf* src;
         DefocusMethod method;
         int supersample, dilate_px;
+        int64_t nonfinite;  // of each kind, in the source's data window
     };
-    for (const Case& c : { Case{ "layers", DefocusMethod::Layers, 1, 0 },
-                           Case{ "layers, supersample 2, dilation 2", DefocusMethod::Layers, 2, 2 },
-                           Case{ "reference", DefocusMethod::Reference, 1, 0 } }) {
+    for (const Case& c : { Case{ "layers", &s, DefocusMethod::Layers, 1, 0, 4 },
+                           Case{ "layers, supersample 2, dilation 2", &s, DefocusMethod::Layers, 2, 2, 4 },
+                           Case{ "reference", &s, DefocusMethod::Reference, 1, 0, 4 },
+                           Case{ "layers, a data window inside the display window", &inner, DefocusMethod::Layers,
+                                 1, 0, 2 } }) {
         SCOPED_TRACE(c.name);
         DefocusOptions o   = banded_options(s);
         o.fill             = DisocclusionFill::Foreground;
@@ -68,9 +77,9 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         if (c.supersample == 2)  // the result is 4 times larger (64 bytes a source pixel)
             o.memory_budget_bytes = int64_t(480) * 270 * 120;
         DefocusReport banded, whole;
-        const OIIO::ImageBuf b = run_defocus(s, o, &banded);
+        const OIIO::ImageBuf b = run_defocus(*c.src, o, &banded);
         o.memory_budget_bytes  = 0;
-        const OIIO::ImageBuf a = run_defocus(s, o, &whole);
+        const OIIO::ImageBuf a = run_defocus(*c.src, o, &whole);
         std::printf("[ figures  ] %s: %d bands of %d rows, %zu layers\n", c.name, banded.bands, banded.band_rows,
                     banded.layer_coc_px.size());
         EXPECT_GE(banded.bands, 2) << banded.summary;
@@ -79,8 +88,8 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         EXPECT_EQ(error_of(b, a).max_abs, 0.0) << "the same bits";
         EXPECT_EQ(banded.layer_coc_px, whole.layer_coc_px);
         EXPECT_EQ(banded.layer_reduction, whole.layer_reduction);
-        EXPECT_EQ(banded.nonfinite.colour, 4);
-        EXPECT_EQ(banded.nonfinite.depth, 4);
+        EXPECT_EQ(banded.nonfinite.colour, c.nonfinite);
+        EXPECT_EQ(banded.nonfinite.depth, c.nonfinite);
         EXPECT_EQ(banded.fill_foreground_px, whole.fill_foreground_px);
         EXPECT_NE(banded.summary.find(" bands of "), std::string::npos) << banded.summary;
     }
