@@ -92,6 +92,11 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         EXPECT_EQ(banded.nonfinite.depth, c.nonfinite);
         EXPECT_EQ(banded.fill_foreground_px, whole.fill_foreground_px);
         EXPECT_NE(banded.summary.find(" bands of "), std::string::npos) << banded.summary;
+        if (c.method == DefocusMethod::Layers && c.supersample == 1 && c.src == &s) {
+            o.memory_budget_bytes         = banded_options(s).memory_budget_bytes;
+            const OIIO::ImageBuf one_thread = run_defocus(s, o, nullptr, 1);
+            EXPECT_EQ(error_of(one_thread, b).max_abs, 0.0) << "the same bits on one thread as on all";
+        }
     }
 }
 
