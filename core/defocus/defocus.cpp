@@ -168,6 +168,7 @@ const char* method_name(DefocusMethod m)
 
 namespace {
 
+// The frame's working planes given back (before the result is allocated).
 void release_pixels(Frame& f)
 {
     for (std::vector<float>* v : { &f.img.rgba, &f.img.z, &f.coc, &f.linear_rgba })
@@ -234,7 +235,7 @@ bool defocus(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, const DefocusOption
         const double up2     = double(opts.supersample) * double(opts.supersample);
         const double bytes   = double(data.npixels()) * (26.0 + (opts.iris != 0.0f ? 16.0 : 0.0))
                              + double(out.npixels()) * up2 * 32.0;
-        if (!within_defocus_memory(opts, bytes, "", "", err)) {
+        if (opts.memory_budget_bytes > 0 && bytes > double(opts.memory_budget_bytes)) {
             // Over the budget at once: in bands of output rows when the options allow it.
             std::string why;
             if (!check_defocus_options(opts, err)) {
