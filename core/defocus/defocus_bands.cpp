@@ -13,10 +13,15 @@
 // the whole frame, so a continuation wider than the reach can differ
 // (tests/defocus/defocus_bands_test.cpp measures by how much).
 //
-// Limits: lens character (its highlights are chosen over the whole frame), iris mode (its
-// exp space is set by the frame's colour range), the gather method (blurred copies of the
-// whole frame) and the predicted planner (frame-wide statistics) are drawn at once only;
-// over the budget they are refused, saying so.
+// Lens character: the frame's highlights are ranked first, a stretch of rows at a time, and
+// each band keeps those that rank above the frame's cut (max_sprites), so every band
+// draws the sprites the frame drawn at once would; the bands then lie on the lens layer's
+// grid too, and reach as far as a sprite's PSF and the block its sprites merge in.
+//
+// Limits: iris mode (its exp space is set by the frame's colour range), the gather method
+// (blurred copies of the whole frame) and the predicted planner (frame-wide statistics) are
+// drawn at once only; over the budget they are refused, saying so. Ranking the highlights
+// prepares the frame twice.
 
 #include <bokeh/defocus.h>
 #include <bokeh/image.h>
@@ -25,6 +30,7 @@
 #include "defocus/defocus_layers.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include <OpenImageIO/strutil.h>
@@ -85,13 +91,101 @@ int band_rows_for(const DefocusOptions& o, const OIIO::ROI& data, const OIIO::RO
     return best;
 }
 
+// Lens character over the whole frame: its highlights ranked a stretch of rows at a time
+// (each prepared without sprites, as prepare_frame prepares it), the max_sprites best kept
+// as they come; the cut (the last kept, when there were more), the count, and the reach of
+// the kept ones' PSFs (fetched into the process's cache, where the bands find them).
+struct FrameSprites {
+    SpriteCut cut;
+    int64_t candidates = 0;
+    int64_t kept       = 0;
+    float extent_px    = 0.0f;
+    size_t psfs        = 0;
+    float min_coc_px = 0.0f, max_coc_px = 0.0f;
+};
+
+bool frame_sprites(FrameSprites& fs, const OIIO::ImageBuf& src, const DefocusOptions& o, int nthreads,
+                   std::string& err)
+{
+    const OIIO::ROI data = src.roi();
+    const int64_t w      = data.width();
+    struct Ranked {
+        float key;
+        int64_t at;
+        int x, y;
+        float coc_px;
+    };
+    auto ranks_first = [](const Ranked& a, const Ranked& b) { return outranks(a.key, a.at, b.key, b.at); };
+    const size_t most = size_t(o.max_sprites);
+    std::vector<Ranked> best;
+    DefocusOptions plain  = o;
+    plain.lens_character  = false;
+    // A stretch holds half the budget of prepared pixels (26 bytes each).
+    const int stretch = int(std::clamp(double(o.memory_budget_bytes) / 2.0 / (26.0 * double(w)), 16.0,
+                                       double(data.height())));
+    for (int y0 = data.ybegin; y0 < data.yend; y0 += stretch) {
+        const int y1 = std::min(data.yend, y0 + stretch);
+        FrameBand rows;
+        rows.read        = data;
+        rows.read.ybegin = std::max(data.ybegin, y0 - plain.depth_dilate_px);
+        rows.read.yend   = std::min(data.yend, y1 + plain.depth_dilate_px);
+        rows.out         = data;
+        rows.counted_ybegin = y0, rows.counted_yend = y1;
+        Frame f;
+        DefocusReport part;
+        if (!prepare_frame(f, src, plain, part, nthreads, err, &rows))
+            return false;
+        for (int y = y0; y < y1; ++y)
+            for (int x = data.xbegin; x < data.xend; ++x) {
+                const size_t i = f.img.index(x, y);
+                float lum;
+                const float share = sprite_share(f.img.rgba.data() + i * 4, o.highlight_threshold, lum);
+                if (!(share > 0.0f))
+                    continue;
+                ++fs.candidates;
+                best.push_back({ share * lum, int64_t(y - data.ybegin) * w + int64_t(x - data.xbegin), x, y,
+                                 f.coc[i] });
+            }
+        if (best.size() > 2 * most) {
+            std::nth_element(best.begin(), best.begin() + std::ptrdiff_t(most), best.end(), ranks_first);
+            best.resize(most);
+        }
+    }
+    if (best.size() > most) {
+        std::nth_element(best.begin(), best.begin() + std::ptrdiff_t(most), best.end(), ranks_first);
+        best.resize(most);
+    }
+    if (fs.candidates > int64_t(most) && !best.empty()) {
+        const Ranked& last = *std::max_element(best.begin(), best.end(), ranks_first);
+        fs.cut.active      = true;
+        fs.cut.key         = last.key;
+        fs.cut.at          = last.at;
+    }
+    fs.kept = int64_t(best.size());
+    LensCharacter lens;
+    if (!defocus_lens(o, src.spec(), lens, err))
+        return false;
+    SpriteSet set;
+    for (const Ranked& r : best) {
+        Sprite sp;
+        sp.x = r.x, sp.y = r.y, sp.coc_px = r.coc_px;
+        set.sprites.push_back(sp);
+        fs.min_coc_px = set.sprites.size() == 1 ? r.coc_px : std::min(fs.min_coc_px, r.coc_px);
+        fs.max_coc_px = set.sprites.size() == 1 ? r.coc_px : std::max(fs.max_coc_px, r.coc_px);
+    }
+    if (!fetch_sprite_psfs(set, *shared_psf_cache(lens, nthreads), FieldFrame(src.spec(), lens), o.supersample,
+                           nthreads, err))
+        return false;
+    fs.extent_px = set.extent_px;
+    fs.psfs      = set.psfs;
+    return true;
+}
+
 }  // namespace
 
 bool detail::defocus_bands_allowed(const DefocusOptions& o, std::string& why)
 {
-    if (o.lens_character)
-        why = "lens character chooses its highlights over the whole frame and is not drawn in bands";
-    else if (o.iris != 0.0f)
+    if (o.iris != 0.0f)
         why = "iris mode's exp space is set by the whole frame's colours and is not drawn in bands";
     else if (o.method == DefocusMethod::Gather)
         why = "the gather method blurs copies of the whole frame and is not drawn in bands";
@@ -137,14 +231,26 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
     }
     rep.layer_coc_px    = plan.coc_px;
     rep.layer_reduction = plan.reduction;
+    FrameSprites sprites;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (o.lens_character && !frame_sprites(sprites, src, o, nthreads, err)) {
+        dst.errorfmt("defocus: {}", err);
+        return false;
+    }
+    rep.sprite_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 
-    const float extreme = std::max(-rep.min_coc_px, rep.max_coc_px);
+    // Sprites spread as far as their PSFs (prepare_frame's output region).
+    const float extreme = std::max({ -rep.min_coc_px, rep.max_coc_px, 2.0f * sprites.extent_px });
     const OIIO::ROI out = defocus_output_region(src.spec(), data, extreme, o);
     const int reduction = plan.reduction.empty() ? 1 : *std::max_element(plan.reduction.begin(), plan.reduction.end());
-    const int align     = kLayerTilePx * reduction;
-    // How far past its rows a band reads: the largest kernel's half height, a reduced
-    // buffer's box and bilinear read on either side, the depth dilation's square.
-    const int halo = int(std::ceil(0.5f * extreme * o.aspect)) + 4 * reduction + 2 + o.depth_dilate_px;
+    // Every layer's tile grid: 64 px times its reduction, and with lens character 256 px
+    // for the in-focus rung blurred with the lens's PSF (reduction 1: defocus_sprites.cpp).
+    const int align = std::max(kLayerTilePx * reduction, o.lens_character ? kLensLayerTilePx : 0);
+    // How far past its rows a band reads: the largest kernel's half height (or a sprite's
+    // PSF's), a reduced buffer's box and bilinear read on either side, the depth dilation's
+    // square, and a sprite block (up to 8 px: draw_layer_sprites merges a block's sprites).
+    const int halo = int(std::ceil(std::max(0.5f * extreme * o.aspect, sprites.extent_px))) + 4 * reduction + 2
+                     + o.depth_dilate_px + (o.lens_character ? 8 : 0);
     const int rows = band_rows_for(o, data, out, align, halo);
     if (rows == 0) {
         const double up2 = double(o.supersample) * double(o.supersample);
@@ -178,6 +284,8 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
         band.counted_yend = b + 1 == rep.bands ? data.yend : std::clamp(band.out.yend, data.ybegin, data.yend);
         band.min_coc_px   = rep.min_coc_px;
         band.max_coc_px   = rep.max_coc_px;
+        band.sprite_cut        = sprites.cut;
+        band.sprite_cut.offset = int64_t(band.read.ybegin - data.ybegin) * int64_t(data.width());
 
         DefocusOptions ob = o;
         if (o.progress)
@@ -200,11 +308,22 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
             return false;
         }
         fill_uncovered(plane, f, ob, part, nthreads);
+        report_sprites(part, f.sprites.get());
+        rep.sprites_drawn += part.sprites_drawn;
+        rep.sprite_seconds += part.sprite_seconds;
         write_result_rows(dst, plane, f.out.xbegin * up, f.out.ybegin * up, nthreads);
         rep.nonfinite.colour += part.nonfinite.colour;
         rep.nonfinite.depth += part.nonfinite.depth;
         rep.fill_continued_px += part.fill_continued_px;
         rep.fill_foreground_px += part.fill_foreground_px;
+    }
+    if (o.lens_character) {
+        rep.lens_character    = true;
+        rep.sprites           = sprites.kept;
+        rep.sprite_candidates = sprites.candidates;
+        rep.sprite_psfs       = sprites.psfs;
+        rep.sprite_min_coc_px = sprites.min_coc_px;
+        rep.sprite_max_coc_px = sprites.max_coc_px;
     }
     summarise_defocus(rep, out.width() * up, out.height() * up);
     if (report)

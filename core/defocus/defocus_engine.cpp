@@ -53,7 +53,7 @@ int reach_y(float coc_px, float aspect) { return int(std::ceil(0.5f * std::abs(c
 constexpr int kTile = kLayerTilePx;
 // A layer blurred with the lens's PSF goes by FFT, whose every call transforms its four
 // kernels and pays a margin of the kernel's reach: its tiles are 4 times wider.
-constexpr int kLensTile = 256;
+constexpr int kLensTile = kLensLayerTilePx;
 // Which of a lens layer's kernels (lens_layer_kernels: R, G, B, mean) blurs each channel of
 // its input (R, G, B, coverage, visibility).
 constexpr std::array<int, 5> kLensChannelKernels = { 0, 1, 2, 3, 3 };

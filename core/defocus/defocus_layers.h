@@ -143,6 +143,16 @@ bool within_defocus_memory(const DefocusOptions& o, double bytes, const std::str
 /// the (2r + 1)^2 square about it, cut by the frame's edge.
 void dilate_nearest(std::vector<float>& coc, int w, int h, int r, int nthreads);
 
+/// Which of a frame's highlights become sprites when it has more than max_sprites: those
+/// that outrank the last one kept (its key and data-window index); all when not `active`.
+/// `offset` is the frame's data-window index of the image's first pixel (a band's).
+struct SpriteCut {
+    bool active  = false;
+    float key    = 0.0f;
+    int64_t at   = 0;
+    int64_t offset = 0;
+};
+
 /// A band of a flat frame's output drawn on its own under a memory budget
 /// (core/defocus/defocus_bands.cpp): the source pixels it reads (its output rows and the
 /// layers' reach about them), its output rows, the source rows whose non-finite values it
@@ -151,6 +161,8 @@ struct FrameBand {
     OIIO::ROI read, out;
     int counted_ybegin = 0, counted_yend = 0;
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
+    /// Lens character: the frame's cut of its highlights (select_sprites).
+    SpriteCut sprite_cut;
 };
 
 /// A flat image made ready for a method (core/defocus/defocus_prepare.cpp): the options checked,
@@ -253,6 +265,8 @@ OIIO::ROI defocus_output_region(const OIIO::ImageSpec& spec, const OIIO::ROI& da
 /// layer reduced by s is computed in tiles of kLayerTilePx * s frame pixels from the
 /// output's origin.
 constexpr int kLayerTilePx = 64;
+/// The same for a layer blurred with the lens's PSF (by FFT: lens character's in-focus layers).
+constexpr int kLensLayerTilePx = 256;
 
 /// Blur every layer of `m` with the aperture at its CoC (with lens character, the lens's
 /// PSF at focus: lens_layer_kernels) and composite them, front over back, into `out`
@@ -293,9 +307,19 @@ bool check_sprite_options(const DefocusOptions& o, std::string& err);
 float sprite_share(const float* rgb, float threshold, float& luminance);
 
 /// Lens character on a flat frame: select the highlights of f.img (f.coc known), take
-/// their share out of f.img and fetch their PSFs into f.sprites. False + `err`.
+/// their share out of f.img and fetch their PSFs into f.sprites. With `cut` (a band of a
+/// frame: defocus_bands.cpp), the frame's own cut instead of this image's, and only the
+/// sprites of the band's counted rows counted in the report. False + `err`.
 bool select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec, int nthreads,
-                    std::string& err);
+                    std::string& err, const SpriteCut* cut = nullptr, int counted_ybegin = 0,
+                    int counted_yend = 0);
+
+/// A highlight's rank among a frame's: its sprite share times its luminance, then its
+/// index in the data window (the lower first).
+inline bool outranks(float key_a, int64_t at_a, float key_b, int64_t at_b)
+{
+    return key_a > key_b || (key_a == key_b && at_a < at_b);
+}
 
 /// Fetch both PSFs of every sprite from `cache` and set the set's extent. False + `err`.
 /// `up` is the output's resolution over the frame's (2: PSFs at twice the CoC, box-folded).

@@ -178,12 +178,15 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
     if (o.bloom_gain != 1.0f)
         apply_bloom(f.img, o.bloom_threshold, o.bloom_gain, nthreads);
     // Highlights leave the layers in linear light (before iris mode's exp space).
-    if (o.lens_character && !select_sprites(f, o, src.spec(), nthreads, err))
+    if (o.lens_character
+        && !(band ? select_sprites(f, o, src.spec(), nthreads, err, &band->sprite_cut, band->counted_ybegin,
+                                   band->counted_yend)
+                  : select_sprites(f, o, src.spec(), nthreads, err)))
         return false;
     if (o.iris != 0.0f && !to_iris_space(f, o.iris, nthreads, err))
         return false;
 
-    if (band) {  // the frame's range and the band's rows (bands refuse sprites)
+    if (band) {  // the frame's range and the band's rows
         rep.min_coc_px = band->min_coc_px;
         rep.max_coc_px = band->max_coc_px;
         f.out          = band->out;

@@ -387,7 +387,7 @@ bool detail::fetch_sprite_psfs(SpriteSet& set, PsfCache& cache, const FieldFrame
 }
 
 bool detail::select_sprites(Frame& f, const DefocusOptions& o, const OIIO::ImageSpec& spec, int nthreads,
-                            std::string& err)
+                            std::string& err, const SpriteCut* cut, int counted_ybegin, int counted_yend)
 {
     const Clock::time_point t0 = Clock::now();
     LensCharacter lens;
@@ -403,15 +403,16 @@ bool detail::select_sprites(Frame& f, const DefocusOptions& o, const OIIO::Image
     for (size_t i = 0; i < n; ++i) {
         float lum;
         const float share = sprite_share(f.img.rgba.data() + i * 4, o.highlight_threshold, lum);
-        if (share > 0.0f)
+        if (share > 0.0f
+            && !(cut && cut->active && outranks(cut->key, cut->at, share * lum, cut->offset + int64_t(i))))
             found.push_back({ i, share, lum });
     }
     set->candidates = int64_t(found.size());
-    if (found.size() > size_t(o.max_sprites)) {
+    if (!cut && found.size() > size_t(o.max_sprites)) {
         std::nth_element(found.begin(), found.begin() + o.max_sprites, found.end(),
                          [](const Candidate& a, const Candidate& b) {
-                             return a.share * a.luminance > b.share * b.luminance
-                                    || (a.share * a.luminance == b.share * b.luminance && a.at < b.at);
+                             return outranks(a.share * a.luminance, int64_t(a.at), b.share * b.luminance,
+                                             int64_t(b.at));
                          });
         found.resize(size_t(o.max_sprites));
     }
@@ -423,6 +424,7 @@ bool detail::select_sprites(Frame& f, const DefocusOptions& o, const OIIO::Image
         s.x      = f.data.xbegin + int(c.at % size_t(w));
         s.y      = f.data.ybegin + int(c.at / size_t(w));
         s.coc_px = f.coc[c.at];
+        s.counted = !cut || (s.y >= counted_ybegin && s.y < counted_yend);
         float* px = f.img.rgba.data() + c.at * 4;
         for (int k = 0; k < 3; ++k) {
             s.rgb[k] = px[k] * c.share;
@@ -536,7 +538,7 @@ void detail::draw_layer_sprites(Plane& target, const Frame& f, const Membership&
             const int lo   = m.lower[s.at];
             const float up = m.upper[s.at];
             share          = lo == k ? 1.0f - up : lo + 1 == k ? up : 0.0f;
-            first          = lo == k || !(1.0f - up > 0.0f);
+            first          = (lo == k || !(1.0f - up > 0.0f)) && s.counted;
         }
         if (!(share > 0.0f))
             continue;

@@ -1,7 +1,7 @@
 // A flat defocus over its memory budget drawn in bands of output rows
 // (core/defocus/defocus_bands.cpp), against the same defocus drawn at once: the same bits
-// where no background is continued, the continuation close, the counts the same, and what
-// cannot be banded refused with the reason.
+// where no background is continued (lens character's sprites included), the continuation
+// close, the counts the same, and what cannot be banded refused with the reason.
 
 #include "test_util.h"
 
@@ -62,20 +62,30 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         DefocusMethod method;
         int supersample, dilate_px;
         int64_t nonfinite;  // of each kind, in the source's data window
+        int max_sprites = 0;  // lens character with at most this many sprites (0: off)
     };
+    // Lens character's bands lie on its lens layers' grid of 256 rows: a taller frame, and a
+    // budget (50 bytes a pixel) that holds a band of 256 rows beside the result.
+    const OIIO::ImageBuf big = lights_scene(960, 540);
     for (const Case& c : { Case{ "layers", &s, DefocusMethod::Layers, 1, 0, 4 },
                            Case{ "layers, supersample 2, dilation 2", &s, DefocusMethod::Layers, 2, 2, 4 },
                            Case{ "reference", &s, DefocusMethod::Reference, 1, 0, 4 },
                            Case{ "layers, a data window inside the display window", &inner, DefocusMethod::Layers,
-                                 1, 0, 2 } }) {
+                                 1, 0, 2 },
+                           Case{ "lens character, all highlights", &big, DefocusMethod::Layers, 1, 0, 0, 20000 },
+                           Case{ "lens character, the 40 brightest", &big, DefocusMethod::Layers, 1, 0, 0, 40 } }) {
         SCOPED_TRACE(c.name);
         DefocusOptions o   = banded_options(s);
         o.fill             = DisocclusionFill::Foreground;
         o.method           = c.method;
         o.supersample      = c.supersample;
         o.depth_dilate_px  = c.dilate_px;
+        o.lens_character   = c.max_sprites > 0;
+        o.max_sprites      = c.max_sprites > 0 ? c.max_sprites : o.max_sprites;
         if (c.supersample == 2)  // the result is 4 times larger (64 bytes a source pixel)
             o.memory_budget_bytes = int64_t(480) * 270 * 120;
+        if (c.max_sprites > 0)
+            o.memory_budget_bytes = int64_t(960) * 540 * 50;
         DefocusReport banded, whole;
         const OIIO::ImageBuf b = run_defocus(*c.src, o, &banded);
         o.memory_budget_bytes  = 0;
@@ -91,6 +101,15 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         EXPECT_EQ(banded.nonfinite.colour, c.nonfinite);
         EXPECT_EQ(banded.nonfinite.depth, c.nonfinite);
         EXPECT_EQ(banded.fill_foreground_px, whole.fill_foreground_px);
+        EXPECT_EQ(banded.sprites, whole.sprites);
+        EXPECT_EQ(banded.sprite_candidates, whole.sprite_candidates);
+        EXPECT_EQ(banded.sprites_drawn, whole.sprites_drawn);
+        if (c.max_sprites > 0) {
+            EXPECT_GT(whole.sprites, 0) << whole.summary;
+            std::printf("[ figures  ]   %lld sprites of %lld highlights, %lld drawn (at once: %lld)\n",
+                        (long long)banded.sprites, (long long)banded.sprite_candidates,
+                        (long long)banded.sprites_drawn, (long long)whole.sprites_drawn);
+        }
         EXPECT_NE(banded.summary.find(" bands of "), std::string::npos) << banded.summary;
         if (c.method == DefocusMethod::Layers && c.supersample == 1 && c.src == &s) {
             o.memory_budget_bytes         = banded_options(s).memory_budget_bytes;
@@ -136,9 +155,6 @@ TEST(DefocusBands, WhatCannotBeBandedIsRefusedWithTheReason)
         EXPECT_NE(err.find(why), std::string::npos) << err;
     };
     DefocusOptions o = banded_options(s);
-    DefocusOptions lc = o;
-    lc.lens_character = true;
-    refused(lc, "lens character chooses its highlights over the whole frame");
     DefocusOptions iris = o;
     iris.iris           = 2.0f;
     refused(iris, "iris mode's exp space");
