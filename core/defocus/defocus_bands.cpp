@@ -18,10 +18,12 @@
 // draws the sprites the frame drawn at once would; the bands then lie on the lens layer's
 // grid too, and reach as far as a sprite's PSF and the block its sprites merge in.
 //
-// Limits: iris mode (its exp space is set by the frame's colour range), the gather method
-// (blurred copies of the whole frame) and the predicted planner (frame-wide statistics) are
-// drawn at once only; over the budget they are refused, saying so. Ranking the highlights
-// prepares the frame twice.
+// Iris mode: its exp space is set from the whole frame's colour range, found the same way
+// (after the sprites are taken out), and given to every band.
+//
+// Limits: the gather method (blurred copies of the whole frame) and the predicted planner
+// (frame-wide statistics) are drawn at once only; over the budget they are refused, saying
+// so. Ranking the highlights, and iris mode's range, each prepare the frame once more.
 
 #include <bokeh/defocus.h>
 #include <bokeh/image.h>
@@ -30,8 +32,10 @@
 #include "defocus/defocus_layers.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
+#include <limits>
 
 #include <OpenImageIO/strutil.h>
 
@@ -47,6 +51,8 @@ using OIIO::Strutil::fmt::format;
 // source pixels prepared (RGBA 16, CoC 4, shares 6), its result plane (16 an output pixel)
 // and the fill's pyramid (8).
 constexpr double kBandSourceBytes = 26.0;
+// Iris mode keeps the linear colour beside its exp space (16 bytes a source pixel more).
+double band_source_bytes(const DefocusOptions& o) { return kBandSourceBytes + (o.iris != 0.0f ? 16.0 : 0.0); }
 constexpr double kBandOutputBytes = 24.0;
 // The result every band writes into: RGBA float an output pixel.
 constexpr double kResultBytes = 16.0;
@@ -83,7 +89,7 @@ int band_rows_for(const DefocusOptions& o, const OIIO::ROI& data, const OIIO::RO
     int best            = 0;
     for (int rows = align; rows < out.height() + align; rows += align) {
         const double read  = double(std::min(rows + 2 * halo, data.height())) * double(data.width());
-        const double bytes = read * kBandSourceBytes + double(rows) * double(out.width()) * up2 * kBandOutputBytes;
+        const double bytes = read * band_source_bytes(o) + double(rows) * double(out.width()) * up2 * kBandOutputBytes;
         if (result + bytes > double(o.memory_budget_bytes))
             break;
         best = rows;
@@ -104,6 +110,35 @@ struct FrameSprites {
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
 };
 
+// The frame prepared a stretch of rows at a time (half the budget of prepared pixels, 26
+// bytes each, and the depth dilation's reach about them), with options `o` and lens
+// character's cut `cut`: `fn(f, y0, y1)` for each, rows [y0, y1) its own. False + `err`.
+template <class Fn>
+bool for_each_stretch(const OIIO::ImageBuf& src, const DefocusOptions& o, const SpriteCut& cut, int nthreads,
+                      std::string& err, Fn fn)
+{
+    const OIIO::ROI data = src.roi();
+    const int stretch    = int(std::clamp(double(o.memory_budget_bytes) / 2.0 / (26.0 * double(data.width())),
+                                          16.0, double(data.height())));
+    for (int y0 = data.ybegin; y0 < data.yend; y0 += stretch) {
+        const int y1 = std::min(data.yend, y0 + stretch);
+        FrameBand rows;
+        rows.read           = data;
+        rows.read.ybegin    = std::max(data.ybegin, y0 - o.depth_dilate_px);
+        rows.read.yend      = std::min(data.yend, y1 + o.depth_dilate_px);
+        rows.out            = data;
+        rows.counted_ybegin = y0, rows.counted_yend = y1;
+        rows.sprite_cut        = cut;
+        rows.sprite_cut.offset = int64_t(rows.read.ybegin - data.ybegin) * int64_t(data.width());
+        Frame f;
+        DefocusReport part;
+        if (!prepare_frame(f, src, o, part, nthreads, err, &rows))
+            return false;
+        fn(f, y0, y1);
+    }
+    return true;
+}
+
 bool frame_sprites(FrameSprites& fs, const OIIO::ImageBuf& src, const DefocusOptions& o, int nthreads,
                    std::string& err)
 {
@@ -118,23 +153,10 @@ bool frame_sprites(FrameSprites& fs, const OIIO::ImageBuf& src, const DefocusOpt
     auto ranks_first = [](const Ranked& a, const Ranked& b) { return outranks(a.key, a.at, b.key, b.at); };
     const size_t most = size_t(o.max_sprites);
     std::vector<Ranked> best;
-    DefocusOptions plain  = o;
-    plain.lens_character  = false;
-    // A stretch holds half the budget of prepared pixels (26 bytes each).
-    const int stretch = int(std::clamp(double(o.memory_budget_bytes) / 2.0 / (26.0 * double(w)), 16.0,
-                                       double(data.height())));
-    for (int y0 = data.ybegin; y0 < data.yend; y0 += stretch) {
-        const int y1 = std::min(data.yend, y0 + stretch);
-        FrameBand rows;
-        rows.read        = data;
-        rows.read.ybegin = std::max(data.ybegin, y0 - plain.depth_dilate_px);
-        rows.read.yend   = std::min(data.yend, y1 + plain.depth_dilate_px);
-        rows.out         = data;
-        rows.counted_ybegin = y0, rows.counted_yend = y1;
-        Frame f;
-        DefocusReport part;
-        if (!prepare_frame(f, src, plain, part, nthreads, err, &rows))
-            return false;
+    DefocusOptions plain = o;
+    plain.lens_character = false;
+    plain.iris           = 0.0f;  // the highlights are taken out in linear light
+    const bool ok = for_each_stretch(src, plain, SpriteCut(), nthreads, err, [&](const Frame& f, int y0, int y1) {
         for (int y = y0; y < y1; ++y)
             for (int x = data.xbegin; x < data.xend; ++x) {
                 const size_t i = f.img.index(x, y);
@@ -150,7 +172,9 @@ bool frame_sprites(FrameSprites& fs, const OIIO::ImageBuf& src, const DefocusOpt
             std::nth_element(best.begin(), best.begin() + std::ptrdiff_t(most), best.end(), ranks_first);
             best.resize(most);
         }
-    }
+    });
+    if (!ok)
+        return false;
     if (best.size() > most) {
         std::nth_element(best.begin(), best.begin() + std::ptrdiff_t(most), best.end(), ranks_first);
         best.resize(most);
@@ -181,13 +205,28 @@ bool frame_sprites(FrameSprites& fs, const OIIO::ImageBuf& src, const DefocusOpt
     return true;
 }
 
+// Iris mode over the whole frame: its exp space from the colour range of every stretch of
+// rows, prepared as a band prepares them (sprites taken out by the frame's cut), as
+// prepare_frame sets it for the frame at once.
+bool frame_iris(IrisSpace& iris, const OIIO::ImageBuf& src, const DefocusOptions& o, const SpriteCut& cut,
+                int nthreads, std::string& err)
+{
+    std::array<float, 3> lo, hi;
+    lo.fill(std::numeric_limits<float>::infinity());
+    hi.fill(-std::numeric_limits<float>::infinity());
+    DefocusOptions linear = o;
+    linear.iris           = 0.0f;
+    if (!for_each_stretch(src, linear, cut, nthreads, err,
+                          [&](const Frame& f, int, int) { iris_channel_range(f, lo, hi); }))
+        return false;
+    return iris_space_for(o.iris, lo, hi, iris, err);
+}
+
 }  // namespace
 
 bool detail::defocus_bands_allowed(const DefocusOptions& o, std::string& why)
 {
-    if (o.iris != 0.0f)
-        why = "iris mode's exp space is set by the whole frame's colours and is not drawn in bands";
-    else if (o.method == DefocusMethod::Gather)
+    if (o.method == DefocusMethod::Gather)
         why = "the gather method blurs copies of the whole frame and is not drawn in bands";
     else if (o.planner == DefocusPlanner::Predicted)
         why = "the predicted planner weighs the whole frame and is not drawn in bands";
@@ -238,6 +277,11 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
         return false;
     }
     rep.sprite_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    IrisSpace iris;
+    if (o.iris != 0.0f && !frame_iris(iris, src, o, sprites.cut, nthreads, err)) {
+        dst.errorfmt("defocus: {}", err);
+        return false;
+    }
 
     // Sprites spread as far as their PSFs (prepare_frame's output region).
     const float extreme = std::max({ -rep.min_coc_px, rep.max_coc_px, 2.0f * sprites.extent_px });
@@ -256,7 +300,7 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
         const double up2 = double(o.supersample) * double(o.supersample);
         const double least =
             double(out.npixels()) * up2 * kResultBytes
-            + double(std::min(align + 2 * halo, data.height())) * double(data.width()) * kBandSourceBytes
+            + double(std::min(align + 2 * halo, data.height())) * double(data.width()) * band_source_bytes(o)
             + double(align) * double(out.width()) * up2 * kBandOutputBytes;
         within_defocus_memory(o, least,
                               format("the defocus of {}x{} pixels in bands of {} rows", data.width(), data.height(),
@@ -286,6 +330,8 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
         band.max_coc_px   = rep.max_coc_px;
         band.sprite_cut        = sprites.cut;
         band.sprite_cut.offset = int64_t(band.read.ybegin - data.ybegin) * int64_t(data.width());
+        band.iris_known        = o.iris != 0.0f;
+        band.iris              = iris;
 
         DefocusOptions ob = o;
         if (o.progress)

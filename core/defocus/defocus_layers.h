@@ -163,7 +163,19 @@ struct FrameBand {
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
     /// Lens character: the frame's cut of its highlights (select_sprites).
     SpriteCut sprite_cut;
+    /// Iris mode: the frame's exp space (set from its colour range), when known.
+    bool iris_known = false;
+    IrisSpace iris;
 };
+
+/// Iris mode: the range of each channel's colour (unpremultiplied) over f.img's covered
+/// pixels, joined to `lo` .. `hi`.
+void iris_channel_range(const Frame& f, std::array<float, 3>& lo, std::array<float, 3>& hi);
+
+/// Iris mode: the exp space of exponent k for colours in `lo` .. `hi` (IrisSpace's shift);
+/// false + `err` when k times a channel's range passes kIrisMaxExponent.
+bool iris_space_for(float k, std::array<float, 3> lo, std::array<float, 3> hi, IrisSpace& iris,
+                    std::string& err);
 
 /// A flat image made ready for a method (core/defocus/defocus_prepare.cpp): the options checked,
 /// the pixels premultiplied and scrubbed (counted in `rep`), each pixel's signed CoC, the

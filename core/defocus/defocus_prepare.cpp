@@ -43,13 +43,27 @@ void apply_bloom(WorkImage& w, float threshold, float gain, int nthreads)
     });
 }
 
-// Iris mode: f.img's colour into iris space (see IrisSpace), the linear copy kept for the
-// disocclusion fill. False + err when |k| times a channel's range exceeds kIrisMaxExponent.
-bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
+// Iris mode: f.img's colour into iris space `iris` (see IrisSpace), the linear copy kept for
+// the disocclusion fill.
+void to_iris_space(Frame& f, const IrisSpace& iris, int nthreads)
 {
-    std::array<float, 3> lo, hi;
-    lo.fill(std::numeric_limits<float>::infinity());
-    hi.fill(-std::numeric_limits<float>::infinity());
+    f.iris        = iris;
+    f.linear_rgba = f.img.rgba;
+    const double k = double(iris.k);
+    parallel_for_chunks(0, int64_t(f.img.rgba.size() / 4), 4096, nthreads, [&](int64_t b, int64_t e) {
+        for (int64_t i = b; i < e; ++i) {
+            float* p = f.img.rgba.data() + size_t(i) * 4;
+            for (size_t c = 0; c < 3; ++c)
+                p[c] = p[3] > 0.0f ? p[3] * float(std::expm1(k * (double(p[c]) / p[3] - f.iris.shift[c])))
+                                   : 0.0f;
+        }
+    });
+}
+
+}  // namespace
+
+void detail::iris_channel_range(const Frame& f, std::array<float, 3>& lo, std::array<float, 3>& hi)
+{
     for (size_t i = 0; i < f.img.rgba.size(); i += 4)
         if (f.img.rgba[i + 3] > 0.0f)
             for (size_t c = 0; c < 3; ++c) {
@@ -57,7 +71,12 @@ bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
                 lo[c]         = std::min(lo[c], x);
                 hi[c]         = std::max(hi[c], x);
             }
-    f.iris.k = k;
+}
+
+bool detail::iris_space_for(float k, std::array<float, 3> lo, std::array<float, 3> hi, IrisSpace& iris,
+                            std::string& err)
+{
+    iris.k = k;
     for (size_t c = 0; c < 3; ++c) {
         if (!(hi[c] >= lo[c]))
             lo[c] = hi[c] = 0.0f;  // no covered pixel
@@ -67,22 +86,10 @@ bool to_iris_space(Frame& f, float k, int nthreads, std::string& err)
                          k, "RGB"[c], lo[c], hi[c], kIrisMaxExponent);
             return false;
         }
-        f.iris.shift[c] = k > 0.0f ? lo[c] : hi[c];
+        iris.shift[c] = k > 0.0f ? lo[c] : hi[c];
     }
-    f.linear_rgba = f.img.rgba;
-    parallel_for_chunks(0, int64_t(f.img.rgba.size() / 4), 4096, nthreads, [&](int64_t b, int64_t e) {
-        for (int64_t i = b; i < e; ++i) {
-            float* p = f.img.rgba.data() + size_t(i) * 4;
-            for (size_t c = 0; c < 3; ++c)
-                p[c] = p[3] > 0.0f ? p[3] * float(std::expm1(double(k) * (double(p[c]) / p[3] - f.iris.shift[c])))
-                                   : 0.0f;
-        }
-    });
     return true;
 }
-
-
-}  // namespace
 
 // A separable min filter: the (2r + 1)^2 square's min is the min over its rows of each
 // row's min.
@@ -183,8 +190,20 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
                                    band->counted_yend)
                   : select_sprites(f, o, src.spec(), nthreads, err)))
         return false;
-    if (o.iris != 0.0f && !to_iris_space(f, o.iris, nthreads, err))
-        return false;
+    if (o.iris != 0.0f) {
+        IrisSpace iris;
+        if (band && band->iris_known) {
+            iris = band->iris;
+        } else {
+            std::array<float, 3> lo, hi;
+            lo.fill(std::numeric_limits<float>::infinity());
+            hi.fill(-std::numeric_limits<float>::infinity());
+            iris_channel_range(f, lo, hi);
+            if (!iris_space_for(o.iris, lo, hi, iris, err))
+                return false;
+        }
+        to_iris_space(f, iris, nthreads);
+    }
 
     if (band) {  // the frame's range and the band's rows
         rep.min_coc_px = band->min_coc_px;

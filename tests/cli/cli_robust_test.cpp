@@ -137,13 +137,13 @@ TEST(Robust, TypedSizesAreCheckedBeforeMemoryIsTaken)
     // A defocus: a flat frame's working planes (26 bytes a source pixel, 32 an output pixel:
     // 1920 x 1080 x 58 is 114.7 MiB); a deep frame's layers, 20 bytes a pixel a layer, as
     // many as layers= asks for.
-    // Past the budget a flat frame is drawn in bands of rows; iris mode's exp space comes
-    // from the whole frame's colours, so it cannot be.
+    // Past the budget a flat frame is drawn in bands of rows; the gather method blurs copies
+    // of the whole frame, so it cannot be.
     const std::string flat = "--maxmemory 100M --scene lights:width=1920:height=1080:aa=1 ";
-    r = bokehtool(flat + "--defocus:iris=1 -o " + out);
-    expect_clean_failure(r, "--defocus: the defocus of 1920x1080 pixels into 1920x1080 would take 146.3 MiB, over "
-                            "the memory budget of 100.0 MiB (--maxmemory raises it; iris mode's exp space is set by "
-                            "the whole frame's colours and is not drawn in bands)", out);
+    r = bokehtool(flat + "--defocus:method=gather -o " + out);
+    expect_clean_failure(r, "--defocus: the defocus of 1920x1080 pixels into 1920x1080 would take 114.7 MiB, over "
+                            "the memory budget of 100.0 MiB (--maxmemory raises it; the gather method blurs copies "
+                            "of the whole frame and is not drawn in bands)", out);
     r = bokehtool(format("-v {}--defocus -o {}/banded.exr", flat, dir));
     EXPECT_EQ(r.status, 0) << r.err;
     EXPECT_NE(r.out.find("output 1920x1080, in 2 bands of "), std::string::npos) << r.out;

@@ -63,6 +63,7 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         int supersample, dilate_px;
         int64_t nonfinite;  // of each kind, in the source's data window
         int max_sprites = 0;  // lens character with at most this many sprites (0: off)
+        float iris      = 0.0f;
     };
     // Lens character's bands lie on its lens layers' grid of 256 rows: a taller frame, and a
     // budget (50 bytes a pixel) that holds a band of 256 rows beside the result.
@@ -73,7 +74,9 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
                            Case{ "layers, a data window inside the display window", &inner, DefocusMethod::Layers,
                                  1, 0, 2 },
                            Case{ "lens character, all highlights", &big, DefocusMethod::Layers, 1, 0, 0, 20000 },
-                           Case{ "lens character, the 40 brightest", &big, DefocusMethod::Layers, 1, 0, 0, 40 } }) {
+                           Case{ "lens character, the 40 brightest", &big, DefocusMethod::Layers, 1, 0, 0, 40 },
+                           Case{ "iris mode", &s, DefocusMethod::Layers, 1, 0, 4, 0, 0.1f },
+                           Case{ "iris mode and lens character", &big, DefocusMethod::Layers, 1, 0, 0, 40, 0.1f } }) {
         SCOPED_TRACE(c.name);
         DefocusOptions o   = banded_options(s);
         o.fill             = DisocclusionFill::Foreground;
@@ -81,11 +84,14 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
         o.supersample      = c.supersample;
         o.depth_dilate_px  = c.dilate_px;
         o.lens_character   = c.max_sprites > 0;
+        o.iris             = c.iris;
         o.max_sprites      = c.max_sprites > 0 ? c.max_sprites : o.max_sprites;
         if (c.supersample == 2)  // the result is 4 times larger (64 bytes a source pixel)
             o.memory_budget_bytes = int64_t(480) * 270 * 120;
         if (c.max_sprites > 0)
             o.memory_budget_bytes = int64_t(960) * 540 * 50;
+        if (c.iris != 0.0f)  // the linear colour kept beside the exp space: 16 bytes a pixel more
+            o.memory_budget_bytes += int64_t(c.src->spec().width) * c.src->spec().height * 20;
         DefocusReport banded, whole;
         const OIIO::ImageBuf b = run_defocus(*c.src, o, &banded);
         o.memory_budget_bytes  = 0;
@@ -155,15 +161,24 @@ TEST(DefocusBands, WhatCannotBeBandedIsRefusedWithTheReason)
         EXPECT_NE(err.find(why), std::string::npos) << err;
     };
     DefocusOptions o = banded_options(s);
-    DefocusOptions iris = o;
-    iris.iris           = 2.0f;
-    refused(iris, "iris mode's exp space");
     DefocusOptions gather = o;
     gather.method         = DefocusMethod::Gather;
     refused(gather, "the gather method");
     DefocusOptions predicted = o;
     predicted.planner        = DefocusPlanner::Predicted;
     refused(predicted, "the predicted planner");
+    // Iris mode past its exponent's range: the frame's own error, banded or not.
+    DefocusOptions iris = o;
+    iris.iris           = 0.5f;
+    std::vector<std::string> errors;
+    for (int64_t budget : { o.memory_budget_bytes, int64_t(0) }) {
+        iris.memory_budget_bytes = budget;
+        OIIO::ImageBuf dst;
+        EXPECT_FALSE(defocus(dst, s, iris));
+        errors.push_back(dst.geterror());
+    }
+    EXPECT_NE(errors[0].find("iris 0.5 times channel R's range "), std::string::npos) << errors[0];
+    EXPECT_EQ(errors[0], errors[1]);
     // Less than the result itself: no band fits.
     DefocusOptions tiny     = o;
     tiny.memory_budget_bytes = int64_t(240) * 135 * 8;
