@@ -20,6 +20,9 @@ Shots:
                plane's deep image (256 a pixel, two seeds)
   plane-dolly  the same plane moved 0 -> 0.5 m towards the camera (every depth changes),
                focus held at 3 m; truth as above
+  facing-cross the plane's texture facing the camera at 3 m, focus moved so its CoC runs
+               -3 -> +3 px evenly (not in the default shots): how the picture starts to
+               blur; truth as above, and again with the rays over each pixel's area
   lights-pull  the built-in lights scene (240 x 135: HDR lights over a textured floor) at
                its f/1.27, focus 5 m -> 7 m; truth: the scene's geometric truth (--spp a
                pixel, two seeds; its figure is noisy at that count: see --spp)
@@ -28,7 +31,11 @@ Shots:
                cannot move)
 
     temporal.py [--module-dir build/python] [--frames 24] [--spp 1024] [--csv FILE]
-                [--chart FILE] [--shots plane-pull,...]
+                [--chart FILE] [--shots plane-pull,...] [--plane-width 320] [--columns 0]
+
+--columns K also prints each plane shot's figure over bands of K columns of the frame (the
+plane's near side on the left, its far side on the right): where in depth a method is less
+steady than the truth.
 """
 import argparse
 import csv
@@ -44,6 +51,8 @@ ap.add_argument("--spp", type=int, default=1024, help="rays a pixel of the light
 ap.add_argument("--csv")
 ap.add_argument("--chart")
 ap.add_argument("--shots", default="plane-pull,plane-dolly,lights-pull,lights-dolly")
+ap.add_argument("--plane-width", type=int, default=320, help="the plane shots' width (height 9/16 of it)")
+ap.add_argument("--columns", type=int, default=0, help="also print the plane shots' figure over bands of this many columns")
 args = ap.parse_args()
 sys.path.insert(0, args.module_dir)
 import openbokeh as ob  # noqa: E402
@@ -58,12 +67,14 @@ def tone_mapped(img):
     return a / (1.0 + np.abs(a))
 
 
-def figure(a, b):
-    """(overall, worst frame, median frame) of the sequences a and b (the same for a method)."""
-    e1 = np.array([np.mean((a[i + 1] - a[i]) * (b[i + 1] - b[i])) for i in range(n - 1)])
-    e2 = np.array([np.mean((a[i + 2] - 2 * a[i + 1] + a[i]) * (b[i + 2] - 2 * b[i + 1] + b[i]))
+def figure(a, b, cols=slice(None)):
+    """(overall, worst frame, median frame) of the sequences a and b (the same for a method),
+    over the columns `cols` of the frames."""
+    e1 = np.array([np.mean(((a[i + 1] - a[i]) * (b[i + 1] - b[i]))[:, cols]) for i in range(n - 1)])
+    e2 = np.array([np.mean(((a[i + 2] - 2 * a[i + 1] + a[i]) * (b[i + 2] - 2 * b[i + 1] + b[i]))[:, cols])
                    for i in range(n - 2)])
-    per = [np.sqrt(max(e2[i], 0.0) / (0.5 * (e1[i] + e1[i + 1]))) for i in range(n - 2)]
+    # Frames that do not change (a facing plane in focus) have no figure of their own.
+    per = [np.sqrt(max(e2[i], 0.0) / (0.5 * (e1[i] + e1[i + 1]))) for i in range(n - 2) if e1[i] + e1[i + 1] > 0]
     return np.sqrt(max(e2.mean(), 0.0) / e1.mean()), max(per), float(np.median(per))
 
 
@@ -86,20 +97,27 @@ def pull(near, far):
 
 def shot_frames(shot):
     """[(focus_m, image array or ImageBuf, truth callable(seed) or None)] for each frame, and lens kwargs."""
-    if shot.startswith("plane"):
-        base = slanted_plane(320, 180)
+    if shot.startswith("plane") or shot == "facing-cross":
+        base = slanted_plane(args.plane_width, args.plane_width * 9 // 16)
         lens = dict(focal="85", fstop="1.4", sensor="36", unit="m")
+        # CoC px of depth 3 m at focus f (m): (3 - f) / 3 * k / (1000 f - 85), k = 85^2 / (1.4 eps),
+        # eps the sensor's mm a pixel; solved for f.
+        k = 85.0 ** 2 / (1.4 * 36.0 / args.plane_width)
         frames = []
         for i in range(n):
             img = base.copy()
             if shot == "plane-pull":
                 focus = pull(1.5, 6.0)[i]
+            elif shot == "facing-cross":
+                c = -3.0 + 6.0 * i / (n - 1)
+                focus = (3.0 * k + 255.0 * c) / (3000.0 * c + k)
+                img[..., 4] = 3.0
             else:
                 focus = 3.0
                 img[..., 4] -= 0.5 * i / (n - 1)
             deep = ob.deepen(img)
-            frames.append((focus, img, lambda seed, d=deep, f=focus: ob.defocus(
-                d, method="truth", spp="256", seed=str(seed), focus=str(f), **lens)))
+            frames.append((focus, img, lambda seed, d=deep, f=focus, pixel="centre": ob.defocus(
+                d, method="truth", spp="256", seed=str(seed), focus=str(f), pixel=pixel, **lens)))
         return frames, lens
     sharp = ob.scene("lights", width=240, height=135)
     lens = dict(fstop="1.27", focal="50", sensor="36")
@@ -147,6 +165,20 @@ for shot in args.shots.split(","):
         rows.append(dict(shot=shot, method="truth", figure=overall, worst=worst, median=median, seconds=time.time() - t))
         print(f"{shot:13s} {'truth':12s} {overall:6.3f}  worst {worst:6.3f}  median {median:6.3f}  ({time.time() - t:.1f} s)",
               flush=True)
+    if shot == "facing-cross":
+        pa = [tone_mapped(tr(1, pixel="area")) for _, _, tr in frames]
+        pb = [tone_mapped(tr(2, pixel="area")) for _, _, tr in frames]
+        overall, worst, median = figure(pa, pb)
+        rows.append(dict(shot=shot, method="truth (pixel area)", figure=overall, worst=worst, median=median))
+        print(f"{shot:13s} {'truth (area)':12s} {overall:6.3f}  worst {worst:6.3f}  median {median:6.3f}", flush=True)
+    if args.columns > 0 and shot.startswith("plane"):
+        width = seqs[METHODS[0][0]][0].shape[1]
+        for c0 in range(0, width, args.columns):
+            cols = slice(c0, min(width, c0 + args.columns))
+            line = " ".join(f"{name} {figure(seqs[name], seqs[name], cols)[0]:.3f}" for name, _ in METHODS)
+            if frames[0][2] is not None:
+                line += f" truth {figure(a, b, cols)[0]:.3f}"
+            print(f"{shot:13s} columns {c0:4d}-{cols.stop - 1:4d}: {line}", flush=True)
 
 if args.csv:
     with open(args.csv, "w", newline="") as f:
