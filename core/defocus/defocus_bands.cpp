@@ -222,6 +222,85 @@ bool frame_iris(IrisSpace& iris, const OIIO::ImageBuf& src, const DefocusOptions
     return iris_space_for(o.iris, lo, hi, iris, err);
 }
 
+// The plan of the whole frame (its CoC range in `rep`, the rungs and reductions), from its
+// CoCs alone, as the frame at once would make it.
+bool plan_whole_frame(LayerPlan& plan, DefocusReport& rep, const OIIO::ImageBuf& src, const DefocusOptions& o,
+                      int nthreads, std::string& err)
+{
+    Frame whole;
+    frame_cocs(whole.coc, src, o.coc, o.depth_dilate_px, nthreads);
+    const auto [lo, hi] = std::minmax_element(whole.coc.begin(), whole.coc.end());
+    rep.min_coc_px      = whole.coc.empty() ? 0.0f : *lo;
+    rep.max_coc_px      = whole.coc.empty() ? 0.0f : *hi;
+    if (rep.method != DefocusMethod::Reference) {
+        plan = choose_layer_plan(whole, o, rep.min_coc_px, rep.max_coc_px, nthreads, rep.plans);
+        return true;
+    }
+    if ((rep.max_coc_px - rep.min_coc_px) / o.reference_step_px > 65535.0f) {
+        err = format("CoC range {} .. {} px holds too many {} px steps; raise the reference step", rep.min_coc_px,
+                     rep.max_coc_px, o.reference_step_px);
+        return false;
+    }
+    plan.coc_px = reference_rungs(whole.coc, rep.min_coc_px, rep.max_coc_px, o.reference_step_px);
+    plan.reduction.assign(plan.coc_px.size(), 1);
+    return true;
+}
+
+// Where the bands lie: the source's data window, the output region, the output rows a band
+// draws, the rows past them it reads, and how many bands.
+struct BandGeometry {
+    OIIO::ROI data, out;
+    int rows, halo, bands;
+};
+
+// Band `b`'s output rows, the source rows it reads, and the source rows whose non-finite
+// values it counts (each row once: by the band whose output rows hold it).
+FrameBand band_at(const BandGeometry& g, int b)
+{
+    FrameBand band;
+    band.out         = g.out;
+    band.out.ybegin  = g.out.ybegin + b * g.rows;
+    band.out.yend    = std::min(g.out.yend, band.out.ybegin + g.rows);
+    band.read        = g.data;
+    band.read.ybegin = std::clamp(band.out.ybegin - g.halo, g.data.ybegin, g.data.yend - 1);
+    band.read.yend   = std::clamp(band.out.yend + g.halo, band.read.ybegin + 1, g.data.yend);
+    band.counted_ybegin = b == 0 ? g.data.ybegin : std::clamp(band.out.ybegin, g.data.ybegin, g.data.yend);
+    band.counted_yend   = b + 1 == g.bands ? g.data.yend : std::clamp(band.out.yend, g.data.ybegin, g.data.yend);
+    return band;
+}
+
+// One band: prepared from its rows, its layers composited on the frame's plan, the
+// uncovered background filled, and its rows written into `dst` (begun by the first band,
+// `begun` false: it knows whether the source has alpha). What it reports is added to `rep`.
+bool draw_band(OIIO::ImageBuf& dst, bool& begun, DefocusReport& rep, const OIIO::ImageBuf& src,
+               const DefocusOptions& o, const LayerPlan& plan, const FrameBand& band, const OIIO::ROI& out,
+               int nthreads, std::string& err)
+{
+    const int up = o.supersample;
+    DefocusReport part;
+    Frame f;
+    if (!prepare_frame(f, src, o, part, nthreads, err, &band))
+        return false;
+    if (!begun)
+        begin_result(dst, src.spec(), f.lens, scaled_roi(out, up), up, f.img.has_alpha);
+    begun = true;
+    Plane plane(f.out.width() * up, f.out.height() * up, 4);
+    std::fill_n(plane.px.get(), plane.size(), 0.0f);
+    const Membership m = layer_membership(f, plan, nthreads);
+    if (!composite_layers(plane, f, m, o, nthreads, err))
+        return false;
+    fill_uncovered(plane, f, o, part, nthreads);
+    report_sprites(part, f.sprites.get());
+    write_result_rows(dst, plane, f.out.xbegin * up, f.out.ybegin * up, nthreads);
+    rep.sprites_drawn += part.sprites_drawn;
+    rep.sprite_seconds += part.sprite_seconds;
+    rep.nonfinite.colour += part.nonfinite.colour;
+    rep.nonfinite.depth += part.nonfinite.depth;
+    rep.fill_continued_px += part.fill_continued_px;
+    rep.fill_foreground_px += part.fill_foreground_px;
+    return true;
+}
+
 }  // namespace
 
 bool detail::defocus_bands_allowed(const DefocusOptions& o, std::string& why)
@@ -250,23 +329,9 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
 
     // The plan over the whole frame, from its CoCs alone.
     LayerPlan plan;
-    {
-        Frame whole;
-        frame_cocs(whole.coc, src, o.coc, o.depth_dilate_px, nthreads);
-        const auto [lo, hi] = std::minmax_element(whole.coc.begin(), whole.coc.end());
-        rep.min_coc_px      = whole.coc.empty() ? 0.0f : *lo;
-        rep.max_coc_px      = whole.coc.empty() ? 0.0f : *hi;
-        if (rep.method == DefocusMethod::Reference) {
-            if ((rep.max_coc_px - rep.min_coc_px) / o.reference_step_px > 65535.0f) {
-                dst.errorfmt("defocus: CoC range {} .. {} px holds too many {} px steps; raise the reference step",
-                             rep.min_coc_px, rep.max_coc_px, o.reference_step_px);
-                return false;
-            }
-            plan.coc_px = reference_rungs(whole.coc, rep.min_coc_px, rep.max_coc_px, o.reference_step_px);
-            plan.reduction.assign(plan.coc_px.size(), 1);
-        } else {
-            plan = choose_layer_plan(whole, o, rep.min_coc_px, rep.max_coc_px, nthreads, rep.plans);
-        }
+    if (!plan_whole_frame(plan, rep, src, o, nthreads, err)) {
+        dst.errorfmt("defocus: {}", err);
+        return false;
     }
     rep.layer_coc_px    = plan.coc_px;
     rep.layer_reduction = plan.reduction;
@@ -312,56 +377,23 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
     rep.bands     = (out.height() + rows - 1) / rows;
     rep.band_rows = rows * o.supersample;
 
-    const OIIO::ImageSpec& spec = src.spec();
-    const int up                = o.supersample;
-    bool alpha_known            = false;
+    const BandGeometry geometry{ data, out, rows, halo, rep.bands };
+    bool begun = false;
     for (int b = 0; b < rep.bands; ++b) {
-        FrameBand band;
-        band.out        = out;
-        band.out.ybegin = out.ybegin + b * rows;
-        band.out.yend   = std::min(out.yend, band.out.ybegin + rows);
-        band.read       = data;
-        band.read.ybegin = std::clamp(band.out.ybegin - halo, data.ybegin, data.yend - 1);
-        band.read.yend   = std::clamp(band.out.yend + halo, band.read.ybegin + 1, data.yend);
-        // Each source row counted by the band whose output rows hold it.
-        band.counted_ybegin = b == 0 ? data.ybegin : std::clamp(band.out.ybegin, data.ybegin, data.yend);
-        band.counted_yend = b + 1 == rep.bands ? data.yend : std::clamp(band.out.yend, data.ybegin, data.yend);
-        band.min_coc_px   = rep.min_coc_px;
-        band.max_coc_px   = rep.max_coc_px;
+        FrameBand band = band_at(geometry, b);
+        band.min_coc_px        = rep.min_coc_px;
+        band.max_coc_px        = rep.max_coc_px;
         band.sprite_cut        = sprites.cut;
         band.sprite_cut.offset = int64_t(band.read.ybegin - data.ybegin) * int64_t(data.width());
         band.iris_known        = o.iris != 0.0f;
         band.iris              = iris;
-
         DefocusOptions ob = o;
         if (o.progress)
             ob.progress = [&, b](float p) { o.progress((float(b) + p) / float(rep.bands)); };
-        DefocusReport part;
-        Frame f;
-        if (!prepare_frame(f, src, ob, part, nthreads, err, &band)) {
+        if (!draw_band(dst, begun, rep, src, ob, plan, band, out, nthreads, err)) {
             dst.errorfmt("defocus: {}", err);
             return false;
         }
-        if (!alpha_known) {
-            begin_result(dst, spec, f.lens, scaled_roi(out, up), up, f.img.has_alpha);
-            alpha_known = true;
-        }
-        Plane plane(f.out.width() * up, f.out.height() * up, 4);
-        std::fill_n(plane.px.get(), plane.size(), 0.0f);
-        const Membership m = layer_membership(f, plan, nthreads);
-        if (!composite_layers(plane, f, m, ob, nthreads, err)) {
-            dst.errorfmt("defocus: {}", err);
-            return false;
-        }
-        fill_uncovered(plane, f, ob, part, nthreads);
-        report_sprites(part, f.sprites.get());
-        rep.sprites_drawn += part.sprites_drawn;
-        rep.sprite_seconds += part.sprite_seconds;
-        write_result_rows(dst, plane, f.out.xbegin * up, f.out.ybegin * up, nthreads);
-        rep.nonfinite.colour += part.nonfinite.colour;
-        rep.nonfinite.depth += part.nonfinite.depth;
-        rep.fill_continued_px += part.fill_continued_px;
-        rep.fill_foreground_px += part.fill_foreground_px;
     }
     if (o.lens_character) {
         rep.lens_character    = true;
@@ -371,7 +403,7 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
         rep.sprite_min_coc_px = sprites.min_coc_px;
         rep.sprite_max_coc_px = sprites.max_coc_px;
     }
-    summarise_defocus(rep, out.width() * up, out.height() * up);
+    summarise_defocus(rep, out.width() * o.supersample, out.height() * o.supersample);
     if (report)
         *report = std::move(rep);
     return true;
