@@ -6,7 +6,8 @@
 // axis and distorted by the aperture's radial LUT; docs/methods/lens-character.md):
 //  1. Per wavelength, a radial table: rays at 8K pupil radii s in (0, 1) land at r(s) =
 //     s (c/2 - a(s, l)); each ray's mass s ds is spread over the R interval its s step
-//     covers, into bins 0.5 px wide; the bins' densities (mass over annulus area) are
+//     covers, into bins 0.5 px wide (an eighth of the radius for a disk under 8 px:
+//     radial_bin_px); the bins' densities (mass over annulus area) are
 //     kept at K + 1 pupil radii s = k / K, cumulatively, so the PSF of any pupil span
 //     [lo, hi] along a direction is D(R, hi) - D(R, lo) (linear in s and R between).
 //     The table is built as increments (the few bins each s step's rays reach) summed
@@ -232,7 +233,8 @@ void build_radial_table(RgbTable& table, double reach_px[2], const LensCharacter
 {
     reach_px[0] = reach_px[1] = -1.0;
     table.K         = std::clamp(int(std::ceil(2.0 * r_max)), 32, 1024);  // half a px of radius apart
-    table.half_bins = int(std::ceil(r_max / kBinPx)) + 2;
+    table.bin_px    = radial_bin_px(r_max);
+    table.half_bins = int(std::ceil(r_max / table.bin_px)) + 2;
     table.dens.assign(size_t(table.K + 1) * table.bins() * 3, 0.0f);
     const int nspec = int(spectrum.size());
     std::vector<std::vector<double>> radii{ size_t(nspec) };
@@ -258,7 +260,7 @@ void build_radial_table(RgbTable& table, double reach_px[2], const LensCharacter
         }
     for (int side = 0; side < 2; ++side)
         if (reach_px[side] >= 0.0)
-            reach_px[side] = (std::floor(reach_px[side] / kBinPx) + 3.0) * kBinPx;
+            reach_px[side] = (std::floor(reach_px[side] / table.bin_px) + 3.0) * table.bin_px;
 }
 
 // Onion-ring contrast per channel: procedural, plus the physical law per wavelength

@@ -57,7 +57,7 @@ void add_wavelength_increments(RgbTable& t, const std::vector<double>& r, const 
     const int K = t.K, nb = t.bins();
     const double ds = 1.0 / (double(K) * kRaysPerRow);
     auto density = [&](int b) {  // per unit angle
-        const double r0 = std::abs((b - t.half_bins) * kBinPx), r1 = std::abs((b - t.half_bins + 1) * kBinPx);
+        const double r0 = std::abs((b - t.half_bins) * t.bin_px), r1 = std::abs((b - t.half_bins + 1) * t.bin_px);
         return mass[size_t(b)] / (0.5 * std::abs(r1 * r1 - r0 * r0));
     };
     for (int k = std::max(1, k_begin); k < std::min(k_end, K + 1); ++k) {
@@ -67,7 +67,7 @@ void add_wavelength_increments(RgbTable& t, const std::vector<double>& r, const 
             const double r_prev = r[size_t(i)], r_next = r[size_t(i) + 1];
             const double m      = s_mid * ds;  // pupil area per unit angle
             const double lo = std::min(r_prev, r_next), hi = std::max(r_prev, r_next);
-            const double f_lo = lo / kBinPx + t.half_bins, f_hi = hi / kBinPx + t.half_bins;
+            const double f_lo = lo / t.bin_px + t.half_bins, f_hi = hi / t.bin_px + t.half_bins;
             const int b_lo = std::clamp(int(std::floor(f_lo)), 0, nb - 1);
             const int b_hi = std::clamp(int(std::floor(f_hi)), 0, nb - 1);
             touched_lo     = std::min(touched_lo, b_lo);
@@ -265,7 +265,7 @@ void add_fringes(RgbTable& t, const LensCharacter& lens, const Geometry& g,
         for (const SpectralSample& smp : spectrum)
             innermost = std::min(innermost, std::abs(Landing{ lens, 0.5 * g.c_ref, na_per_pitch, smp.wavelength_nm }.r(s)));
         t.rim[size_t(j)]     = float(std::abs(r_mid));
-        t.plateau[size_t(j)] = float(std::max(0.0, innermost - 2.0 * kBinPx));
+        t.plateau[size_t(j)] = float(std::max(0.0, innermost - 2.0 * t.bin_px));
         const double rel = slope * sd / (0.5 * std::abs(g.c_ref));
         const double x   = std::clamp((rel - 0.05) / 0.2, 0.0, 1.0);
         t.gain[size_t(j)] = float(x * x * (3.0 - 2.0 * x));

@@ -18,7 +18,13 @@
 
 namespace bokeh::detail {
 
-constexpr double kBinPx = 0.5;   // radial table bin width, reference px
+constexpr double kBinPx = 0.5;   // radial table bin width, reference px, for a disk of 8 px and more
+// The bin width for a PSF of reference radius r_max: kBinPx, and r_max / 8 for a smaller
+// disk (down to 1/64 px), so a disk just past a pixel of CoC, where the PSF stops being a
+// point, is not spread a pixel by half-pixel bins (a 1.044 px disk put 22 % of its light
+// outside the centre pixel where its area puts 0.5 %: a step as a light passed 1 px of
+// CoC in a focus pull).
+inline double radial_bin_px(double r_max) { return std::clamp(r_max / 8.0, 1.0 / 64.0, kBinPx); }
 constexpr double kBandV = 8.0;   // edge-law band half-width in v: |F - 1| < 4 % past it
 constexpr double kFadeV = 6.0;   // from here to kBandV, F fades to its mean (1 in, 0 out)
 
@@ -86,6 +92,7 @@ struct Landing {
 // (step 3), both over the spectrum.
 struct RgbTable {
     int K = 0, half_bins = 0;
+    double bin_px = kBinPx;  // radial bin width, reference px (radial_bin_px)
     std::vector<float> dens;  // (K + 1) x bins x 3: density of the span [0, k / K]
 
     // Fringes: at Kf + 1 pupil radii s_j = s_lo + j (1 - s_lo) / Kf, the middle
@@ -114,7 +121,7 @@ struct RgbTable {
         const int k0    = std::min(int(fk), K - 1);
         const double tk = fk - k0;
         const bool negative = std::signbit(R);
-        const double u = std::max(0.0, std::abs(R) / kBinPx - 0.5);
+        const double u = std::max(0.0, std::abs(R) / bin_px - 0.5);
         const int b0   = int(u);
         if (b0 >= half_bins)
             return;

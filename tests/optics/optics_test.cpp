@@ -280,6 +280,41 @@ TEST(LensPsf, OffIsTheFlatDiskKernel)
     }
 }
 
+TEST(LensPsf, JustPastAPixelOfCocTheDiskGrowsFromThePoint)
+{
+    // Under a pixel of CoC the PSF is a point; just past it, the disk's light starts to
+    // reach the neighbours as the disk's area covers them, as the flat kernel's does. The
+    // radial table's bins are then a fraction of the disk's radius: half-pixel bins spread a
+    // 1.044 px disk a pixel (22 % of its light outside the centre pixel, where the disk's
+    // area puts 0.5 %), a step in time as a light's CoC passed 1 px in a focus pull
+    // (core/optics/psf_table.h, radial_bin_px). Measured against the kernel (absolute, the
+    // PSF summing to 1): 0.007 at 1.02 px, 0.027-0.030 at 1.05-1.1 (the PSF's sub-samples
+    // reach the neighbours later than the disk's area does), under 0.012 from 1.25 to 3 px;
+    // with half-pixel bins 0.19-0.22 from 1.02 to 1.25 px.
+    bokeh::LensCharacter off;
+    double previous_centre = 1.0;
+    for (double coc : { 1.0, 1.02, 1.05, 1.1, 1.25, 1.5, 2.0, 3.0 }) {
+        const bokeh::Psf p = psf_of(off, coc);
+        bokeh::Kernel k;
+        k.shape    = bokeh::KernelShape::Disk;
+        k.width_px = k.height_px = float(coc);
+        const bokeh::KernelWeights kw = bokeh::kernel_weights(k, 1);
+        double worst = 0.0;
+        for (int y = 0; y < p.height; ++y)
+            for (int x = 0; x < p.width; ++x) {
+                const int dx = x - p.width / 2, dy = y - p.height / 2;
+                const double ref = (std::abs(dx) <= kw.rx && std::abs(dy) <= kw.ry) ? kw.at(dx, dy) : 0.0;
+                worst = std::max(worst, std::abs(p.at(x, y, 0) - ref));
+            }
+        const double centre = p.at(p.width / 2, p.height / 2, 0);
+        std::printf("[ figures  ] off, CoC %.2f: centre %.4f, largest difference from the disk kernel %.4f\n", coc,
+                    centre, worst);
+        EXPECT_LT(worst, 0.04) << "coc " << coc;
+        EXPECT_LE(centre, previous_centre + 1e-6) << "coc " << coc << ": the centre only falls as the disk grows";
+        previous_centre = centre;
+    }
+}
+
 TEST(LensPsf, CausticWhereTheLandingRadiusTurns)
 {
     // Pure third-order spherical aberration (no colour, no zonal correction):
