@@ -144,6 +144,51 @@ float texture(int x, int y, int salt)
     return float((h * 2654435761u) >> 8 & 0xffff) / 65535.0f;
 }
 
+OIIO::ImageBuf slanted_plane()
+{
+    return make_image(160, 90, [](int x, int y) {
+        Px p;
+        const float inv  = 1.0f + (0.1f - 1.0f) * float(x) / 159.0f;
+        p.z              = 1.0f / inv;
+        const bool check = ((x / 6) + (y / 6)) % 2 == 0;
+        p.r              = check ? 0.9f : 0.1f;
+        p.g              = 0.5f + 0.4f * std::sin(0.5f * float(y));
+        p.b              = 0.3f + 0.6f * texture(x / 3, y / 3);
+        return p;
+    });
+}
+
+namespace {
+// R, G, B of a frame after the tone map x / (1 + |x|), as doubles.
+std::vector<double> tone_mapped_rgb(const OIIO::ImageBuf& img)
+{
+    std::vector<double> v;
+    for (OIIO::ImageBuf::ConstIterator<float> it(img); !it.done(); ++it)
+        for (int c = 0; c < 3; ++c)
+            v.push_back(double(it[c]) / (1.0 + std::abs(double(it[c]))));
+    return v;
+}
+}  // namespace
+
+double second_to_first_difference(const std::vector<OIIO::ImageBuf>& a, const std::vector<OIIO::ImageBuf>& b)
+{
+    std::vector<std::vector<double>> fa, fb;
+    for (size_t i = 0; i < a.size(); ++i) {
+        fa.push_back(tone_mapped_rgb(a[i]));
+        fb.push_back(tone_mapped_rgb(b[i]));
+    }
+    double e1 = 0.0, e2 = 0.0;
+    for (size_t i = 0; i + 1 < fa.size(); ++i)
+        for (size_t k = 0; k < fa[i].size(); ++k) {
+            e1 += (fa[i + 1][k] - fa[i][k]) * (fb[i + 1][k] - fb[i][k]);
+            if (i + 2 < fa.size())
+                e2 += (fa[i + 2][k] - 2.0 * fa[i + 1][k] + fa[i][k]) * (fb[i + 2][k] - 2.0 * fb[i + 1][k] + fb[i][k]);
+        }
+    // Per frame: e1 has one more frame pair than e2.
+    const double n1 = double(fa.size() - 1), n2 = double(fa.size() - 2);
+    return std::sqrt(std::max(0.0, e2 / n2) / (e1 / n1));
+}
+
 bokeh::KernelWeights disk(float c)
 {
     bokeh::Kernel k;

@@ -90,6 +90,20 @@ bokeh::DefocusOptions direct_options(bokeh::DefocusMethod m, bokeh::Border borde
 /// metres (the focus left to the test).
 bokeh::DefocusOptions plane_lens(bokeh::DefocusMethod m);
 
+/// The focus-pull tests' 160 x 90 slanted plane: 1 / Z linear in x from 1 m (left) to 10 m
+/// (right), textured (6 px checker in red, horizontal sine in green, 3 px blocks of noise in
+/// blue; luminance up to about 0.9).
+OIIO::ImageBuf slanted_plane();
+
+/// How a sequence changes in time: sqrt(mean over frames of mean(d2_a d2_b) / mean of
+/// mean(d1_a d1_b)), d1 and d2 the first and second differences of the frames' R, G, B
+/// after the tone map x / (1 + |x|). A sequence that changes at a steady rate scores 0; one
+/// that steps scores about 1 and more. `a` and `b` are two renders of the same sequence: a
+/// method's twice (the same frames: the RMS ratio), or the truth's with two ray seeds,
+/// whose noise is independent, so its products average to zero and the figure is the
+/// noiseless truth's (a noisy truth alone scores sqrt(3) for its noise).
+double second_to_first_difference(const std::vector<OIIO::ImageBuf>& a, const std::vector<OIIO::ImageBuf>& b);
+
 /// Defocus options for a built-in scene (make_scene): depth in metres and the lens and
 /// focus its metadata records.
 bokeh::DefocusOptions scene_lens(const OIIO::ImageSpec& scene);

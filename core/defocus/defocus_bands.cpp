@@ -108,6 +108,7 @@ struct FrameSprites {
     float extent_px    = 0.0f;
     size_t psfs        = 0;
     float min_coc_px = 0.0f, max_coc_px = 0.0f;
+    std::vector<float> coc_px;  // each kept sprite's
 };
 
 // The frame prepared a stretch of rows at a time (half the budget of prepared pixels, 26
@@ -196,6 +197,7 @@ bool frame_sprites(FrameSprites& fs, const OIIO::ImageBuf& src, const DefocusOpt
         set.sprites.push_back(sp);
         fs.min_coc_px = set.sprites.size() == 1 ? r.coc_px : std::min(fs.min_coc_px, r.coc_px);
         fs.max_coc_px = set.sprites.size() == 1 ? r.coc_px : std::max(fs.max_coc_px, r.coc_px);
+        fs.coc_px.push_back(r.coc_px);
     }
     if (!fetch_sprite_psfs(set, *shared_psf_cache(lens, nthreads), FieldFrame(src.spec(), lens), o.supersample,
                            nthreads, err))
@@ -273,14 +275,15 @@ FrameBand band_at(const BandGeometry& g, int b)
 // uncovered background filled, and its rows written into `dst` (begun by the first band,
 // `begun` false: it knows whether the source has alpha). What it reports is added to `rep`.
 bool draw_band(OIIO::ImageBuf& dst, bool& begun, DefocusReport& rep, const OIIO::ImageBuf& src,
-               const DefocusOptions& o, const LayerPlan& plan, const FrameBand& band, const OIIO::ROI& out,
-               int nthreads, std::string& err)
+               const DefocusOptions& o, const LayerPlan& plan, const std::vector<float>& gain_floors,
+               const FrameBand& band, const OIIO::ROI& out, int nthreads, std::string& err)
 {
     const int up = o.supersample;
     DefocusReport part;
     Frame f;
     if (!prepare_frame(f, src, o, part, nthreads, err, &band))
         return false;
+    f.sprite_gain_floors = gain_floors;  // the whole frame's sprites, as the frame at once
     if (!begun)
         begin_result(dst, src.spec(), f.lens, scaled_roi(out, up), up, f.img.has_alpha);
     begun = true;
@@ -378,6 +381,8 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
     rep.band_rows = rows * o.supersample;
 
     const BandGeometry geometry{ data, out, rows, halo, rep.bands };
+    const std::vector<float> gain_floors =
+        o.lens_character ? sprite_gain_floors(sprites.coc_px, plan.coc_px) : std::vector<float>();
     bool begun = false;
     for (int b = 0; b < rep.bands; ++b) {
         FrameBand band = band_at(geometry, b);
@@ -390,7 +395,7 @@ bool detail::defocus_in_bands(OIIO::ImageBuf& dst, const OIIO::ImageBuf& src, co
         DefocusOptions ob = o;
         if (o.progress)
             ob.progress = [&, b](float p) { o.progress((float(b) + p) / float(rep.bands)); };
-        if (!draw_band(dst, begun, rep, src, ob, plan, band, out, nthreads, err)) {
+        if (!draw_band(dst, begun, rep, src, ob, plan, gain_floors, band, out, nthreads, err)) {
             dst.errorfmt("defocus: {}", err);
             return false;
         }

@@ -420,7 +420,7 @@ void composite_tile(const LayerPass& lp, int tile, TileContent& known, bool firs
 // colour is (a deep frame's layers are continued only under the same surface, the deep
 // visibility; its sprites are not). The gain's grid is the layer's tiles.
 SpriteGain sprite_gain(const Frame& f, const Membership& m, int k, int gx, int gy, int tile_px, int cols,
-                       int s, size_t tiles)
+                       int s, size_t tiles, const std::vector<float>& floors)
 {
     SpriteGain gain;
     if (f.sprites && !f.deep() && layer_has_sprites(f, m, k)) {
@@ -433,6 +433,7 @@ SpriteGain sprite_gain(const Frame& f, const Membership& m, int k, int gx, int g
         gain.draw.resize(tiles);
         gain.low.resize(tiles);
         gain.visibility.resize(tiles);
+        gain.floor = size_t(k) < floors.size() ? floors[size_t(k)] : 0.0f;
     }
     return gain;
 }
@@ -499,6 +500,13 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
         std::fill_n(mean.px.get(), mean.size(), 0.0f);
     }
     std::vector<std::vector<TileContent>> contents(m.coc_px.size());
+    std::vector<float> gain_floors = f.sprite_gain_floors;
+    if (gain_floors.empty() && f.sprites && !f.deep()) {
+        std::vector<float> cocs;
+        for (const Sprite& sp : f.sprites->sprites)
+            cocs.push_back(sp.coc_px);
+        gain_floors = sprite_gain_floors(cocs, m.coc_px);
+    }
     for (const ApertureView& view : views) {
         const bool first_view = &view == &views.front();
         if (own_views)
@@ -520,7 +528,8 @@ bool detail::composite_layers(Plane& out, const Frame& f, const Membership& m, c
                 contents[size_t(k)].resize(tiles[size_t(k)].size());
             const double weight = tile_weight(size_t(k));
             Plane& target = per_layer ? (*per_layer)[size_t(k)] : view_out;
-            SpriteGain gain = sprite_gain(f, m, k, gx, gy, cells * s, cols[size_t(k)], s, tiles[size_t(k)].size());
+            SpriteGain gain = sprite_gain(f, m, k, gx, gy, cells * s, cols[size_t(k)], s, tiles[size_t(k)].size(),
+                                          gain_floors);
             const LayerPass pass{ f, m, k, w, lens_kernels, cells, s, cols[size_t(k)], gx, gy, up, target };
             parallel_for_chunks(0, int64_t(todo.size()), 1, nthreads, [&](int64_t n, int64_t) {
                 struct Counted {  // the tile counts as done however it returns

@@ -88,6 +88,10 @@ struct Frame {
     // (1 - (1 - u) a for a sample shared u / 1 - u with the nearer layer); the layer is
     // divided by its blur, as a flat frame's layers are by their visibility.
     std::vector<std::vector<float>> layer_vis;
+    // Lens character on a flat frame: each layer's sprite gain floor (sprite_gain_floors),
+    // given by the whole frame's sprites when the frame is drawn in bands; else empty and
+    // found from `sprites`.
+    std::vector<float> sprite_gain_floors;
     // Lens character: the highlights taken out of img (null: off).
     std::shared_ptr<SpriteSet> sprites;
     // Pseudo-high resolution: the result plane is over `out` scaled by this (1 or 2).
@@ -357,19 +361,25 @@ struct SpriteGain {
     std::vector<OIIO::ROI> draw;  // per tile: the frame pixels the layer reaches (else 1)
     std::vector<OIIO::ROI> low;   // per tile: the reduced pixels `visibility` covers
     std::vector<Plane> visibility;  // per tile: the blurred visibility, 1 channel; empty: 1
+    float floor = 0.0f;             // the least visibility the gain divides by (sprite_gain_floor)
     /// The tile holding frame pixel (x, y), or -1 past the grid.
     int tile_of(int x, int y) const
     {
         const int tx = floor_div(x - gx, tile_px), ty = floor_div(y - gy, tile_px);
         return tx < 0 || ty < 0 || tx >= cols || ty * cols + tx >= int(draw.size()) ? -1 : ty * cols + tx;
     }
-    /// The gain at frame pixel (x, y): 1 / visibility, read as `sample` reads colour
-    /// (0 where it is under 1e-6), 1 where the layer is not hidden.
+    /// The gain at frame pixel (x, y): 1 / max(visibility, floor), the visibility read as
+    /// `sample` reads colour (0 where it is under 1e-6), 1 where the layer is not hidden.
     float at(int x, int y) const;
 };
 
 /// Whether layer k holds a share of any sprite.
 bool layer_has_sprites(const Frame& f, const Membership& m, int k);
+
+/// Per layer of `rungs`, the least visibility its sprite gain divides by: 0 where every
+/// sprite's PSF lies within the layer's kernel (its CoC at most the rung's), rising to
+/// kSpriteGainFloor as the PSFs of the sprites it holds outgrow it (defocus_sprites.cpp).
+std::vector<float> sprite_gain_floors(const std::vector<float>& sprite_coc_px, const std::vector<float>& rungs);
 
 /// Add the sprites of layer k (share by `m` for flat frames, their own layer for deep
 /// ones) into `target` (RGBA over f.out; colour only: a sprite is the light of a pixel

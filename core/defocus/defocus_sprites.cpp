@@ -30,7 +30,9 @@
 //   layer's own colour is (SpriteGain), so moving a pixel's light between the layer and
 //   its sprite changes its shape only, never how it is occluded (measured: without it a
 //   light beside an in-focus card lost 19 % of its visible energy,
-//   DefocusSprites.ASpriteIsOccludedAsItsLayerIs). A deep frame's layers are continued
+//   DefocusSprites.ASpriteIsOccludedAsItsLayerIs), by no less than a floor where the
+//   sprite's PSF is wider than the layer's kernel (kSpriteGainFloor: there the layer's
+//   visibility says little of the sprite). A deep frame's layers are continued
 //   under the same surface only (core/defocus/defocus_deep.cpp), and its sprites are not divided.
 // * At focus (ours): the in-focus layer (within kLensLayerMaxCoc_px) is blurred with the
 //   lens's PSF on axis (lens_layer_kernels; R, G, B each their own, coverage and visibility
@@ -93,6 +95,26 @@ constexpr float kLensLayerMaxCoc_px = 0.0f;
 // The share of each channel's light a layer's lens kernel may leave out past its square:
 // at 1e-4 the kernels shrink from 25..65 px to 3..25 px with no change in those figures.
 constexpr double kLensKernelTail = 1e-4;
+// The least visibility a sprite's gain divides by in a layer whose kernel is smaller than
+// some of its sprites' PSFs (a pixel between two rungs is drawn in the nearer-to-focus one
+// with its own, wider PSF). There the PSF reaches past where the layer's kernel carries
+// any of the sprite's own pixel, so the layer's visibility says little of the sprite: it
+// falls toward 0 under the pixels shared into nearer layers, and 1 / visibility made the
+// sprite flicker as the CoCs moved. Where every PSF lies within the kernel (exact rungs,
+// the in-focus rung) the division stays whole: an in-focus light beside a blurred panel
+// glows through it only with gains past 100 (edges: a floor of 0.01 for every layer cost
+// 4.9 dB against the scatter reference). Measured with tools/bokeh-bench/temporal.py's
+// figure (lens off / achromat; the plain layers' figure 0.389 and 0.679) and
+// `bokeh-bench --task lens --size 640x360`: no floor, plane dolly 1.675 / 1.684, lights
+// dolly 0.566 / 0.907; floor 0.01: 0.438 / 0.517, 0.566 / 0.907; 0.02: 0.425 / 0.488,
+// 0.568 / 0.908; 0.03: 0.422 / 0.481, 0.580 / 0.914; 0.1: 0.426 / 0.480, 0.686 / 1.059
+// (there the gain no longer reaches the light behind the post's blurred edge); the lens
+// task's figures the same for each (46.3 / 51.0 / 47.2 dB).
+constexpr float kSpriteGainFloor = 0.02f;
+// The PSF's excess over the kernel (its CoC over the rung's, less 1, times the sprite's
+// share in the layer: continuous as a sprite moves between layers) at which the floor is
+// whole; a ladder's rungs lie 1.5 apart, so a sprite halfway between two has 0.2.
+constexpr float kSpriteGainFloorExcess = 0.05f;
 // A sprite's PSF is drawn as ramps within this fraction of each pixel's value (psf_runs).
 // Measured (bokeh-bench --task lens --size 640x360, PSNR against the scatter reference):
 // lights / edges / giant 45.4 / 51.0 / 47.3 dB, as drawn pixel by pixel; 1e-3 of each
@@ -221,7 +243,7 @@ float detail::SpriteGain::at(int x, int y) const
     float vis;
     bilinear(v, (float(x - gx) + 0.5f) / float(s) - 0.5f - float(low[size_t(t)].xbegin),
              (float(y - gy) + 0.5f) / float(s) - 0.5f - float(low[size_t(t)].ybegin), &vis, 0, 1);
-    return vis > 1e-6f ? 1.0f / vis : 0.0f;
+    return vis > 1e-6f ? 1.0f / std::max(vis, floor) : 0.0f;
 }
 
 detail::FieldFrame::FieldFrame(const OIIO::ImageSpec& spec, const LensCharacter& lens)
@@ -498,6 +520,27 @@ bool detail::lens_layer_kernels(std::vector<std::vector<KernelWeights>>& out, co
             return false;
         }
     return true;
+}
+
+std::vector<float> detail::sprite_gain_floors(const std::vector<float>& sprite_coc_px, const std::vector<float>& rungs)
+{
+    // Continuous in every sprite's CoC, so a sequence does not step as a sprite moves
+    // between layers: per layer, the widest PSF's excess over the kernel times its share.
+    std::vector<float> excess(rungs.size(), 0.0f);
+    for (float c : sprite_coc_px) {
+        uint16_t lo;
+        float up;
+        share_between(c, rungs, lo, up);
+        for (size_t k : { size_t(lo), size_t(lo) + 1 }) {
+            const float share = k == lo ? 1.0f - up : up;
+            const float rung  = k < rungs.size() ? std::abs(rungs[k]) : 0.0f;
+            if (share > 0.0f && rung > 0.0f)
+                excess[k] = std::max(excess[k], share * (std::abs(c) / rung - 1.0f));
+        }
+    }
+    for (float& e : excess)
+        e = kSpriteGainFloor * std::clamp(e / kSpriteGainFloorExcess, 0.0f, 1.0f);
+    return excess;
 }
 
 bool detail::layer_has_sprites(const Frame& f, const Membership& m, int k)

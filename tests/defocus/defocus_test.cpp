@@ -39,6 +39,8 @@ using bokeh_test::make_image;
 using bokeh_test::Px;
 using bokeh_test::run_defocus;
 using bokeh_test::error_of;
+using bokeh_test::second_to_first_difference;
+using bokeh_test::slanted_plane;
 using bokeh_test::scene_lens;
 
 namespace {
@@ -495,22 +497,6 @@ TEST(DefocusOcclusion, OpaqueInputStaysOpaque)
 
 namespace {
 
-// 160 x 90 slanted plane: 1 / Z linear in x from 1 m (left) to 10 m (right), textured
-// (6 px checker in red, horizontal sine in green, 3 px blocks of noise in blue).
-OIIO::ImageBuf slanted_plane()
-{
-    return make_image(160, 90, [](int x, int y) {
-        Px p;
-        const float inv  = 1.0f + (0.1f - 1.0f) * float(x) / 159.0f;
-        p.z              = 1.0f / inv;
-        const bool check = ((x / 6) + (y / 6)) % 2 == 0;
-        p.r              = check ? 0.9f : 0.1f;
-        p.g              = 0.5f + 0.4f * std::sin(0.5f * float(y));
-        p.b              = 0.3f + 0.6f * texture(x / 3, y / 3);
-        return p;
-    });
-}
-
 // Focus distances of a pull from `near_m` to `far_m` in `n` frames, evenly in 1 / distance
 // (as a focus ring turns).
 std::vector<double> focus_pull_m(double near_m, double far_m, int n)
@@ -519,42 +505,6 @@ std::vector<double> focus_pull_m(double near_m, double far_m, int n)
     for (int i = 0; i < n; ++i)
         d.push_back(1.0 / (1.0 / near_m + (1.0 / far_m - 1.0 / near_m) * i / double(n - 1)));
     return d;
-}
-
-// R, G, B of a frame after the tone map x / (1 + |x|), as doubles.
-std::vector<double> tone_mapped_rgb(const OIIO::ImageBuf& img)
-{
-    std::vector<double> v;
-    for (OIIO::ImageBuf::ConstIterator<float> it(img); !it.done(); ++it)
-        for (int c = 0; c < 3; ++c)
-            v.push_back(double(it[c]) / (1.0 + std::abs(double(it[c]))));
-    return v;
-}
-
-// How a sequence changes in time: sqrt(sum of mean(d2_a d2_b) / sum of mean(d1_a d1_b)),
-// d1 and d2 the first and second differences of the tone-mapped frames. A sequence that
-// changes at a steady rate scores 0; one that steps scores about 1 and more. `a` and `b`
-// are two renders of the same sequence: a method's twice (the same frames: the RMS
-// ratio), or the truth's with two ray seeds, whose noise is independent, so its products
-// average to zero and the figure is the noiseless truth's (a noisy truth alone scores
-// sqrt(3) for its noise).
-double second_to_first_difference(const std::vector<OIIO::ImageBuf>& a, const std::vector<OIIO::ImageBuf>& b)
-{
-    std::vector<std::vector<double>> fa, fb;
-    for (size_t i = 0; i < a.size(); ++i) {
-        fa.push_back(tone_mapped_rgb(a[i]));
-        fb.push_back(tone_mapped_rgb(b[i]));
-    }
-    double e1 = 0.0, e2 = 0.0;
-    for (size_t i = 0; i + 1 < fa.size(); ++i)
-        for (size_t k = 0; k < fa[i].size(); ++k) {
-            e1 += (fa[i + 1][k] - fa[i][k]) * (fb[i + 1][k] - fb[i][k]);
-            if (i + 2 < fa.size())
-                e2 += (fa[i + 2][k] - 2.0 * fa[i + 1][k] + fa[i][k]) * (fb[i + 2][k] - 2.0 * fb[i + 1][k] + fb[i][k]);
-        }
-    // Per frame: e1 has one more frame pair than e2.
-    const double n1 = double(fa.size() - 1), n2 = double(fa.size() - 2);
-    return std::sqrt(std::max(0.0, e2 / n2) / (e1 / n1));
 }
 
 }  // namespace
