@@ -554,20 +554,12 @@ TEST(DefocusSprites, FocusPullDoesNotPop)
     // shape at once (a CoC bin, a layer boundary) would show. The measure is the existing test's: d_i = RMSE of frame
     // i+1 against frame i (linear), and a pop is a step |d_{i+1} - d_i| above 0.5 of the
     // mean d (the reference's steps stay under 0.1 of it on the plane alone).
-    const OIIO::ImageBuf src = make_image(160, 90, [](int x, int y) {
-        Px p;
-        const float inv  = 1.0f + (0.1f - 1.0f) * float(x) / 159.0f;
-        p.z              = 1.0f / inv;
-        const bool check = ((x / 6) + (y / 6)) % 2 == 0;
-        p.r              = check ? 0.9f : 0.1f;
-        p.g              = 0.5f + 0.4f * std::sin(0.5f * float(y));
-        p.b              = 0.3f + 0.6f * hash01(x / 3, y / 3);
-        if ((x == 2 || x == 6) && y % 15 == 7) {
-            const float v = 0.8f * std::pow(10.0f, float(y / 15 + 6 * (x == 6)) / 11.0f);
-            p.r = v, p.g = 0.9f * v, p.b = 0.7f * v;
+    OIIO::ImageBuf src = slanted_plane();
+    for (OIIO::ImageBuf::Iterator<float> it(src); !it.done(); ++it)
+        if ((it.x() == 2 || it.x() == 6) && it.y() % 15 == 7) {
+            const float v = 0.8f * std::pow(10.0f, float(it.y() / 15 + 6 * (it.x() == 6)) / 11.0f);
+            it[0] = v, it[1] = 0.9f * v, it[2] = 0.7f * v;
         }
-        return p;
-    });
     for (DefocusMethod m : { DefocusMethod::Layers, DefocusMethod::Reference }) {
         for (bool character : { false, true }) {
             SCOPED_TRACE(std::string(method_name(m)) + (character ? " lens character" : " plain"));
