@@ -527,7 +527,9 @@ std::vector<float> detail::sprite_gain_floors(const std::vector<float>& sprite_c
     // Continuous in every sprite's CoC, so a sequence does not step as a sprite moves
     // between layers: per layer, the widest PSF's excess over the kernel times its share.
     std::vector<float> excess(rungs.size(), 0.0f);
-    for (float c : rungs.empty() ? std::vector<float>() : sprite_coc_px) {
+    if (rungs.empty())
+        return excess;
+    for (float c : sprite_coc_px) {
         uint16_t lo;
         float up;
         share_between(c, rungs, lo, up);
