@@ -125,6 +125,50 @@ TEST(DefocusBands, TheSamePixelsAsAtOnceWhereNoBackgroundIsContinued)
     }
 }
 
+TEST(DefocusBands, ASpritesGainFloorIsTheWholeFramesInEveryBand)
+{
+    // A layer's sprite gain floor (core/defocus/defocus_sprites.cpp, sprite_gain_floors)
+    // depends on every sprite the layer holds, wherever it is in the frame: a band must use
+    // the frame's, not its own rows'. CoC in px (direct), a ladder of ratio 2 (rungs 0, 1,
+    // 2, 4, 8, 16 and the extreme 20). At the top a light at CoC 18, drawn in rung 16 with
+    // its wider PSF: that layer's floor. At the bottom a light at CoC 16 (rung 16 alone)
+    // against the edge of a card at CoC -30: near its disk's rim over the card, layer 16's
+    // visibility falls under the floor where the card's wide blurred edge still lets the
+    // light through. A band holding the bottom light but not the top one would divide by
+    // less (measured: 1.39 off at most, where the frame's floor gives the same bits).
+    const int w = 640, h = 640;
+    const OIIO::ImageBuf src = make_image(w, h, [](int x, int y) {
+        Px p;
+        p.r = p.g = p.b = 0.2f;
+        p.z             = 20.0f;  // the background
+        if (x == 100 && y == 60)
+            p.r = p.g = p.b = 50.0f, p.z = 18.0f;
+        if (x == 316 && y == 520)
+            p.r = p.g = p.b = 50.0f, p.z = 16.0f;
+        if (x >= 317 && y >= 440 && y < 600)
+            p.r = 0.6f, p.g = 0.3f, p.b = 0.1f, p.z = -30.0f;
+        return p;
+    });
+    DefocusOptions o        = direct_options(DefocusMethod::Layers, Border::Clamp);
+    o.ladder_ratio          = 2.0f;
+    o.lens_character        = true;
+    o.fill                  = DisocclusionFill::Foreground;
+    o.memory_budget_bytes   = int64_t(w) * h * 50;
+    DefocusReport banded, whole;
+    const OIIO::ImageBuf b = run_defocus(src, o, &banded);
+    o.memory_budget_bytes  = 0;
+    const OIIO::ImageBuf a = run_defocus(src, o, &whole);
+    std::printf("[ figures  ] %d bands of %d rows; %lld sprites; rungs", banded.bands, banded.band_rows,
+                (long long)whole.sprites);
+    for (float c : whole.layer_coc_px)
+        std::printf(" %g", c);
+    std::printf("\n");
+    ASSERT_GE(banded.bands, 2) << banded.summary;
+    EXPECT_EQ(whole.sprites, 2) << whole.summary;
+    EXPECT_EQ(banded.layer_coc_px, whole.layer_coc_px);
+    EXPECT_EQ(error_of(b, a).max_abs, 0.0) << "the same bits";
+}
+
 TEST(DefocusBands, TheContinuedBackgroundStaysCloseToTheFrameAtOnce)
 {
     // Each band's plate is built from its own rows, so a continuation may differ from the
