@@ -213,15 +213,13 @@ bool frame_sprites(FrameSprites& fs, const OIIO::ImageBuf& src, const DefocusOpt
 bool frame_iris(IrisSpace& iris, const OIIO::ImageBuf& src, const DefocusOptions& o, const SpriteCut& cut,
                 int nthreads, std::string& err)
 {
-    std::array<float, 3> lo, hi;
-    lo.fill(std::numeric_limits<float>::infinity());
-    hi.fill(-std::numeric_limits<float>::infinity());
+    IrisRange range;
     DefocusOptions linear = o;
     linear.iris           = 0.0f;
     if (!for_each_stretch(src, linear, cut, nthreads, err,
-                          [&](const Frame& f, int, int) { iris_channel_range(f, lo, hi); }))
+                          [&](const Frame& f, int, int) { iris_channel_range(f, range); }))
         return false;
-    return iris_space_for(o.iris, lo, hi, iris, err);
+    return iris_space_for(o.iris, range, iris, err);
 }
 
 // The plan of the whole frame (its CoC range in `rep`, the rungs and reductions), from its

@@ -21,6 +21,7 @@
 
 #include <array>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -172,14 +173,19 @@ struct FrameBand {
     IrisSpace iris;
 };
 
-/// Iris mode: the range of each channel's colour (unpremultiplied) over f.img's covered
-/// pixels, joined to `lo` .. `hi`.
-void iris_channel_range(const Frame& f, std::array<float, 3>& lo, std::array<float, 3>& hi);
+/// Iris mode: each channel's colour range (unpremultiplied), empty until joined.
+struct IrisRange {
+    static constexpr float kNone = std::numeric_limits<float>::infinity();
+    std::array<float, 3> lo{ kNone, kNone, kNone }, hi{ -kNone, -kNone, -kNone };
+};
 
-/// Iris mode: the exp space of exponent k for colours in `lo` .. `hi` (IrisSpace's shift);
+/// Iris mode: the range of each channel's colour over f.img's covered pixels, joined to
+/// `range`.
+void iris_channel_range(const Frame& f, IrisRange& range);
+
+/// Iris mode: the exp space of exponent k for colours in `range` (IrisSpace's shift);
 /// false + `err` when k times a channel's range passes kIrisMaxExponent.
-bool iris_space_for(float k, std::array<float, 3> lo, std::array<float, 3> hi, IrisSpace& iris,
-                    std::string& err);
+bool iris_space_for(float k, IrisRange range, IrisSpace& iris, std::string& err);
 
 /// A flat image made ready for a method (core/defocus/defocus_prepare.cpp): the options checked,
 /// the pixels premultiplied and scrubbed (counted in `rep`), each pixel's signed CoC, the
@@ -361,7 +367,7 @@ struct SpriteGain {
     std::vector<OIIO::ROI> draw;  // per tile: the frame pixels the layer reaches (else 1)
     std::vector<OIIO::ROI> low;   // per tile: the reduced pixels `visibility` covers
     std::vector<Plane> visibility;  // per tile: the blurred visibility, 1 channel; empty: 1
-    float floor = 0.0f;             // the least visibility the gain divides by (sprite_gain_floor)
+    float floor = 0.0f;             // the least visibility the gain divides by (sprite_gain_floors)
     /// The tile holding frame pixel (x, y), or -1 past the grid.
     int tile_of(int x, int y) const
     {

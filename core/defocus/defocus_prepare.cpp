@@ -62,8 +62,9 @@ void to_iris_space(Frame& f, const IrisSpace& iris, int nthreads)
 
 }  // namespace
 
-void detail::iris_channel_range(const Frame& f, std::array<float, 3>& lo, std::array<float, 3>& hi)
+void detail::iris_channel_range(const Frame& f, IrisRange& range)
 {
+    auto& [lo, hi] = range;
     for (size_t i = 0; i < f.img.rgba.size(); i += 4)
         if (f.img.rgba[i + 3] > 0.0f)
             for (size_t c = 0; c < 3; ++c) {
@@ -73,9 +74,9 @@ void detail::iris_channel_range(const Frame& f, std::array<float, 3>& lo, std::a
             }
 }
 
-bool detail::iris_space_for(float k, std::array<float, 3> lo, std::array<float, 3> hi, IrisSpace& iris,
-                            std::string& err)
+bool detail::iris_space_for(float k, IrisRange range, IrisSpace& iris, std::string& err)
 {
+    auto& [lo, hi] = range;
     iris.k = k;
     for (size_t c = 0; c < 3; ++c) {
         if (!(hi[c] >= lo[c]))
@@ -195,11 +196,9 @@ bool detail::prepare_frame(Frame& f, const OIIO::ImageBuf& src, const DefocusOpt
         if (band && band->iris_known) {
             iris = band->iris;
         } else {
-            std::array<float, 3> lo, hi;
-            lo.fill(std::numeric_limits<float>::infinity());
-            hi.fill(-std::numeric_limits<float>::infinity());
-            iris_channel_range(f, lo, hi);
-            if (!iris_space_for(o.iris, lo, hi, iris, err))
+            IrisRange range;
+            iris_channel_range(f, range);
+            if (!iris_space_for(o.iris, range, iris, err))
                 return false;
         }
         to_iris_space(f, iris, nthreads);
