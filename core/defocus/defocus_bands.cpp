@@ -236,11 +236,8 @@ bool plan_whole_frame(LayerPlan& plan, DefocusReport& rep, const OIIO::ImageBuf&
         plan = choose_layer_plan(whole, o, rep.min_coc_px, rep.max_coc_px, nthreads, rep.plans);
         return true;
     }
-    if ((rep.max_coc_px - rep.min_coc_px) / o.reference_step_px > 65535.0f) {
-        err = format("CoC range {} .. {} px holds too many {} px steps; raise the reference step", rep.min_coc_px,
-                     rep.max_coc_px, o.reference_step_px);
+    if (!reference_range_fits(rep.min_coc_px, rep.max_coc_px, o.reference_step_px, err))
         return false;
-    }
     plan.coc_px = reference_rungs(whole.coc, rep.min_coc_px, rep.max_coc_px, o.reference_step_px);
     plan.reduction.assign(plan.coc_px.size(), 1);
     return true;

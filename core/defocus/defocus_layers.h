@@ -249,6 +249,10 @@ Membership one_layer_per_coc(const Frame& f, float lo, float hi, float step, int
 /// else the points of a grid `step` apart around them.
 std::vector<float> reference_rungs(const std::vector<float>& cocs, float lo, float hi, float step);
 
+/// Whether [lo, hi] holds at most 65535 of the Reference's `step`s (its layers are counted
+/// in 16 bits); else false + `err`.
+bool reference_range_fits(float lo, float hi, float step, std::string& err);
+
 /// Every pixel of `f` shared between the rungs of `plan` (share_between), with its reductions.
 Membership layer_membership(const Frame& f, LayerPlan plan, int nthreads);
 

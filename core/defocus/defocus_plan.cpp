@@ -34,9 +34,12 @@
 #include <cmath>
 #include <limits>
 
+#include <OpenImageIO/strutil.h>
+
 namespace bokeh {
 
 using namespace detail;
+using OIIO::Strutil::fmt::format;
 
 namespace {
 
@@ -141,6 +144,14 @@ Membership detail::one_layer_per_coc(const Frame& f, float lo, float hi, float s
 std::vector<float> detail::reference_rungs(const std::vector<float>& cocs, float lo, float hi, float step)
 {
     return exact_rungs(cocs, lo, hi, step);
+}
+
+bool detail::reference_range_fits(float lo, float hi, float step, std::string& err)
+{
+    if ((hi - lo) / step <= 65535.0f)
+        return true;
+    err = format("CoC range {} .. {} px holds too many {} px steps; raise the reference step", lo, hi, step);
+    return false;
 }
 
 Membership detail::layer_membership(const Frame& f, LayerPlan plan, int nthreads)

@@ -247,11 +247,8 @@ bool detail::scatter_reference(Plane& out, Frame& f, const DefocusOptions& o, co
 bool detail::reference_layers(Plane& out, const Frame& f, const DefocusOptions& o, DefocusReport& rep, int nthreads,
                               std::string& err)
 {
-    if ((rep.max_coc_px - rep.min_coc_px) / o.reference_step_px > 65535.0f) {
-        err = format("CoC range {} .. {} px holds too many {} px steps; raise the reference step", rep.min_coc_px,
-                     rep.max_coc_px, o.reference_step_px);
+    if (!reference_range_fits(rep.min_coc_px, rep.max_coc_px, o.reference_step_px, err))
         return false;
-    }
     const Membership m = one_layer_per_coc(f, rep.min_coc_px, rep.max_coc_px, o.reference_step_px, nthreads);
     if (m.coc_px.size() > 65535) {
         err = format("{} distinct CoC values; raise the reference step", m.coc_px.size());
